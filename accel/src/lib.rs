@@ -1,0 +1,1 @@
+//! tress-accel: Embree geometry for tress.

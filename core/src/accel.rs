@@ -1,0 +1,56 @@
+//! The ray-intersection interface implemented by `tress-accel` (Embree).
+
+use crate::math::{Aabb, Ray, Vec3};
+
+/// Identifies one primitive: an Embree geometry and a primitive (curve segment, triangle, sphere)
+/// inside it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct PrimId {
+    pub geom: u32,
+    pub prim: u32,
+}
+
+/// What was hit.
+#[derive(Clone, Copy, Debug)]
+pub enum HitKind {
+    /// A hair fiber.
+    Fiber {
+        /// Unit curve tangent at the hit, root → tip.
+        tangent: Vec3,
+        /// Signed offset across the fiber in [−1, 1], measured along the y axis of
+        /// `FiberFrame::new(tangent, -ray.dir)` (see `tress_core::bcsdf`).
+        h: f32,
+        /// Fiber radius at the hit.
+        radius: f32,
+        /// Index of the strand within its hair object.
+        strand: u32,
+        /// Parameter along the strand, 0 at the root and 1 at the tip.
+        v: f32,
+    },
+    /// A surface (triangle mesh, sphere).
+    Surface {
+        /// Unit geometric normal, facing the side the ray came from.
+        normal: Vec3,
+    },
+}
+
+/// A ray hit.
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    pub t: f32,
+    pub p: Vec3,
+    pub prim: PrimId,
+    /// Index into `Scene::materials`.
+    pub material: u32,
+    pub kind: HitKind,
+}
+
+/// Ray queries against the scene geometry.
+pub trait Accel: Send + Sync {
+    /// Closest hit in `(0, ray.t_max)`, skipping `ray.exclude`.
+    fn intersect(&self, ray: &Ray) -> Option<Hit>;
+    /// Whether anything blocks `(0, ray.t_max)`, skipping `ray.exclude`.
+    fn occluded(&self, ray: &Ray) -> bool;
+    /// Bounds of all geometry.
+    fn bounds(&self) -> Aabb;
+}

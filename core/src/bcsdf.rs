@@ -1,0 +1,97 @@
+//! The fiber scattering interface.
+//!
+//! # Local fiber frame (used by every [`Bcsdf`])
+//! - **x** = the curve tangent `t`, root → tip. `sin θ = ω.x`, θ ∈ [−π/2, π/2], +π/2 toward the tip.
+//! - **z** = the unit vector ⟂ t pointing back toward the viewer: the component of `wo` (the
+//!   direction the hit was seen from) orthogonal to `t`, normalised. Flat-curve ribbons face the
+//!   ray, so z is also the ribbon normal.
+//! - **y** = z × x, across the ribbon's width.
+//! - Azimuth `φ = atan2(ω.z, ω.y)`, so `wo` always has φ_o = π/2 (up to the tangent component).
+//! - **h** ∈ [−1, 1] is the signed offset of the hit from the fiber axis along **y**, in units of
+//!   the fiber radius. With this sign, specular reflection (p = 0) leaves at
+//!   φ_i − φ_o = −2·asin(h), the convention of pbrt and Chiang et al. 2016.
+//!
+//! # Value convention
+//! [`Bcsdf::eval`] returns `f(wo, wi) · cos θ_i` — the cosine to the fiber's normal plane is
+//! *included* — so the scattered radiance is `L_o(wo) = ∫_{S²} eval(wo, wi) L_i(wi) dω_i` and an
+//! energy-conserving, non-absorbing fiber integrates to exactly 1 (the white furnace). A sample's
+//! Monte Carlo weight is `f / pdf`, with `pdf` per unit solid angle.
+
+use crate::math::{Frame, Rgb, Vec3};
+use std::fmt::Debug;
+
+/// A direction sampled from a BCSDF, with its value (`eval` at `wi`) and solid-angle pdf.
+#[derive(Clone, Copy, Debug)]
+pub struct BcsdfSample {
+    pub wi: Vec3,
+    /// `eval(wo, wi)`: includes cos θ_i (see the module docs).
+    pub f: Rgb,
+    pub pdf: f32,
+}
+
+/// A fiber scattering function in the local fiber frame (module docs).
+pub trait Bcsdf: Send + Sync + Debug {
+    /// `f(wo, wi) · cos θ_i` for unit directions `wo`, `wi` at offset `h`.
+    fn eval(&self, wo: Vec3, wi: Vec3, h: f32) -> Rgb;
+
+    /// Importance-sample `wi` from four uniform numbers in [0, 1). `None` when no direction
+    /// carries energy.
+    fn sample(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<BcsdfSample>;
+
+    /// The solid-angle density with which [`Bcsdf::sample`] produces `wi`.
+    fn pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> f32;
+}
+
+/// The local frame at a fiber hit (module docs): built from the tangent and the direction the hit
+/// is seen from. Accelerators compute `h` against exactly this frame.
+#[derive(Clone, Copy, Debug)]
+pub struct FiberFrame(pub Frame);
+
+impl FiberFrame {
+    /// Frame with x = `tangent`, z = `toward_viewer` made orthogonal to it.
+    pub fn new(tangent: Vec3, toward_viewer: Vec3) -> Self {
+        let x = tangent.normalize();
+        let z_raw = toward_viewer - x * toward_viewer.dot(x);
+        let z = if z_raw.length_squared() > 1e-12 {
+            z_raw.normalize()
+        } else {
+            // Looking straight along the fiber: any normal will do.
+            Frame::from_z(x).x
+        };
+        FiberFrame(Frame {
+            x,
+            y: z.cross(x),
+            z,
+        })
+    }
+
+    #[inline]
+    pub fn to_local(&self, v: Vec3) -> Vec3 {
+        self.0.to_local(v)
+    }
+
+    #[inline]
+    pub fn to_world(&self, v: Vec3) -> Vec3 {
+        self.0.to_world(v)
+    }
+
+    /// Across-width axis (y): the direction along which `h` is measured.
+    pub fn width_axis(&self) -> Vec3 {
+        self.0.y
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fiber_frame_is_right_handed_and_faces_viewer() {
+        let t = Vec3::new(0.0, 1.0, 0.2).normalize();
+        let wo = Vec3::new(0.3, 0.1, 1.0).normalize();
+        let f = FiberFrame::new(t, wo);
+        assert!((f.0.x.cross(f.0.y) - f.0.z).length() < 1e-5);
+        let l = f.to_local(wo);
+        assert!(l.y.abs() < 1e-5 && l.z > 0.0);
+    }
+}

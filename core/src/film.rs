@@ -1,0 +1,128 @@
+//! Film settings and the image buffer the render loop fills.
+
+use crate::math::Rgb;
+use serde::{Deserialize, Serialize};
+
+/// Film description: resolution, samples, seed and an optional crop window.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FilmSettings {
+    pub width: u32,
+    pub height: u32,
+    #[serde(default = "default_spp")]
+    pub spp: u32,
+    #[serde(default)]
+    pub seed: u64,
+    /// Pixel window `[x0, y0, x1, y1)` to render; `None` renders the whole film.
+    #[serde(default)]
+    pub crop: Option<[u32; 4]>,
+}
+
+fn default_spp() -> u32 {
+    16
+}
+
+impl FilmSettings {
+    /// The pixel window actually rendered, `[x0, y0, x1, y1)`.
+    pub fn window(&self) -> [u32; 4] {
+        self.crop.unwrap_or([0, 0, self.width, self.height])
+    }
+
+    /// Checks sizes and the crop window, describing the first problem found.
+    pub fn validate(&self) -> Result<(), String> {
+        const MAX_SIDE: u32 = 1 << 16;
+        if self.width == 0 || self.height == 0 {
+            return Err(format!("film size {}x{} is empty", self.width, self.height));
+        }
+        if self.width > MAX_SIDE || self.height > MAX_SIDE {
+            return Err(format!(
+                "film size {}x{} exceeds {MAX_SIDE} pixels per side",
+                self.width, self.height
+            ));
+        }
+        if self.spp == 0 {
+            return Err("spp must be at least 1".into());
+        }
+        if let Some([x0, y0, x1, y1]) = self.crop {
+            if x0 >= x1 || y0 >= y1 || x1 > self.width || y1 > self.height {
+                return Err(format!(
+                    "crop window [{x0}, {y0}, {x1}, {y1}) is empty or outside the {}x{} film",
+                    self.width, self.height
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A linear RGB image covering the pixel window `[x0, y0, x0 + width, y0 + height)` of a
+/// `full_width` × `full_height` film (the window is the whole film unless cropped).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub x0: u32,
+    pub y0: u32,
+    pub full_width: u32,
+    pub full_height: u32,
+    /// Row-major, `width * height` pixels.
+    pub pixels: Vec<Rgb>,
+}
+
+impl Image {
+    /// A black image of the whole `width`×`height` film.
+    pub fn new(width: u32, height: u32) -> Self {
+        Image {
+            width,
+            height,
+            x0: 0,
+            y0: 0,
+            full_width: width,
+            full_height: height,
+            pixels: vec![Rgb::ZERO; width as usize * height as usize],
+        }
+    }
+
+    /// A black image of `window` within a `full_width`×`full_height` film.
+    pub fn window(window: [u32; 4], full_width: u32, full_height: u32) -> Self {
+        let [x0, y0, x1, y1] = window;
+        Image {
+            width: x1 - x0,
+            height: y1 - y0,
+            x0,
+            y0,
+            full_width,
+            full_height,
+            pixels: vec![Rgb::ZERO; (x1 - x0) as usize * (y1 - y0) as usize],
+        }
+    }
+
+    /// Pixel at window-relative coordinates.
+    #[inline]
+    pub fn get(&self, x: u32, y: u32) -> Rgb {
+        self.pixels[(y * self.width + x) as usize]
+    }
+
+    #[inline]
+    pub fn set(&mut self, x: u32, y: u32, c: Rgb) {
+        self.pixels[(y * self.width + x) as usize] = c;
+    }
+
+    /// Mean over all pixels and channels.
+    pub fn mean(&self) -> f64 {
+        let s: f64 = self.pixels.iter().map(|p| (p.x + p.y + p.z) as f64).sum();
+        s / (3 * self.pixels.len()).max(1) as f64
+    }
+
+    /// Per-channel mean.
+    pub fn mean_rgb(&self) -> [f64; 3] {
+        let mut s = [0.0f64; 3];
+        for p in &self.pixels {
+            s[0] += p.x as f64;
+            s[1] += p.y as f64;
+            s[2] += p.z as f64;
+        }
+        let n = self.pixels.len().max(1) as f64;
+        s.map(|v| v / n)
+    }
+}

@@ -1,0 +1,30 @@
+//! tress-core: the small trait surfaces ([`Bcsdf`], [`Accel`], [`Integrator`]) and everything the
+//! integrators share — math, sampling, RNG, camera, film, lights, scene and the one render loop.
+//!
+//! This crate depends on neither Embree nor RON: geometry comes in through [`Accel`], scene files
+//! are parsed by `tress-cli`.
+
+pub mod accel;
+pub mod bcsdf;
+pub mod camera;
+pub mod envmap;
+pub mod film;
+pub mod image_io;
+pub mod integrator;
+pub mod light;
+pub mod math;
+pub mod render;
+pub mod rng;
+pub mod sampling;
+pub mod scene;
+pub mod stats;
+
+pub use accel::{Accel, Hit, HitKind, PrimId};
+pub use bcsdf::{Bcsdf, BcsdfSample, FiberFrame};
+pub use camera::Camera;
+pub use film::Image;
+pub use integrator::Integrator;
+pub use light::Light;
+pub use math::{luminance, Aabb, Frame, Ray, Rgb};
+pub use rng::Sampler;
+pub use scene::{Material, Scene};

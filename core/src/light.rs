@@ -1,0 +1,158 @@
+//! Lights: environment maps (importance sampled), a constant environment, distant (sun) lights
+//! with an angular radius, and point lights.
+//!
+//! World directions map to environment-map texels with +y up: θ = acos(d.y) from the zenith,
+//! φ = atan2(d.x, −d.z), u = φ/2π + ½ wrapped, v = θ/π (so the map's centre column faces −z),
+//! then rotated about +y by `rotation_deg`.
+
+use crate::math::Frame;
+use crate::math::{Rgb, Vec2, Vec3};
+use crate::sampling::{sample_uniform_cone, sample_uniform_sphere, uniform_cone_pdf, INV_4PI};
+
+pub use crate::envmap::EnvironmentMap;
+
+/// A light sample as seen from a shading point.
+#[derive(Clone, Copy, Debug)]
+pub struct LightSample {
+    /// Unit direction from the shading point toward the light.
+    pub wi: Vec3,
+    /// Radiance arriving along `wi` (for a point light: intensity / distance²).
+    pub radiance: Rgb,
+    /// Solid-angle pdf; for delta lights the probability (1) of the chosen direction.
+    pub pdf: f32,
+    /// Distance to the light (infinite for lights at infinity).
+    pub distance: f32,
+    /// Whether the light is a delta distribution (no MIS possible).
+    pub is_delta: bool,
+}
+
+/// A light source.
+#[derive(Clone, Debug)]
+pub enum Light {
+    /// Image-based environment, importance sampled.
+    Environment(EnvironmentMap),
+    /// Uniform radiance from every direction.
+    Constant { radiance: Rgb },
+    /// A distant light (the sun): radiance `radiance` within a cone of half-angle
+    /// `half_angle_rad` around `-direction`; a delta light when the angle is 0, in which case
+    /// `radiance` is the irradiance it delivers perpendicular to its direction.
+    Distant {
+        direction: Vec3,
+        radiance: Rgb,
+        half_angle_rad: f32,
+    },
+    /// A point light of intensity `intensity` (W/sr).
+    Point { position: Vec3, intensity: Rgb },
+}
+
+impl Light {
+    /// A direction toward the light from `p`, from two uniform numbers.
+    pub fn sample_li(&self, p: Vec3, u: Vec2) -> Option<LightSample> {
+        match self {
+            Light::Environment(env) => env.sample(u),
+            Light::Constant { radiance } => {
+                let wi = sample_uniform_sphere(u);
+                Some(LightSample {
+                    wi,
+                    radiance: *radiance,
+                    pdf: INV_4PI,
+                    distance: f32::INFINITY,
+                    is_delta: false,
+                })
+            }
+            Light::Distant {
+                direction,
+                radiance,
+                half_angle_rad,
+            } => {
+                let to_light = -direction.normalize();
+                if *half_angle_rad <= 0.0 {
+                    return Some(LightSample {
+                        wi: to_light,
+                        radiance: *radiance,
+                        pdf: 1.0,
+                        distance: f32::INFINITY,
+                        is_delta: true,
+                    });
+                }
+                let cos_max = half_angle_rad.cos();
+                let wi = Frame::from_z(to_light).to_world(sample_uniform_cone(u, cos_max));
+                Some(LightSample {
+                    wi,
+                    radiance: *radiance,
+                    pdf: uniform_cone_pdf(cos_max),
+                    distance: f32::INFINITY,
+                    is_delta: false,
+                })
+            }
+            Light::Point {
+                position,
+                intensity,
+            } => {
+                let d = *position - p;
+                let dist2 = d.length_squared();
+                if dist2 == 0.0 {
+                    return None;
+                }
+                let dist = dist2.sqrt();
+                Some(LightSample {
+                    wi: d / dist,
+                    radiance: *intensity / dist2,
+                    pdf: 1.0,
+                    distance: dist,
+                    is_delta: true,
+                })
+            }
+        }
+    }
+
+    /// Solid-angle pdf with which [`Light::sample_li`] returns `wi` (0 for delta lights).
+    pub fn pdf_li(&self, wi: Vec3) -> f32 {
+        match self {
+            Light::Environment(env) => env.pdf(wi),
+            Light::Constant { .. } => INV_4PI,
+            Light::Distant {
+                direction,
+                half_angle_rad,
+                ..
+            } => {
+                if *half_angle_rad <= 0.0 {
+                    return 0.0;
+                }
+                let cos_max = half_angle_rad.cos();
+                if wi.dot(-direction.normalize()) >= cos_max {
+                    uniform_cone_pdf(cos_max)
+                } else {
+                    0.0
+                }
+            }
+            Light::Point { .. } => 0.0,
+        }
+    }
+
+    /// Radiance along an escaping ray travelling in direction `dir` (arriving from `dir`).
+    pub fn le(&self, dir: Vec3) -> Rgb {
+        match self {
+            Light::Environment(env) => env.radiance(dir),
+            Light::Constant { radiance } => *radiance,
+            Light::Distant {
+                direction,
+                radiance,
+                half_angle_rad,
+            } => {
+                if *half_angle_rad > 0.0 && dir.dot(-direction.normalize()) >= half_angle_rad.cos()
+                {
+                    *radiance
+                } else {
+                    Rgb::ZERO
+                }
+            }
+            Light::Point { .. } => Rgb::ZERO,
+        }
+    }
+
+    /// Whether the light is at infinity (seen by escaping rays, no distance).
+    pub fn is_infinite(&self) -> bool {
+        !matches!(self, Light::Point { .. })
+    }
+}

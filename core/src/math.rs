@@ -1,0 +1,195 @@
+//! Small math types on top of glam.
+
+pub use glam::{Mat3, Mat4, Vec2, Vec3};
+use serde::{Deserialize, Serialize};
+
+/// Linear RGB radiance or reflectance. Plain `Vec3` so all of glam's arithmetic applies.
+pub type Rgb = Vec3;
+
+/// Rec. 709 luminance of a linear RGB value.
+#[inline]
+pub fn luminance(c: Rgb) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
+/// A ray with a parametric extent `(0, t_max)` and an optional primitive to ignore.
+///
+/// `exclude` names the primitive the ray leaves from: a ray leaving a convex primitive (a fiber
+/// segment, a triangle, the outside of a sphere) can never hit it again, so accelerators skip it
+/// instead of relying on an epsilon offset (see `tress-accel`).
+#[derive(Clone, Copy, Debug)]
+pub struct Ray {
+    pub origin: Vec3,
+    /// Unit direction.
+    pub dir: Vec3,
+    pub t_max: f32,
+    pub exclude: Option<crate::PrimId>,
+}
+
+impl Ray {
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        Ray {
+            origin,
+            dir,
+            t_max: f32::INFINITY,
+            exclude: None,
+        }
+    }
+
+    /// A ray leaving primitive `from`.
+    pub fn leaving(origin: Vec3, dir: Vec3, from: crate::PrimId) -> Self {
+        Ray {
+            origin,
+            dir,
+            t_max: f32::INFINITY,
+            exclude: Some(from),
+        }
+    }
+
+    pub fn with_t_max(mut self, t_max: f32) -> Self {
+        self.t_max = t_max;
+        self
+    }
+
+    #[inline]
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + self.dir * t
+    }
+}
+
+/// An orthonormal frame; `to_local` maps world directions to (x, y, z) coordinates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame {
+    pub x: Vec3,
+    pub y: Vec3,
+    pub z: Vec3,
+}
+
+impl Frame {
+    /// Any frame whose z axis is the unit vector `n` (Duff et al. 2017 branchless basis).
+    pub fn from_z(n: Vec3) -> Self {
+        let sign = 1.0f32.copysign(n.z);
+        let a = -1.0 / (sign + n.z);
+        let b = n.x * n.y * a;
+        let x = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+        let y = Vec3::new(b, sign + n.y * n.y * a, -n.y);
+        Frame { x, y, z: n }
+    }
+
+    #[inline]
+    pub fn to_local(&self, v: Vec3) -> Vec3 {
+        Vec3::new(v.dot(self.x), v.dot(self.y), v.dot(self.z))
+    }
+
+    #[inline]
+    pub fn to_world(&self, v: Vec3) -> Vec3 {
+        self.x * v.x + self.y * v.y + self.z * v.z
+    }
+}
+
+/// Axis-aligned bounding box.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Aabb {
+    pub min: Vec3,
+    pub max: Vec3,
+}
+
+impl Aabb {
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3::splat(f32::INFINITY),
+        max: Vec3::splat(f32::NEG_INFINITY),
+    };
+
+    pub fn is_empty(&self) -> bool {
+        self.min.cmpgt(self.max).any()
+    }
+
+    pub fn grow(&mut self, p: Vec3) {
+        self.min = self.min.min(p);
+        self.max = self.max.max(p);
+    }
+
+    pub fn union(&self, o: &Aabb) -> Aabb {
+        Aabb {
+            min: self.min.min(o.min),
+            max: self.max.max(o.max),
+        }
+    }
+
+    pub fn extent(&self) -> Vec3 {
+        self.max - self.min
+    }
+
+    pub fn center(&self) -> Vec3 {
+        0.5 * (self.min + self.max)
+    }
+
+    /// Entry and exit distances of a ray through the box, if it crosses it within `[0, t_max]`.
+    pub fn intersect(&self, ray: &Ray) -> Option<(f32, f32)> {
+        let inv = ray.dir.recip();
+        let t0 = (self.min - ray.origin) * inv;
+        let t1 = (self.max - ray.origin) * inv;
+        let tmin = t0.min(t1).max_element().max(0.0);
+        let tmax = t0.max(t1).min_element().min(ray.t_max);
+        (tmin <= tmax).then_some((tmin, tmax))
+    }
+}
+
+/// Spherical direction from (sin θ, cos θ, φ) in a frame whose x axis is the pole; used by the
+/// fiber frame where x is the tangent.
+#[inline]
+pub fn fiber_direction(sin_theta: f32, cos_theta: f32, phi: f32) -> Vec3 {
+    let (s, c) = phi.sin_cos();
+    Vec3::new(sin_theta, cos_theta * c, cos_theta * s)
+}
+
+#[inline]
+pub fn safe_sqrt(x: f32) -> f32 {
+    x.max(0.0).sqrt()
+}
+
+#[inline]
+pub fn safe_asin(x: f32) -> f32 {
+    x.clamp(-1.0, 1.0).asin()
+}
+
+#[inline]
+pub fn safe_acos(x: f32) -> f32 {
+    x.clamp(-1.0, 1.0).acos()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_from_z_is_orthonormal() {
+        for n in [
+            Vec3::Z,
+            -Vec3::Z,
+            Vec3::X,
+            Vec3::new(0.3, -0.5, 0.8).normalize(),
+        ] {
+            let f = Frame::from_z(n);
+            assert!((f.x.length() - 1.0).abs() < 1e-5);
+            assert!((f.y.length() - 1.0).abs() < 1e-5);
+            assert!(
+                f.x.dot(f.y).abs() < 1e-5 && f.x.dot(f.z).abs() < 1e-5 && f.y.dot(f.z).abs() < 1e-5
+            );
+            let v = Vec3::new(0.2, 0.7, -0.1);
+            assert!((f.to_world(f.to_local(v)) - v).length() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn aabb_ray_intersection() {
+        let b = Aabb {
+            min: Vec3::splat(-1.0),
+            max: Vec3::splat(1.0),
+        };
+        let r = Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::Z);
+        assert_eq!(b.intersect(&r), Some((4.0, 6.0)));
+        let miss = Ray::new(Vec3::new(3.0, 0.0, -5.0), Vec3::Z);
+        assert_eq!(b.intersect(&miss), None);
+    }
+}

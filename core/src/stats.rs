@@ -1,0 +1,276 @@
+//! Statistical test support: χ² goodness of fit over the sphere, used to check every sampler in
+//! tress (BCSDFs, environment maps) against its claimed pdf.
+
+use crate::math::Vec3;
+use crate::rng::Sampler;
+use std::f64::consts::PI;
+
+/// ln Γ(x) for x > 0 (Lanczos, g = 7, n = 9; relative error ~1e-15).
+pub fn ln_gamma(x: f64) -> f64 {
+    const G: f64 = 7.0;
+    const C: [f64; 9] = [
+        0.999_999_999_999_809_9,
+        676.520_368_121_885_1,
+        -1_259.139_216_722_402_8,
+        771.323_428_777_653_1,
+        -176.615_029_162_140_6,
+        12.507_343_278_686_905,
+        -0.138_571_095_265_720_12,
+        9.984_369_578_019_572e-6,
+        1.505_632_735_149_311_6e-7,
+    ];
+    if x < 0.5 {
+        // Reflection formula.
+        return (PI / (PI * x).sin()).ln() - ln_gamma(1.0 - x);
+    }
+    let x = x - 1.0;
+    let mut a = C[0];
+    let t = x + G + 0.5;
+    for (i, c) in C.iter().enumerate().skip(1) {
+        a += c / (x + i as f64);
+    }
+    0.5 * (2.0 * PI).ln() + (x + 0.5) * t.ln() - t + a.ln()
+}
+
+/// Upper regularised incomplete gamma Q(a, x) = Γ(a, x)/Γ(a).
+pub fn gamma_q(a: f64, x: f64) -> f64 {
+    if x <= 0.0 {
+        return 1.0;
+    }
+    if x < a + 1.0 {
+        // Series for P(a, x).
+        let mut sum = 1.0 / a;
+        let mut term = sum;
+        let mut ap = a;
+        for _ in 0..10_000 {
+            ap += 1.0;
+            term *= x / ap;
+            sum += term;
+            if term.abs() < sum.abs() * 1e-15 {
+                break;
+            }
+        }
+        1.0 - sum * (-x + a * x.ln() - ln_gamma(a)).exp()
+    } else {
+        // Continued fraction for Q(a, x) (modified Lentz).
+        let tiny = 1e-300;
+        let mut b = x + 1.0 - a;
+        let mut c = 1.0 / tiny;
+        let mut d = 1.0 / b;
+        let mut h = d;
+        for i in 1..10_000 {
+            let an = -(i as f64) * (i as f64 - a);
+            b += 2.0;
+            d = an * d + b;
+            if d.abs() < tiny {
+                d = tiny;
+            }
+            c = b + an / c;
+            if c.abs() < tiny {
+                c = tiny;
+            }
+            d = 1.0 / d;
+            let del = d * c;
+            h *= del;
+            if (del - 1.0).abs() < 1e-15 {
+                break;
+            }
+        }
+        (-x + a * x.ln() - ln_gamma(a)).exp() * h
+    }
+}
+
+/// P(χ²_dof ≥ stat).
+pub fn chi2_survival(stat: f64, dof: f64) -> f64 {
+    gamma_q(0.5 * dof, 0.5 * stat)
+}
+
+/// Per-test significance level for `tests` independent tests at family level `alpha` (Šidák).
+pub fn sidak_alpha(alpha: f64, tests: usize) -> f64 {
+    1.0 - (1.0 - alpha).powf(1.0 / tests as f64)
+}
+
+/// Outcome of a χ² goodness-of-fit test.
+#[derive(Clone, Debug)]
+pub struct Chi2Outcome {
+    pub statistic: f64,
+    pub dof: usize,
+    pub p_value: f64,
+    /// Samples that fell in cells whose expected count is (numerically) zero.
+    pub samples_in_empty_cells: u64,
+}
+
+/// χ² test of observed against expected cell counts. Cells with expected count below
+/// `min_expected` are pooled into one, as in Mitsuba's `ChiSquareTest`.
+pub fn chi2_test(observed: &[f64], expected: &[f64], min_expected: f64) -> Chi2Outcome {
+    assert_eq!(observed.len(), expected.len());
+    let mut idx: Vec<usize> = (0..observed.len()).collect();
+    idx.sort_by(|&a, &b| expected[a].total_cmp(&expected[b]));
+    let (mut pool_obs, mut pool_exp) = (0.0, 0.0);
+    let mut stat = 0.0;
+    let mut cells = 0usize;
+    let mut empty_hits = 0u64;
+    for &i in &idx {
+        let (o, e) = (observed[i], expected[i]);
+        if e <= 1e-12 * min_expected {
+            if o > 0.0 {
+                empty_hits += o as u64;
+            }
+            continue;
+        }
+        if e < min_expected {
+            pool_obs += o;
+            pool_exp += e;
+            continue;
+        }
+        stat += (o - e) * (o - e) / e;
+        cells += 1;
+    }
+    if pool_exp > 0.0 {
+        stat += (pool_obs - pool_exp) * (pool_obs - pool_exp) / pool_exp;
+        cells += 1;
+    }
+    let dof = cells.saturating_sub(1).max(1);
+    let p_value = if empty_hits > 0 {
+        0.0
+    } else {
+        chi2_survival(stat, dof as f64)
+    };
+    Chi2Outcome {
+        statistic: stat,
+        dof,
+        p_value,
+        samples_in_empty_cells: empty_hits,
+    }
+}
+
+/// A χ² test of a direction sampler against its solid-angle pdf over the whole sphere.
+///
+/// Cells are equal-area: `res_cos` bins in the cosine to `pole` and `res_phi` bins in azimuth.
+/// Each cell's expected count integrates the pdf over `sub`×`sub` midpoint sub-cells.
+pub struct SphereChi2 {
+    pub pole: Vec3,
+    pub res_cos: usize,
+    pub res_phi: usize,
+    pub sub: usize,
+    pub samples: usize,
+    pub min_expected: f64,
+}
+
+impl Default for SphereChi2 {
+    fn default() -> Self {
+        SphereChi2 {
+            pole: Vec3::Z,
+            res_cos: 50,
+            res_phi: 100,
+            sub: 4,
+            samples: 1_000_000,
+            min_expected: 5.0,
+        }
+    }
+}
+
+impl SphereChi2 {
+    fn basis(&self) -> crate::math::Frame {
+        crate::math::Frame::from_z(self.pole.normalize())
+    }
+
+    fn cell_of(&self, frame: &crate::math::Frame, d: Vec3) -> usize {
+        let l = frame.to_local(d);
+        let c = l.z.clamp(-1.0, 1.0);
+        let phi = l.y.atan2(l.x).rem_euclid(std::f32::consts::TAU);
+        let ic = (((c + 1.0) * 0.5 * self.res_cos as f32) as usize).min(self.res_cos - 1);
+        let ip =
+            ((phi / std::f32::consts::TAU * self.res_phi as f32) as usize).min(self.res_phi - 1);
+        ic * self.res_phi + ip
+    }
+
+    /// Runs the test. `sample` draws a direction (or `None`, a failed sample that counts as lost
+    /// mass); `pdf` is the claimed density. Returns the outcome plus the histograms
+    /// (observed, expected) for dumping on failure.
+    pub fn run(
+        &self,
+        seed: u64,
+        mut sample: impl FnMut(&mut Sampler) -> Option<Vec3>,
+        pdf: impl Fn(Vec3) -> f64,
+    ) -> (Chi2Outcome, Vec<f64>, Vec<f64>) {
+        let frame = self.basis();
+        let n_cells = self.res_cos * self.res_phi;
+        let mut observed = vec![0.0f64; n_cells];
+        let mut rng = Sampler::from_seed(seed);
+        for _ in 0..self.samples {
+            if let Some(d) = sample(&mut rng) {
+                if d.is_finite() {
+                    observed[self.cell_of(&frame, d.normalize())] += 1.0;
+                }
+            }
+        }
+        let mut expected = vec![0.0f64; n_cells];
+        let dc = 2.0 / self.res_cos as f64;
+        let dphi = 2.0 * PI / self.res_phi as f64;
+        let sub_area = dc * dphi / (self.sub * self.sub) as f64;
+        for ic in 0..self.res_cos {
+            for ip in 0..self.res_phi {
+                let mut acc = 0.0;
+                for a in 0..self.sub {
+                    for b in 0..self.sub {
+                        let c = -1.0 + dc * (ic as f64 + (a as f64 + 0.5) / self.sub as f64);
+                        let phi = dphi * (ip as f64 + (b as f64 + 0.5) / self.sub as f64);
+                        let s = (1.0 - c * c).max(0.0).sqrt();
+                        let local =
+                            Vec3::new((s * phi.cos()) as f32, (s * phi.sin()) as f32, c as f32);
+                        acc += pdf(frame.to_world(local));
+                    }
+                }
+                expected[ic * self.res_phi + ip] = acc * sub_area * self.samples as f64;
+            }
+        }
+        (
+            chi2_test(&observed, &expected, self.min_expected),
+            observed,
+            expected,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::{sample_cosine_hemisphere, sample_uniform_sphere};
+
+    #[test]
+    fn chi2_survival_known_values() {
+        // Reference values from mpmath.gammainc (regularised upper incomplete gamma).
+        assert!((chi2_survival(3.841_458_820_694_124, 1.0) - 0.05).abs() < 1e-6);
+        assert!((chi2_survival(18.307_038_053_275_146, 10.0) - 0.05).abs() < 1e-6);
+        assert!((chi2_survival(100.0, 100.0) - 0.481_191_684_527_957).abs() < 1e-9);
+        assert!((chi2_survival(1200.0, 1000.0) - 1.225_594_233_062_29e-5).abs() < 1e-10);
+    }
+
+    #[test]
+    fn sphere_chi2_accepts_right_pdf_and_rejects_wrong_one() {
+        let t = SphereChi2 {
+            samples: 200_000,
+            ..Default::default()
+        };
+        let (ok, _, _) = t.run(
+            7,
+            |s| Some(sample_uniform_sphere(s.next_2d())),
+            |_| 1.0 / (4.0 * PI),
+        );
+        assert!(ok.p_value > 0.01, "{ok:?}");
+        // Cosine-weighted samples claimed to be uniform must be rejected.
+        let (bad, _, _) = t.run(
+            7,
+            |s| Some(sample_cosine_hemisphere(s.next_2d())),
+            |_| 1.0 / (4.0 * PI),
+        );
+        assert!(bad.p_value < 1e-6, "{bad:?}");
+        let (good_cos, _, _) = t.run(
+            9,
+            |s| Some(sample_cosine_hemisphere(s.next_2d())),
+            |d| if d.z > 0.0 { d.z as f64 / PI } else { 0.0 },
+        );
+        assert!(good_cos.p_value > 0.01, "{good_cos:?}");
+    }
+}

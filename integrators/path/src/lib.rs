@@ -1,0 +1,1 @@
+//! Unidirectional path tracer.
