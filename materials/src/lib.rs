@@ -10,6 +10,7 @@ use std::sync::Arc;
 use tress_core::Bcsdf;
 
 pub mod lambertian_fiber;
+pub mod pigment;
 
 /// An invalid model parameter.
 #[derive(Debug, Clone, thiserror::Error, PartialEq)]
