@@ -40,6 +40,21 @@ pub trait Bcsdf: Send + Sync + Debug {
 
     /// The solid-angle density with which [`Bcsdf::sample`] produces `wi`.
     fn pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> f32;
+
+    /// Names of the lobes `eval` is a sum of (e.g. R, TT, TRT, residual), for plots and the
+    /// per-lobe dual-scattering tables. A model without a decomposition is one lobe.
+    fn lobe_names(&self) -> &'static [&'static str] {
+        &["all"]
+    }
+
+    /// The part of `eval` due to lobe `p` (indexing `lobe_names`); the lobes sum to `eval`.
+    fn eval_lobe(&self, wo: Vec3, wi: Vec3, h: f32, p: usize) -> Rgb {
+        if p == 0 {
+            self.eval(wo, wi, h)
+        } else {
+            Rgb::ZERO
+        }
+    }
 }
 
 /// The local frame at a fiber hit (module docs): built from the tangent and the direction the hit

@@ -17,6 +17,7 @@ pub mod render;
 pub mod rng;
 pub mod sampling;
 pub mod scene;
+pub mod shading;
 pub mod stats;
 
 pub use accel::{Accel, Hit, HitKind, PrimId};
@@ -28,3 +29,4 @@ pub use light::Light;
 pub use math::{luminance, Aabb, Frame, Ray, Rgb};
 pub use rng::Sampler;
 pub use scene::{Material, Scene};
+pub use shading::ShadingPoint;

@@ -3,7 +3,9 @@
 //!
 //! World directions map to environment-map texels with +y up: θ = acos(d.y) from the zenith,
 //! φ = atan2(d.x, −d.z), u = φ/2π + ½ wrapped, v = θ/π (so the map's centre column faces −z),
-//! then rotated about +y by `rotation_deg`.
+//! then rotated about +y by `rotation_deg`, right-handed: a map feature at azimuth φ appears at
+//! φ − rotation (rotating by 90° turns the centre column from −z to −x), so lookups use
+//! u = (φ + rotation)/2π + ½.
 
 use crate::math::Frame;
 use crate::math::{Rgb, Vec2, Vec3};
