@@ -1,1 +1,109 @@
-//! Unidirectional path tracer.
+//! Unidirectional path tracing — tress's ground truth.
+//!
+//! At every vertex: next-event estimation toward one light chosen uniformly, combined by
+//! multiple importance sampling (power heuristic) with the scattering-sampled direction, which
+//! is reused as the ray that finds lights at infinity. Russian roulette after `rr_depth` bounces.
+//!
+//! RON: `Path(max_depth: 100, rr_depth: 5)`
+
+use serde::{Deserialize, Serialize};
+use tress_core::sampling::power_heuristic;
+use tress_core::{Integrator, Ray, Rgb, Sampler, Scene, ShadingPoint};
+
+/// Path tracer settings.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct PathSettings {
+    /// Maximum number of scattering events. Light hair needs many (each fiber passes most of the
+    /// light on), hence the high default.
+    pub max_depth: u32,
+    /// Bounces before Russian roulette starts.
+    pub rr_depth: u32,
+}
+
+impl Default for PathSettings {
+    fn default() -> Self {
+        PathSettings { max_depth: 100, rr_depth: 5 }
+    }
+}
+
+/// The path integrator.
+#[derive(Clone, Debug)]
+pub struct PathTracer {
+    settings: PathSettings,
+}
+
+impl PathTracer {
+    pub fn new(settings: PathSettings) -> Self {
+        PathTracer { settings }
+    }
+}
+
+impl Integrator for PathTracer {
+    fn li(&self, camera_ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb {
+        let light_count = scene.lights.len();
+        let light_select_pdf = if light_count > 0 { 1.0 / light_count as f32 } else { 0.0 };
+        let mut radiance = Rgb::ZERO;
+        let mut throughput = Rgb::ONE;
+        let mut ray = *camera_ray;
+        // Density of the scattering sample that produced `ray`; None for the camera ray.
+        let mut scatter_pdf: Option<f32> = None;
+
+        for depth in 0.. {
+            let Some(hit) = scene.intersect(&ray) else {
+                for light in scene.lights.iter().filter(|l| l.is_infinite()) {
+                    let le = light.le(ray.dir);
+                    if le == Rgb::ZERO {
+                        continue;
+                    }
+                    let weight = match scatter_pdf {
+                        None => 1.0,
+                        Some(pdf) => power_heuristic(pdf, light_select_pdf * light.pdf_li(ray.dir)),
+                    };
+                    radiance += throughput * le * weight;
+                }
+                break;
+            };
+            if depth >= self.settings.max_depth {
+                break;
+            }
+            let sp = ShadingPoint::new(&hit, &ray, &scene.materials);
+
+            // Next-event estimation.
+            let u_select = sampler.next_1d();
+            let u_light = sampler.next_2d();
+            if light_count > 0 {
+                let light = &scene.lights[((u_select * light_count as f32) as usize).min(light_count - 1)];
+                if let Some(ls) = light.sample_li(sp.p, u_light) {
+                    let f = sp.eval(ls.wi);
+                    if ls.pdf > 0.0 && f != Rgb::ZERO && ls.radiance != Rgb::ZERO {
+                        let shadow = sp.spawn(ls.wi).with_t_max(ls.distance * (1.0 - 1e-4));
+                        if !scene.occluded(&shadow) {
+                            let light_pdf = light_select_pdf * ls.pdf;
+                            let weight = if ls.is_delta { 1.0 } else { power_heuristic(light_pdf, sp.pdf(ls.wi)) };
+                            radiance += throughput * f * ls.radiance * (weight / light_pdf);
+                        }
+                    }
+                }
+            }
+
+            // Continue the path by sampling the scattering function.
+            let Some(s) = sp.sample(sampler.next_4d()) else { break };
+            if s.pdf <= 0.0 || s.f == Rgb::ZERO {
+                break;
+            }
+            throughput *= s.f / s.pdf;
+            scatter_pdf = Some(s.pdf);
+            ray = sp.spawn(s.wi);
+
+            if depth + 1 >= self.settings.rr_depth {
+                let survive = throughput.max_element().min(0.95);
+                if sampler.next_1d() >= survive {
+                    break;
+                }
+                throughput /= survive;
+            }
+        }
+        radiance
+    }
+}
