@@ -1,1 +1,86 @@
-//! tress-accel: Embree geometry for tress.
+//! tress-accel: Embree geometry for tress — hair as flat curves, triangle meshes and spheres
+//! behind [`tress_core::Accel`], the hair file readers (Cem Yuksel `.hair`, AMD TressFX
+//! `.tfx`) and procedural hair.
+//!
+//! # Building an accelerator from a HAIR file
+//!
+//! ```no_run
+//! use tress_accel::{HairFile, HairOptions, SceneBuilder};
+//! use tress_core::{Accel, math::{Ray, Vec3}};
+//!
+//! # fn main() -> Result<(), tress_accel::Error> {
+//! let hair = HairFile::new("straight.hair").read()?; // Z-up file → Y-up world
+//! let accel = SceneBuilder::new()?
+//!     .add_hair(&hair, &HairOptions::default(), 0)? // material 0
+//!     .add_sphere(Vec3::new(0.0, 40.0, 0.0), 10.0, 1)? // material 1
+//!     .build()?;
+//! println!("{}", accel.info());
+//! let hit = accel.intersect(&Ray::new(Vec3::new(0.0, 40.0, 100.0), -Vec3::Z));
+//! # Ok(()) }
+//! ```
+//!
+//! `examples/preview.rs` renders a quick shaded preview of any hair source.
+//!
+//! # Fibers: flat curves, the local frame and `h`
+//!
+//! Hair is drawn with Embree's *flat* curves: ribbons of the fiber's width that always face the
+//! ray. Embree reports a hit at the depth of the curve axis point nearest the ray, offset
+//! sideways (perpendicular to the ray) by at most the radius. The radius is interpolated along
+//! each segment with the same basis as the positions ([`CurveBasis`]).
+//!
+//! A fiber hit ([`tress_core::HitKind::Fiber`]) carries:
+//! - `tangent`: the unit derivative of the curve at the hit's curve parameter, pointing root →
+//!   tip (strands are stored root first);
+//! - `h` ∈ [−1, 1]: with `axis` the curve point at the hit's parameter and `y` the width axis of
+//!   `FiberFrame::new(tangent, -ray.dir)` — x = tangent, z = the direction back toward the ray
+//!   origin made orthogonal to the tangent, **y = z × x** — `h = (p − axis)·y / radius`, clamped
+//!   to [−1, 1]. So for a fiber along +x seen by a ray travelling along −z, y = +y and a hit on
+//!   the +y side of the axis has h > 0. This is the frame of `tress_core::bcsdf`, in which
+//!   specular reflection leaves at φ_i − φ_o = −2 asin h (pbrt's convention);
+//! - `radius`: the interpolated radius at the hit; `strand`: the strand's index in its hair
+//!   object (its index in the file, also when strands are subsampled); `v`: the parameter along
+//!   the whole strand, `(segment + u) / segments`, 0 at the root and 1 at the tip.
+//!
+//! Surfaces (meshes, spheres) report `HitKind::Surface { normal }`: the unit geometric normal,
+//! flipped to face the incoming ray.
+//!
+//! # Self-intersection
+//!
+//! A ray made with `Ray::leaving(p, dir, prim)` never reports `prim`: a ray cannot re-enter the
+//! convex primitive it leaves (a triangle, a sphere seen from outside, a fiber segment), and a
+//! flat ribbon faces *every* ray, so a ray leaving a fiber in almost any direction would
+//! otherwise "hit" its own ribbon again.
+//!
+//! The neighbouring segments of the same strand overlap the one the ray leaves at the joints,
+//! and ribbon hit points lie inside the fiber (at the axis depth), so rays leaving near a joint,
+//! or grazing along the strand, would also hit the neighbours' ribbons from inside the fiber —
+//! at distances up to the segment length for grazing rays, so no fixed distance cut-off works.
+//! The rule used instead is geometric: each segment is enclosed in a capsule (axis chord plus
+//! radius; for cubic bases padded by the curve's distance from the chord). A hit on another
+//! segment `k` of the strand the ray leaves (segment `s`) is skipped exactly when the ray stays
+//! inside the union of the capsules of segments `s..=k` from its origin until it enters capsule
+//! `k` — then the ray never left the fiber and the "hit" is the ribbon seen from inside. Hits
+//! reached through free space (a curl of the same strand, another strand, a mesh) are kept.
+//! Capsules are padded by 0.1% of the radius plus float rounding of the origin, so borderline
+//! cases count as inside. This runs in Embree filter functions; the excluded primitive travels
+//! in the intersection context, so occlusion queries get the same rule at no extra cost.
+
+mod curves;
+pub mod cyhair;
+mod error;
+pub mod geometry;
+pub mod mesh;
+pub mod procedural;
+mod scene;
+pub mod source;
+pub mod tfx;
+
+pub use curves::CurveBasis;
+pub use cyhair::HairFile;
+pub use error::{Error, Result};
+pub use geometry::{HairAttribute, HairGeometry, Rotation, Transform};
+pub use mesh::TriangleMesh;
+pub use procedural::{HairStyle, ProceduralHair};
+pub use scene::{AccelInfo, EmbreeAccel, ObjectInfo, ObjectKind, SceneBuilder};
+pub use source::{HairOptions, HairSource};
+pub use tfx::TfxFile;

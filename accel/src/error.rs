@@ -1,0 +1,49 @@
+//! The error type of `tress-accel`: every variant names the file or object it is about.
+
+use std::path::PathBuf;
+
+/// Errors from reading hair and mesh files, validating geometry and building the Embree scene.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The file could not be opened or read.
+    #[error("{}: {source}", .path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file was read but its contents are not a valid file of the expected format.
+    #[error("{}: {reason}", .path.display())]
+    Format { path: PathBuf, reason: String },
+    /// `tobj` could not load the OBJ file.
+    #[error("{}: cannot load OBJ: {source}", .path.display())]
+    Obj {
+        path: PathBuf,
+        #[source]
+        source: tobj::LoadError,
+    },
+    /// The geometry of an object (a file's contents or a generated object) is unusable.
+    #[error("{object}: {reason}")]
+    InvalidGeometry { object: String, reason: String },
+    /// An option of an object is out of range.
+    #[error("{object}: invalid `{field}`: {reason}")]
+    InvalidOption {
+        object: String,
+        field: &'static str,
+        reason: String,
+    },
+    /// Embree reported an error.
+    #[error("Embree: {0}")]
+    Embree(String),
+}
+
+/// `Result` with [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Shorthand for a [`Error::Format`] about `path`.
+pub(crate) fn format_error(path: &std::path::Path, reason: impl Into<String>) -> Error {
+    Error::Format {
+        path: path.to_owned(),
+        reason: reason.into(),
+    }
+}

@@ -1,0 +1,746 @@
+//! The Embree scene: [`SceneBuilder`] adds hair, meshes and spheres; [`EmbreeAccel`] answers
+//! ray queries with [`tress_core::Hit`]s. See the crate docs for the fiber frame, the sign of
+//! `h` and the self-intersection rule.
+
+use crate::curves::{Capsule, CurveBasis};
+use crate::error::{Error, Result};
+use crate::geometry::{HairGeometry, Transform};
+use crate::mesh::TriangleMesh;
+use crate::source::HairOptions;
+use embree3::{
+    BufferUsage, Device, DeviceProperty, Format, GeometryBuilder, GeometryKind, HitN,
+    IntersectContext, IntersectContextExt, RayHit, RayN, Scene, SoAHit, SoARay, ValidityN,
+};
+use glam::Vec4;
+use std::borrow::Cow;
+use std::fmt;
+use std::sync::atomic::{AtomicIsize, Ordering};
+use std::sync::Arc;
+use tress_core::accel::{Accel, Hit, HitKind, PrimId};
+use tress_core::bcsdf::FiberFrame;
+use tress_core::math::{Aabb, Ray, Vec3};
+
+const NO_ID: u32 = u32::MAX;
+
+/// What a query excludes, carried to the filter functions in the intersection context.
+#[derive(Clone, Copy, Debug)]
+struct Exclude {
+    geom: u32,
+    prim: u32,
+}
+
+/// Everything needed to turn a curve hit into a fiber hit and to filter self-intersections.
+#[derive(Debug)]
+struct CurveData {
+    basis: CurveBasis,
+    material: u32,
+    /// Embree control points: position and radius.
+    cps: Vec<Vec4>,
+    /// Per primitive (segment): first control point (Embree's index buffer).
+    seg_first_cp: Vec<u32>,
+    /// Per primitive: dense strand slot.
+    seg_strand: Vec<u32>,
+    /// Per primitive: index of the segment in its strand's polyline (for `v`).
+    seg_index: Vec<u32>,
+    /// Per primitive: a capsule containing the fiber swept by the segment.
+    capsules: Vec<Capsule>,
+    /// Per strand slot: polyline segment count.
+    strand_segments: Vec<u32>,
+    /// Per strand slot: the strand's index in the hair object.
+    strand_id: Vec<u32>,
+}
+
+impl CurveData {
+    /// Whether a hit on primitive `hit` should be kept for a ray leaving primitive `from` of
+    /// this geometry (see "Self-intersection" in the crate docs).
+    fn keep(&self, from: u32, hit: u32, org: Vec3, dir: Vec3) -> bool {
+        if hit == from {
+            return false;
+        }
+        let (s, k) = (from as usize, hit as usize);
+        if s >= self.seg_strand.len() || self.seg_strand[s] != self.seg_strand[k] {
+            return true;
+        }
+        !self.inside_fiber_until(s, k, org, dir)
+    }
+
+    /// Whether the ray stays inside the union of the capsules of segments `s..=k` (walking
+    /// along the strand) from its origin until it enters capsule `k`: then a hit on `k` is the
+    /// ray-facing ribbon seen from inside the fiber, not a fiber reached through free space.
+    fn inside_fiber_until(&self, s: usize, k: usize, org: Vec3, dir: Vec3) -> bool {
+        // Slack for rounding: the origin came from `o + t·d` and may sit slightly outside the
+        // capsule it left; radii are padded by this much.
+        let round = 8.0 * f32::EPSILON * org.abs().max_element();
+        let pad = |c: &Capsule| 1e-3 * c.r + round;
+        let cap = &self.capsules[s];
+        let mut reach = cap
+            .line_interval(org, dir, pad(cap))
+            .map_or(0.0, |(_, out)| out.max(0.0));
+        let mut j = s;
+        while j != k {
+            j = if k > s { j + 1 } else { j - 1 };
+            let cap = &self.capsules[j];
+            match cap.line_interval(org, dir, pad(cap)) {
+                Some((t_in, t_out)) if t_in <= reach + pad(cap) => reach = reach.max(t_out),
+                _ => return false,
+            }
+        }
+        true
+    }
+
+    /// The fiber hit on primitive `prim` at curve parameter `u`, hit point `p`.
+    fn fiber_hit(&self, prim: u32, u: f32, ray: &Ray, p: Vec3) -> HitKind {
+        let prim = prim as usize;
+        let first = self.seg_first_cp[prim] as usize;
+        let cps = &self.cps[first..first + self.basis.order()];
+        let (axis, deriv) = self.basis.eval(cps, u);
+        let cap = &self.capsules[prim];
+        let tangent = deriv
+            .truncate()
+            .try_normalize()
+            .or_else(|| (cap.b - cap.a).try_normalize())
+            .unwrap_or(Vec3::Y);
+        let radius = axis.w.max(f32::MIN_POSITIVE);
+        let frame = FiberFrame::new(tangent, -ray.dir);
+        let h = ((p - axis.truncate()).dot(frame.width_axis()) / radius).clamp(-1.0, 1.0);
+        let strand = self.seg_strand[prim] as usize;
+        let v = ((self.seg_index[prim] as f32 + u) / self.strand_segments[strand] as f32)
+            .clamp(0.0, 1.0);
+        HitKind::Fiber {
+            tangent,
+            h,
+            radius,
+            strand: self.strand_id[strand],
+            v,
+        }
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.cps.len() * 16
+            + (self.seg_first_cp.len() + self.seg_strand.len() + self.seg_index.len()) * 4
+            + self.capsules.len() * std::mem::size_of::<Capsule>()
+            + (self.strand_segments.len() + self.strand_id.len()) * 4
+    }
+}
+
+#[derive(Debug)]
+enum GeomData {
+    Hair(Arc<CurveData>),
+    Mesh { material: u32 },
+    Spheres { materials: Vec<u32> },
+}
+
+/// What an object added to the scene is.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ObjectKind {
+    Hair {
+        /// Strands kept (after subsampling, with at least one non-degenerate segment).
+        strands: usize,
+        /// Curve segments (Embree primitives).
+        segments: usize,
+        /// Input points of the kept strands.
+        points: usize,
+        basis: CurveBasis,
+    },
+    Mesh {
+        triangles: usize,
+        vertices: usize,
+    },
+    Sphere {
+        center: Vec3,
+        radius: f32,
+    },
+}
+
+/// One object of the scene, for `tress info`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObjectInfo {
+    pub name: String,
+    pub kind: ObjectKind,
+    pub material: u32,
+    /// World bounds, padded by the fiber or sphere radius.
+    pub bounds: Aabb,
+}
+
+/// Summary of a built scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AccelInfo {
+    pub objects: Vec<ObjectInfo>,
+    pub strands: usize,
+    pub segments: usize,
+    pub points: usize,
+    pub triangles: usize,
+    pub spheres: usize,
+    pub bounds: Aabb,
+    /// Approximate memory: what Embree's device allocated (buffers and BVH) plus the data
+    /// kept here for hit construction and filtering.
+    pub memory_bytes: usize,
+}
+
+impl fmt::Display for AccelInfo {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "{} objects: {} strands, {} curve segments, {} points, {} triangles, {} spheres",
+            self.objects.len(),
+            self.strands,
+            self.segments,
+            self.points,
+            self.triangles,
+            self.spheres
+        )?;
+        let (lo, hi) = (self.bounds.min, self.bounds.max);
+        writeln!(
+            f,
+            "bounds: ({:.4}, {:.4}, {:.4}) – ({:.4}, {:.4}, {:.4})",
+            lo.x, lo.y, lo.z, hi.x, hi.y, hi.z
+        )?;
+        write!(
+            f,
+            "memory: {:.1} MiB",
+            self.memory_bytes as f64 / (1024.0 * 1024.0)
+        )?;
+        for o in &self.objects {
+            write!(f, "\n  {} (material {}): ", o.name, o.material)?;
+            match &o.kind {
+                ObjectKind::Hair {
+                    strands,
+                    segments,
+                    points,
+                    basis,
+                } => write!(
+                    f,
+                    "hair, {strands} strands, {segments} segments, {points} points, {basis:?}"
+                )?,
+                ObjectKind::Mesh {
+                    triangles,
+                    vertices,
+                } => write!(f, "mesh, {triangles} triangles, {vertices} vertices")?,
+                ObjectKind::Sphere { center, radius } => {
+                    write!(f, "sphere, centre {center}, radius {radius}")?
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn embree_error(object: &str, what: &str, e: embree3::Error) -> Error {
+    Error::Embree(format!("{object}: {what}: {e}"))
+}
+
+/// Builds an [`EmbreeAccel`]: add objects, then [`SceneBuilder::build`].
+pub struct SceneBuilder {
+    device: Device,
+    scene: Scene<'static>,
+    geoms: Vec<GeomData>,
+    objects: Vec<ObjectInfo>,
+    spheres: Vec<(Vec4, u32)>,
+    embree_bytes: Arc<AtomicIsize>,
+}
+
+impl SceneBuilder {
+    /// A new Embree device and empty scene.
+    pub fn new() -> Result<Self> {
+        let device =
+            Device::new().map_err(|e| Error::Embree(format!("cannot create device: {e}")))?;
+        for (prop, what) in [
+            (
+                DeviceProperty::FILTER_FUNCTION_SUPPORTED,
+                "filter functions",
+            ),
+            (DeviceProperty::CURVE_GEOMETRY_SUPPORTED, "curves"),
+            (DeviceProperty::POINT_GEOMETRY_SUPPORTED, "point geometry"),
+        ] {
+            if device.get_property(prop).unwrap_or(0) == 0 {
+                return Err(Error::Embree(format!(
+                    "this Embree library was built without {what}"
+                )));
+            }
+        }
+        let embree_bytes = Arc::new(AtomicIsize::new(0));
+        let counter = Arc::clone(&embree_bytes);
+        device.set_memory_monitor_function(move |bytes, _post| {
+            counter.fetch_add(bytes, Ordering::Relaxed);
+            true
+        });
+        let scene = device
+            .create_scene()
+            .map_err(|e| Error::Embree(format!("cannot create scene: {e}")))?;
+        Ok(SceneBuilder {
+            device,
+            scene,
+            geoms: Vec::new(),
+            objects: Vec::new(),
+            spheres: Vec::new(),
+            embree_bytes,
+        })
+    }
+
+    fn check_device(&self, object: &str) -> Result<()> {
+        match self.device.get_error() {
+            embree3::Error::NONE => Ok(()),
+            e => Err(embree_error(object, "device error", e)),
+        }
+    }
+
+    fn attach(&mut self, geometry: GeometryBuilder<'static>, data: GeomData) -> u32 {
+        let id = self.geoms.len() as u32;
+        self.scene.attach_geometry_by_id(&geometry.commit(), id);
+        self.geoms.push(data);
+        id
+    }
+
+    /// Adds a hair object: validates it, subsamples and transforms it per `options`, converts
+    /// the polylines to the chosen basis and attaches flat curves with material `material`.
+    pub fn add_hair(
+        mut self,
+        hair: &HairGeometry,
+        options: &HairOptions,
+        material: u32,
+    ) -> Result<Self> {
+        hair.validate()?;
+        options.validate(&hair.name)?;
+        let (hair, ids): (Cow<HairGeometry>, Vec<u32>) = if options.strand_fraction < 1.0 {
+            let (sub, ids) = hair.subsample(options.strand_fraction, options.strand_seed);
+            (Cow::Owned(sub), ids)
+        } else {
+            (
+                Cow::Borrowed(hair),
+                (0..hair.strand_count() as u32).collect(),
+            )
+        };
+        let basis = options.basis;
+        let order = basis.order();
+        let matrix = options.transform.matrix();
+        let radius_scale = options.radius_scale * options.transform.scale;
+        let mut data = CurveData {
+            basis,
+            material,
+            cps: Vec::new(),
+            seg_first_cp: Vec::new(),
+            seg_strand: Vec::new(),
+            seg_index: Vec::new(),
+            capsules: Vec::new(),
+            strand_segments: Vec::new(),
+            strand_id: Vec::new(),
+        };
+        let mut points = 0;
+        let mut bounds = Aabb::EMPTY;
+        for (slot, &id) in ids.iter().enumerate() {
+            let range = hair.strand(slot);
+            let n = range.len();
+            if n < 2 {
+                continue;
+            }
+            let pts: Vec<Vec4> = range
+                .enumerate()
+                .map(|(i, at)| {
+                    let v = i as f32 / (n - 1) as f32;
+                    let taper = 1.0 + (options.tip_scale - 1.0) * v;
+                    matrix
+                        .transform_point3(hair.points[at])
+                        .extend(hair.radii[at] * radius_scale * taper)
+                })
+                .collect();
+            let strand = data.strand_id.len() as u32;
+            let base = data.cps.len();
+            data.cps.extend(basis.control_points(&pts));
+            let before = data.seg_first_cp.len();
+            for j in 0..n - 1 {
+                // A zero-length segment has no area and no tangent.
+                if pts[j].truncate() == pts[j + 1].truncate() {
+                    continue;
+                }
+                let cap = basis.capsule(&data.cps[base + j..base + j + order]);
+                bounds.grow(cap.a - Vec3::splat(cap.r));
+                bounds.grow(cap.a + Vec3::splat(cap.r));
+                bounds.grow(cap.b - Vec3::splat(cap.r));
+                bounds.grow(cap.b + Vec3::splat(cap.r));
+                data.seg_first_cp.push((base + j) as u32);
+                data.seg_strand.push(strand);
+                data.seg_index.push(j as u32);
+                data.capsules.push(cap);
+            }
+            if data.seg_first_cp.len() == before {
+                data.cps.truncate(base);
+                continue;
+            }
+            data.strand_segments.push((n - 1) as u32);
+            data.strand_id.push(id);
+            points += n;
+        }
+        if data.seg_first_cp.is_empty() {
+            return Err(Error::InvalidGeometry {
+                object: hair.name.clone(),
+                reason: "no strand has a segment of non-zero length".into(),
+            });
+        }
+        if data.cps.len() > u32::MAX as usize {
+            return Err(Error::InvalidGeometry {
+                object: hair.name.clone(),
+                reason: "too many control points for one Embree geometry".into(),
+            });
+        }
+        if !bounds.min.is_finite() || !bounds.max.is_finite() {
+            return Err(Error::InvalidGeometry {
+                object: hair.name.clone(),
+                reason: "the transformed geometry overflows to infinity".into(),
+            });
+        }
+
+        let name = &hair.name;
+        let mut geometry = self
+            .device
+            .create_geometry(basis.geometry_kind())
+            .map_err(|e| embree_error(name, "cannot create curves", e))?;
+        geometry
+            .set_new_buffer::<[f32; 4]>(BufferUsage::VERTEX, 0, Format::FLOAT4, 16, data.cps.len())
+            .map_err(|e| embree_error(name, "cannot allocate control points", e))?
+            .iter_mut()
+            .zip(&data.cps)
+            .for_each(|(dst, src)| *dst = src.to_array());
+        geometry
+            .set_new_buffer::<u32>(
+                BufferUsage::INDEX,
+                0,
+                Format::UINT,
+                4,
+                data.seg_first_cp.len(),
+            )
+            .map_err(|e| embree_error(name, "cannot allocate curve indices", e))?
+            .copy_from_slice(&data.seg_first_cp);
+        let data = Arc::new(data);
+        let filter_data = Arc::clone(&data);
+        install_filters(&mut geometry, move |ex: &Exclude, geom, prim, org, dir| {
+            geom != ex.geom || filter_data.keep(ex.prim, prim, org, dir)
+        });
+        let info = ObjectInfo {
+            name: name.clone(),
+            kind: ObjectKind::Hair {
+                strands: data.strand_id.len(),
+                segments: data.seg_first_cp.len(),
+                points,
+                basis,
+            },
+            material,
+            bounds,
+        };
+        self.attach(geometry, GeomData::Hair(data));
+        self.check_device(&info.name)?;
+        self.objects.push(info);
+        Ok(self)
+    }
+
+    /// Adds a triangle mesh, transformed, with material `material`.
+    pub fn add_mesh(
+        mut self,
+        mesh: &TriangleMesh,
+        transform: &Transform,
+        material: u32,
+    ) -> Result<Self> {
+        mesh.validate()?;
+        transform.validate(&mesh.name)?;
+        let matrix = transform.matrix();
+        let positions: Vec<Vec3> = mesh
+            .positions
+            .iter()
+            .map(|&p| matrix.transform_point3(p))
+            .collect();
+        let mut bounds = Aabb::EMPTY;
+        positions.iter().for_each(|&p| bounds.grow(p));
+        if !bounds.min.is_finite() || !bounds.max.is_finite() {
+            return Err(Error::InvalidGeometry {
+                object: mesh.name.clone(),
+                reason: "the transformed geometry overflows to infinity".into(),
+            });
+        }
+        let name = &mesh.name;
+        let mut geometry = self
+            .device
+            .create_geometry(GeometryKind::TRIANGLE)
+            .map_err(|e| embree_error(name, "cannot create triangles", e))?;
+        geometry
+            .set_new_buffer::<[f32; 3]>(BufferUsage::VERTEX, 0, Format::FLOAT3, 12, positions.len())
+            .map_err(|e| embree_error(name, "cannot allocate vertices", e))?
+            .iter_mut()
+            .zip(&positions)
+            .for_each(|(dst, src)| *dst = src.to_array());
+        geometry
+            .set_new_buffer::<[u32; 3]>(
+                BufferUsage::INDEX,
+                0,
+                Format::UINT3,
+                12,
+                mesh.triangles.len(),
+            )
+            .map_err(|e| embree_error(name, "cannot allocate triangles", e))?
+            .copy_from_slice(&mesh.triangles);
+        install_filters(&mut geometry, exclude_only);
+        let info = ObjectInfo {
+            name: name.clone(),
+            kind: ObjectKind::Mesh {
+                triangles: mesh.triangles.len(),
+                vertices: positions.len(),
+            },
+            material,
+            bounds,
+        };
+        self.attach(geometry, GeomData::Mesh { material });
+        self.check_device(&info.name)?;
+        self.objects.push(info);
+        Ok(self)
+    }
+
+    /// Adds a sphere with material `material` (all spheres share one Embree geometry, made in
+    /// [`SceneBuilder::build`]).
+    pub fn add_sphere(mut self, center: Vec3, radius: f32, material: u32) -> Result<Self> {
+        let name = format!("sphere #{}", self.spheres.len());
+        if !center.is_finite() {
+            return Err(Error::InvalidOption {
+                object: name,
+                field: "center",
+                reason: format!("must be finite, got {center:?}"),
+            });
+        }
+        if !(radius.is_finite() && radius > 0.0) {
+            return Err(Error::InvalidOption {
+                object: name,
+                field: "radius",
+                reason: format!("must be finite and positive, got {radius}"),
+            });
+        }
+        self.spheres.push((center.extend(radius), material));
+        self.objects.push(ObjectInfo {
+            name,
+            kind: ObjectKind::Sphere { center, radius },
+            material,
+            bounds: Aabb {
+                min: center - Vec3::splat(radius),
+                max: center + Vec3::splat(radius),
+            },
+        });
+        Ok(self)
+    }
+
+    /// Commits the scene (builds the BVH).
+    pub fn build(mut self) -> Result<EmbreeAccel> {
+        if !self.spheres.is_empty() {
+            let mut geometry = self
+                .device
+                .create_geometry(GeometryKind::SPHERE_POINT)
+                .map_err(|e| embree_error("spheres", "cannot create spheres", e))?;
+            geometry
+                .set_new_buffer::<[f32; 4]>(
+                    BufferUsage::VERTEX,
+                    0,
+                    Format::FLOAT4,
+                    16,
+                    self.spheres.len(),
+                )
+                .map_err(|e| embree_error("spheres", "cannot allocate spheres", e))?
+                .iter_mut()
+                .zip(&self.spheres)
+                .for_each(|(dst, (s, _))| *dst = s.to_array());
+            install_filters(&mut geometry, exclude_only);
+            let materials = self.spheres.iter().map(|&(_, m)| m).collect();
+            self.attach(geometry, GeomData::Spheres { materials });
+        }
+        // High quality (spatial splits) made the preview example on straight.hair 1.7× faster
+        // (1M camera + 1M shadow rays: 0.48 s vs 0.82 s) at about the same build time.
+        self.scene.set_build_quality(embree3::BuildQuality::HIGH);
+        self.scene.commit();
+        self.check_device("scene")?;
+
+        let mut info = AccelInfo {
+            objects: self.objects,
+            strands: 0,
+            segments: 0,
+            points: 0,
+            triangles: 0,
+            spheres: 0,
+            bounds: Aabb::EMPTY,
+            memory_bytes: 0,
+        };
+        for o in &info.objects {
+            info.bounds = info.bounds.union(&o.bounds);
+            match o.kind {
+                ObjectKind::Hair {
+                    strands,
+                    segments,
+                    points,
+                    ..
+                } => {
+                    info.strands += strands;
+                    info.segments += segments;
+                    info.points += points;
+                }
+                ObjectKind::Mesh { triangles, .. } => info.triangles += triangles,
+                ObjectKind::Sphere { .. } => info.spheres += 1,
+            }
+        }
+        let ours: usize = self
+            .geoms
+            .iter()
+            .map(|g| match g {
+                GeomData::Hair(c) => c.memory_bytes(),
+                GeomData::Mesh { .. } => 0,
+                GeomData::Spheres { materials } => materials.len() * 4,
+            })
+            .sum();
+        info.memory_bytes = self.embree_bytes.load(Ordering::Relaxed).max(0) as usize + ours;
+        tracing::debug!("built Embree scene: {info}");
+        Ok(EmbreeAccel {
+            scene: self.scene,
+            _device: self.device,
+            geoms: self.geoms,
+            info,
+        })
+    }
+}
+
+/// The filter of meshes and spheres: only the primitive the ray leaves is skipped.
+fn exclude_only(ex: &Exclude, geom: u32, prim: u32, _org: Vec3, _dir: Vec3) -> bool {
+    geom != ex.geom || prim != ex.prim
+}
+
+/// Installs `keep` as the intersect and occluded filter of a geometry.
+fn install_filters<F>(geometry: &mut GeometryBuilder<'static>, keep: F)
+where
+    F: Fn(&Exclude, u32, u32, Vec3, Vec3) -> bool + Send + Sync + 'static,
+{
+    let keep = Arc::new(keep);
+    let keep2 = Arc::clone(&keep);
+    geometry.set_intersect_filter_function::<_, ()>(move |rays, hits, valid, ctx, _| {
+        apply_filter(&*keep, rays, hits, valid, ctx)
+    });
+    geometry.set_occluded_filter_function::<_, ()>(move |rays, hits, valid, ctx, _| {
+        apply_filter(&*keep2, rays, hits, valid, ctx)
+    });
+}
+
+fn apply_filter<F>(
+    keep: &F,
+    rays: RayN<'_>,
+    hits: HitN<'_>,
+    mut valid: ValidityN<'_>,
+    ctx: &mut IntersectContext,
+) where
+    F: Fn(&Exclude, u32, u32, Vec3, Vec3) -> bool,
+{
+    // SAFETY: the scenes built here are private to `EmbreeAccel`, whose every query passes an
+    // `IntersectContextExt<Exclude>`.
+    let ex = unsafe { *ctx.ext::<Exclude>() };
+    if ex.geom == NO_ID {
+        return;
+    }
+    for i in 0..rays.len() {
+        if valid[i] == 0 {
+            continue;
+        }
+        let org = Vec3::from(rays.org(i));
+        let dir = Vec3::from(rays.dir(i));
+        if !keep(&ex, hits.geom_id(i), hits.prim_id(i), org, dir) {
+            valid[i] = 0;
+        }
+    }
+}
+
+/// Hair curves, triangle meshes and spheres in an Embree scene; implements [`Accel`].
+///
+/// Shared across threads (`Send + Sync`): Embree allows concurrent queries after commit.
+pub struct EmbreeAccel {
+    scene: Scene<'static>,
+    _device: Device,
+    geoms: Vec<GeomData>,
+    info: AccelInfo,
+}
+
+impl fmt::Debug for EmbreeAccel {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("EmbreeAccel")
+            .field("info", &self.info)
+            .finish()
+    }
+}
+
+impl EmbreeAccel {
+    /// Counts, bounds and memory of the scene.
+    pub fn info(&self) -> &AccelInfo {
+        &self.info
+    }
+
+    fn context(ray: &Ray) -> IntersectContextExt<Exclude> {
+        let ex = ray.exclude.map_or(
+            Exclude {
+                geom: NO_ID,
+                prim: NO_ID,
+            },
+            |p| Exclude {
+                geom: p.geom,
+                prim: p.prim,
+            },
+        );
+        IntersectContextExt::incoherent(ex)
+    }
+
+    fn embree_ray(ray: &Ray) -> embree3::Ray {
+        embree3::Ray::new(
+            ray.origin.to_array(),
+            ray.dir.to_array(),
+            0.0,
+            ray.t_max,
+            0.0,
+            u32::MAX,
+            0,
+        )
+    }
+}
+
+impl Accel for EmbreeAccel {
+    fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        let mut ctx = Self::context(ray);
+        let mut rh = RayHit::from(Self::embree_ray(ray));
+        self.scene.intersect(&mut ctx, &mut rh);
+        if !rh.hit.is_valid() {
+            return None;
+        }
+        let t = rh.ray.tfar;
+        let p = ray.at(t);
+        let (geom, prim) = (rh.hit.geomID, rh.hit.primID);
+        let surface = || {
+            let n = Vec3::new(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z)
+                .try_normalize()
+                .unwrap_or(-ray.dir);
+            HitKind::Surface {
+                normal: if n.dot(ray.dir) > 0.0 { -n } else { n },
+            }
+        };
+        let (kind, material) = match &self.geoms[geom as usize] {
+            GeomData::Hair(c) => (c.fiber_hit(prim, rh.hit.u, ray, p), c.material),
+            GeomData::Mesh { material } => (surface(), *material),
+            GeomData::Spheres { materials } => (surface(), materials[prim as usize]),
+        };
+        Some(Hit {
+            t,
+            p,
+            prim: PrimId { geom, prim },
+            material,
+            kind,
+        })
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        let mut ctx = Self::context(ray);
+        let mut r = Self::embree_ray(ray);
+        self.scene.occluded(&mut ctx, &mut r)
+    }
+
+    fn bounds(&self) -> Aabb {
+        self.info.bounds
+    }
+}
+
+#[cfg(test)]
+#[path = "scene_tests.rs"]
+mod tests;

@@ -1,0 +1,258 @@
+//! Where a hair object comes from, as written in a scene file, and the per-object options
+//! applied when it is added to the scene.
+
+use crate::curves::CurveBasis;
+use crate::cyhair::HairFile;
+use crate::error::{format_error, Result};
+use crate::geometry::{HairGeometry, Transform};
+use crate::procedural::ProceduralHair;
+use crate::tfx::TfxFile;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The source of a hair object. In RON (externally tagged):
+///
+/// ```ron
+/// File("hair/straight.hair")                      // format from the extension, default options
+/// Hair((path: "hair/straight.hair", z_up: true))  // Cem Yuksel .hair
+/// Tfx((path: "hair/sintel_hair.tfx", radius: 0.01))
+/// Procedural((style: Wavy(amplitude: 0.05, frequency: 3.0), strands: 2000))
+/// ```
+///
+/// Paths are used as given; resolve relative paths before loading ([`HairSource::path_mut`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub enum HairSource {
+    /// A `.hair` or `.tfx` file (by extension, case-insensitive) with default reader options.
+    File(PathBuf),
+    Hair(HairFile),
+    Tfx(TfxFile),
+    Procedural(ProceduralHair),
+}
+
+impl HairSource {
+    /// The file this source reads, if any.
+    pub fn path(&self) -> Option<&Path> {
+        match self {
+            HairSource::File(p) => Some(p),
+            HairSource::Hair(f) => Some(&f.path),
+            HairSource::Tfx(f) => Some(&f.path),
+            HairSource::Procedural(_) => None,
+        }
+    }
+
+    /// The file path, for resolving it relative to the scene file.
+    pub fn path_mut(&mut self) -> Option<&mut PathBuf> {
+        match self {
+            HairSource::File(p) => Some(p),
+            HairSource::Hair(f) => Some(&mut f.path),
+            HairSource::Tfx(f) => Some(&mut f.path),
+            HairSource::Procedural(_) => None,
+        }
+    }
+
+    /// Reads or generates the hair (validated).
+    pub fn load(&self) -> Result<HairGeometry> {
+        match self {
+            HairSource::File(path) => {
+                let ext = path
+                    .extension()
+                    .and_then(|e| e.to_str())
+                    .map(str::to_ascii_lowercase);
+                match ext.as_deref() {
+                    Some("hair") => HairFile::new(path).read(),
+                    Some("tfx") => TfxFile::new(path).read(),
+                    _ => Err(format_error(
+                        path,
+                        "unknown hair file type: expected a .hair or .tfx extension",
+                    )),
+                }
+            }
+            HairSource::Hair(f) => f.read(),
+            HairSource::Tfx(f) => f.read(),
+            HairSource::Procedural(p) => p.generate(),
+        }
+    }
+}
+
+/// How a hair object is turned into Embree curves (every field has a default).
+///
+/// ```ron
+/// (basis: CatmullRom, radius_scale: 1.5, tip_scale: 0.3,
+///  transform: (scale: 0.1, rotate: Euler((0, 90, 0)), translate: (0, 1, 0)),
+///  strand_fraction: 0.1, strand_seed: 7)
+/// ```
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HairOptions {
+    pub basis: CurveBasis,
+    /// Multiplies every radius.
+    pub radius_scale: f32,
+    /// Root-to-tip taper: the radius is multiplied by `1 + (tip_scale − 1)·v` with v = 0 at the
+    /// root and 1 at the tip (1 = no taper).
+    pub tip_scale: f32,
+    /// Applied after the reader's own axis conversion; its scale also scales the radii.
+    pub transform: Transform,
+    /// Keep this fraction of the strands, in (0, 1] (previews).
+    pub strand_fraction: f32,
+    /// Seed of the strand subset.
+    pub strand_seed: u64,
+}
+
+impl Default for HairOptions {
+    fn default() -> Self {
+        HairOptions {
+            basis: CurveBasis::Linear,
+            radius_scale: 1.0,
+            tip_scale: 1.0,
+            transform: Transform::default(),
+            strand_fraction: 1.0,
+            strand_seed: 0,
+        }
+    }
+}
+
+impl HairOptions {
+    pub(crate) fn validate(&self, object: &str) -> Result<()> {
+        let bad = |field: &'static str, reason: String| crate::Error::InvalidOption {
+            object: object.to_owned(),
+            field,
+            reason,
+        };
+        if !(self.radius_scale.is_finite() && self.radius_scale > 0.0) {
+            return Err(bad(
+                "radius_scale",
+                format!("must be finite and positive, got {}", self.radius_scale),
+            ));
+        }
+        if !(self.tip_scale.is_finite() && self.tip_scale > 0.0) {
+            return Err(bad(
+                "tip_scale",
+                format!("must be finite and positive, got {}", self.tip_scale),
+            ));
+        }
+        if !(self.strand_fraction > 0.0 && self.strand_fraction <= 1.0) {
+            return Err(bad(
+                "strand_fraction",
+                format!("must be in (0, 1], got {}", self.strand_fraction),
+            ));
+        }
+        self.transform.validate(object)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn file_source_dispatches_on_the_extension() {
+        let e = HairSource::File("x.obj".into())
+            .load()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("x.obj") && e.contains("extension"), "{e}");
+        let e = HairSource::File("missing.HAIR".into())
+            .load()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("missing.HAIR"), "{e}");
+        let mut s = HairSource::Tfx(TfxFile::new("a.tfx"));
+        *s.path_mut().unwrap() = PathBuf::from("/abs/a.tfx");
+        assert_eq!(s.path(), Some(Path::new("/abs/a.tfx")));
+        assert!(HairSource::Procedural(Default::default()).path().is_none());
+    }
+
+    #[test]
+    fn scene_file_syntax_deserialises() {
+        let parse = |s: &str| ron::from_str::<HairSource>(s);
+        assert_eq!(
+            parse(r#"File("hair/straight.hair")"#).unwrap(),
+            HairSource::File("hair/straight.hair".into())
+        );
+        assert_eq!(
+            parse(r#"Hair((path: "s.hair"))"#).unwrap(),
+            HairSource::Hair(HairFile::new("s.hair"))
+        );
+        assert_eq!(
+            parse(r#"Hair((path: "s.hair", z_up: false))"#).unwrap(),
+            HairSource::Hair(HairFile {
+                path: "s.hair".into(),
+                z_up: false
+            })
+        );
+        assert_eq!(
+            parse(r#"Tfx((path: "a.tfx", radius: 0.01))"#).unwrap(),
+            HairSource::Tfx(TfxFile {
+                path: "a.tfx".into(),
+                radius: 0.01
+            })
+        );
+        let p = parse(
+            "Procedural((style: Curly(amplitude: 0.04, frequency: 6.0), strands: 3000, points_per_strand: 48))",
+        )
+        .unwrap();
+        let HairSource::Procedural(p) = p else {
+            panic!("{p:?}")
+        };
+        assert_eq!(
+            p.style,
+            crate::HairStyle::Curly {
+                amplitude: 0.04,
+                frequency: 6.0
+            }
+        );
+        assert_eq!((p.strands, p.points_per_strand, p.seed), (3000, 48, 0));
+        assert_eq!(
+            parse("Procedural((style: Ball))").unwrap(),
+            HairSource::Procedural(ProceduralHair {
+                style: crate::HairStyle::Ball,
+                ..Default::default()
+            })
+        );
+        // Typos are errors.
+        assert!(parse(r#"Hair((path: "s.hair", zup: false))"#).is_err());
+        assert!(parse("Procedural((strand: 5))").is_err());
+
+        let o: HairOptions = ron::from_str(
+            "(basis: CatmullRom, radius_scale: 1.5, tip_scale: 0.3,
+              transform: (scale: 0.1, rotate: Euler((0, 90, 0)), translate: (0, 1, 0)),
+              strand_fraction: 0.1, strand_seed: 7)",
+        )
+        .unwrap();
+        assert_eq!(o.basis, CurveBasis::CatmullRom);
+        assert_eq!(
+            o.transform.rotate,
+            crate::Rotation::Euler(glam::Vec3::new(0.0, 90.0, 0.0))
+        );
+        assert_eq!(o.strand_seed, 7);
+        let o: HairOptions =
+            ron::from_str("(transform: (rotate: AxisAngle(axis: (0, 1, 0), degrees: 45)))")
+                .unwrap();
+        assert_eq!(o.transform.scale, 1.0);
+        assert_eq!(
+            ron::from_str::<HairOptions>("()").unwrap(),
+            HairOptions::default()
+        );
+        assert!(ron::from_str::<HairOptions>("(basis: Bezier)").is_err());
+        // Round trip.
+        let text = ron::to_string(&o).unwrap();
+        assert_eq!(ron::from_str::<HairOptions>(&text).unwrap(), o);
+    }
+
+    #[test]
+    fn option_validation_names_object_and_field() {
+        let o = HairOptions {
+            strand_fraction: 0.0,
+            ..Default::default()
+        };
+        let e = o.validate("head").unwrap_err().to_string();
+        assert!(e.contains("head") && e.contains("strand_fraction"), "{e}");
+        let o = HairOptions {
+            tip_scale: -1.0,
+            ..Default::default()
+        };
+        assert!(o.validate("head").is_err());
+        HairOptions::default().validate("head").unwrap();
+    }
+}
