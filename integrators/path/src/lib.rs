@@ -23,7 +23,10 @@ pub struct PathSettings {
 
 impl Default for PathSettings {
     fn default() -> Self {
-        PathSettings { max_depth: 100, rr_depth: 5 }
+        PathSettings {
+            max_depth: 100,
+            rr_depth: 5,
+        }
     }
 }
 
@@ -42,7 +45,11 @@ impl PathTracer {
 impl Integrator for PathTracer {
     fn li(&self, camera_ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb {
         let light_count = scene.lights.len();
-        let light_select_pdf = if light_count > 0 { 1.0 / light_count as f32 } else { 0.0 };
+        let light_select_pdf = if light_count > 0 {
+            1.0 / light_count as f32
+        } else {
+            0.0
+        };
         let mut radiance = Rgb::ZERO;
         let mut throughput = Rgb::ONE;
         let mut ray = *camera_ray;
@@ -73,14 +80,19 @@ impl Integrator for PathTracer {
             let u_select = sampler.next_1d();
             let u_light = sampler.next_2d();
             if light_count > 0 {
-                let light = &scene.lights[((u_select * light_count as f32) as usize).min(light_count - 1)];
+                let light =
+                    &scene.lights[((u_select * light_count as f32) as usize).min(light_count - 1)];
                 if let Some(ls) = light.sample_li(sp.p, u_light) {
                     let f = sp.eval(ls.wi);
                     if ls.pdf > 0.0 && f != Rgb::ZERO && ls.radiance != Rgb::ZERO {
                         let shadow = sp.spawn(ls.wi).with_t_max(ls.distance * (1.0 - 1e-4));
                         if !scene.occluded(&shadow) {
                             let light_pdf = light_select_pdf * ls.pdf;
-                            let weight = if ls.is_delta { 1.0 } else { power_heuristic(light_pdf, sp.pdf(ls.wi)) };
+                            let weight = if ls.is_delta {
+                                1.0
+                            } else {
+                                power_heuristic(light_pdf, sp.pdf(ls.wi))
+                            };
                             radiance += throughput * f * ls.radiance * (weight / light_pdf);
                         }
                     }
@@ -88,7 +100,9 @@ impl Integrator for PathTracer {
             }
 
             // Continue the path by sampling the scattering function.
-            let Some(s) = sp.sample(sampler.next_4d()) else { break };
+            let Some(s) = sp.sample(sampler.next_4d()) else {
+                break;
+            };
             if s.pdf <= 0.0 || s.f == Rgb::ZERO {
                 break;
             }
@@ -96,8 +110,12 @@ impl Integrator for PathTracer {
             scatter_pdf = Some(s.pdf);
             ray = sp.spawn(s.wi);
 
-            if depth + 1 >= self.settings.rr_depth {
-                let survive = throughput.max_element().min(0.95);
+            // Roulette only paths that have lost energy: white hair keeps a throughput of ~1
+            // over hundreds of bounces, and rouletting it anyway would make the surviving
+            // paths' weights grow geometrically (heavy-tailed noise).
+            let max_throughput = throughput.max_element();
+            if depth + 1 >= self.settings.rr_depth && max_throughput < 1.0 {
+                let survive = max_throughput.min(0.95);
                 if sampler.next_1d() >= survive {
                     break;
                 }
