@@ -1,1 +1,80 @@
-fn main() {}
+//! `tress`: the command-line renderer.
+
+mod bcsdf_cmd;
+mod geometry;
+mod integrators;
+mod render_cmd;
+mod scene_desc;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+
+/// tress — a physically based hair renderer.
+#[derive(Parser, Debug)]
+#[command(name = "tress", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Render a scene to a linear EXR and a tone-mapped PNG preview.
+    Render(render_cmd::RenderArgs),
+    /// Print what a scene contains: strands, segments, bounds, memory.
+    Info {
+        /// Scene file (RON).
+        scene: PathBuf,
+    },
+    /// Tools for adding and tuning hair models: furnace, eval.
+    #[command(subcommand)]
+    Bcsdf(bcsdf_cmd::BcsdfCommand),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    if let Err(e) = run(cli) {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Render(args) => render_cmd::render(args),
+        Command::Info { scene } => render_cmd::info(&scene),
+        Command::Bcsdf(cmd) => bcsdf_cmd::run(cmd),
+    }
+}
+
+/// RON options for everything tress parses: newtype variants may omit their inner parentheses,
+/// so `Chiang(beta_m: 0.3)` and `Path(max_depth: 8)` read naturally.
+pub fn ron_options() -> ron::Options {
+    ron::Options::default()
+        .with_default_extension(ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES)
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so readers
+/// never see a partial file.
+pub fn atomic_write(path: &std::path::Path, bytes: &[u8]) -> Result<()> {
+    use anyhow::Context;
+    use std::io::Write;
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    let mut tmp = tempfile::NamedTempFile::new_in(dir)
+        .with_context(|| format!("cannot write in {}", dir.display()))?;
+    tmp.write_all(bytes)
+        .with_context(|| format!("writing {}", path.display()))?;
+    tmp.persist(path)
+        .with_context(|| format!("cannot create {}", path.display()))?;
+    Ok(())
+}

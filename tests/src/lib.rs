@@ -1,1 +1,74 @@
-//! Shared helpers for the cross-crate tests in `tests/tests/`.
+//! Shared helpers for the cross-crate tests in `tests/tests/`: small scenes built in code.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use tress_accel::{HairOptions, HairStyle, ProceduralHair, SceneBuilder};
+use tress_core::film::FilmSettings;
+use tress_core::light::Light;
+use tress_core::math::{Rgb, Vec3};
+use tress_core::{Bcsdf, Camera, Material, Scene};
+
+/// A ball of `strands` fibers of radius 0.01 around the origin (radius 1), seen from +z, with
+/// `bcsdf` and the given lights.
+pub fn hair_ball_scene(bcsdf: Arc<dyn Bcsdf>, strands: u32, lights: Vec<Light>) -> Scene {
+    let hair = ProceduralHair {
+        style: HairStyle::Ball,
+        seed: 3,
+        strands,
+        points_per_strand: 16,
+        radius: 0.01,
+        length: 2.0,
+        center: Vec3::ZERO,
+        sphere_radius: 1.0,
+    }
+    .generate()
+    .expect("procedural hair");
+    let accel = SceneBuilder::new()
+        .and_then(|b| b.add_hair(&hair, &HairOptions::default(), 0))
+        .and_then(|b| b.build())
+        .expect("embree scene");
+    Scene {
+        camera: Camera::perspective(
+            Vec3::new(0.0, 0.0, 4.0),
+            Vec3::ZERO,
+            Vec3::Y,
+            35.0,
+            0.0,
+            None,
+        ),
+        accel: Box::new(accel),
+        materials: vec![Material::Hair(bcsdf)],
+        lights,
+    }
+}
+
+/// A constant white environment of radiance 1.
+pub fn white_environment() -> Vec<Light> {
+    vec![Light::Constant { radiance: Rgb::ONE }]
+}
+
+pub fn film(width: u32, height: u32, spp: u32, seed: u64) -> FilmSettings {
+    FilmSettings {
+        width,
+        height,
+        spp,
+        seed,
+        crop: None,
+    }
+}
+
+/// `shared/data` beside the workspace, if present (tests skip what needs it otherwise).
+pub fn shared_data(rel: &str) -> Option<PathBuf> {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data")
+        .join(rel);
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!(
+            "note: {} not found; skipping the part of the test that needs it",
+            p.display()
+        );
+        None
+    }
+}

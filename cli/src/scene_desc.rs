@@ -1,0 +1,315 @@
+//! Scene files: RON descriptions deserialised with serde, then built into a renderable
+//! [`tress_core::Scene`].
+//!
+//! All enums are externally tagged (RON's native `Variant(...)` syntax), every struct denies
+//! unknown fields, and relative paths resolve against the scene file's folder.
+
+use crate::integrators::IntegratorDesc;
+use anyhow::{anyhow, bail, Context, Result};
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use tress_core::film::FilmSettings;
+use tress_core::light::{EnvironmentMap, Light};
+use tress_core::{Camera, Material, Scene};
+use tress_materials::HairModel;
+
+/// A whole scene file.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneDesc {
+    pub camera: CameraDesc,
+    pub film: FilmSettings,
+    #[serde(default)]
+    pub integrator: IntegratorDesc,
+    /// Named materials, referred to by objects.
+    pub materials: BTreeMap<String, MaterialDesc>,
+    pub objects: Vec<crate::geometry::ObjectDesc>,
+    pub lights: Vec<LightDesc>,
+}
+
+/// Perspective camera.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraDesc {
+    pub look_from: Vec3,
+    pub look_at: Vec3,
+    #[serde(default = "default_up")]
+    pub up: Vec3,
+    /// Vertical field of view in degrees, in (0, 180).
+    #[serde(default = "default_fov")]
+    pub fov: f32,
+    /// Thin-lens aperture radius in scene units; 0 is a pinhole.
+    #[serde(default)]
+    pub lens_radius: f32,
+    /// Distance to the plane in focus; default: the distance to `look_at`.
+    #[serde(default)]
+    pub focus_distance: Option<f32>,
+}
+
+fn default_up() -> Vec3 {
+    Vec3::Y
+}
+
+fn default_fov() -> f32 {
+    40.0
+}
+
+/// A material: a hair model for fibers, or a diffuse surface for meshes and spheres.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub enum MaterialDesc {
+    Hair(HairModel),
+    Diffuse { albedo: Vec3 },
+}
+
+/// A light source.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub enum LightDesc {
+    /// Equirectangular HDR environment (Radiance .hdr or OpenEXR).
+    Environment {
+        file: PathBuf,
+        /// Rotation about +y, degrees.
+        #[serde(default)]
+        rotation: f32,
+        #[serde(default = "one")]
+        scale: f32,
+    },
+    /// The built-in procedural sky with a sun (needs no files).
+    Sky {
+        #[serde(default)]
+        rotation: f32,
+        #[serde(default = "one")]
+        scale: f32,
+    },
+    /// Uniform radiance from all directions.
+    Constant { radiance: Vec3 },
+    /// A distant light (sun) shining along `direction`, delivering `irradiance` perpendicular to
+    /// it, from a disc of angular radius `angular_radius` degrees (0: a delta light).
+    Distant {
+        direction: Vec3,
+        irradiance: Vec3,
+        #[serde(default)]
+        angular_radius: f32,
+    },
+    /// A point light of the given intensity (W/sr).
+    Point { position: Vec3, intensity: Vec3 },
+}
+
+fn one() -> f32 {
+    1.0
+}
+
+/// A scene built from its description, with a human-readable summary of what it holds.
+pub struct BuiltScene {
+    pub scene: Scene,
+    pub summary: String,
+}
+
+/// Reads and parses a scene file; errors name the file, line and column.
+pub fn load(path: &Path) -> Result<SceneDesc> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read scene file {}", path.display()))?;
+    parse(&text).map_err(|e| anyhow!("{}:{e}", path.display()))
+}
+
+/// Parses scene text; the error is `line:column: message`.
+pub fn parse(text: &str) -> std::result::Result<SceneDesc, String> {
+    crate::ron_options()
+        .from_str::<SceneDesc>(text)
+        .map_err(|e| {
+            let p = e.span.start;
+            format!("{}:{}: {}", p.line, p.col, e.code)
+        })
+}
+
+/// Resolves `p` against the folder holding the scene file.
+pub fn resolve(scene_path: &Path, p: &Path) -> PathBuf {
+    if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        scene_path.parent().unwrap_or(Path::new(".")).join(p)
+    }
+}
+
+fn finite3(v: Vec3) -> bool {
+    v.is_finite()
+}
+
+/// Builds the renderable scene.
+pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
+    let here = |what: &str| format!("{}: {what}", scene_path.display());
+    let c = &desc.camera;
+    if !(c.fov > 0.0 && c.fov < 180.0) {
+        bail!(
+            "{}",
+            here(&format!(
+                "camera.fov = {} must lie in (0, 180) degrees",
+                c.fov
+            ))
+        );
+    }
+    if !finite3(c.look_from) || !finite3(c.look_at) || !finite3(c.up) {
+        bail!("{}", here("camera positions must be finite"));
+    }
+    if (c.look_at - c.look_from).length() == 0.0
+        || (c.look_at - c.look_from).cross(c.up).length() < 1e-6
+    {
+        bail!(
+            "{}",
+            here("camera.look_at must differ from look_from and not be parallel to up")
+        );
+    }
+    if !(c.lens_radius >= 0.0 && c.lens_radius.is_finite()) {
+        bail!(
+            "{}",
+            here(&format!(
+                "camera.lens_radius = {} must be finite and >= 0",
+                c.lens_radius
+            ))
+        );
+    }
+    let camera = Camera::perspective(
+        c.look_from,
+        c.look_at,
+        c.up,
+        c.fov,
+        c.lens_radius,
+        c.focus_distance,
+    );
+
+    // Materials, in a stable order; objects refer to them by index.
+    let t0 = Instant::now();
+    let mut material_index = BTreeMap::new();
+    let mut materials = Vec::new();
+    for (name, m) in &desc.materials {
+        let built = match m {
+            MaterialDesc::Hair(model) => Material::Hair(
+                model
+                    .build()
+                    .map_err(|e| anyhow!("{}", here(&format!("material '{name}': {e}"))))?,
+            ),
+            MaterialDesc::Diffuse { albedo } => {
+                if !(albedo.min_element() >= 0.0 && albedo.max_element() <= 1.0) {
+                    bail!(
+                        "{}",
+                        here(&format!(
+                            "material '{name}': albedo {albedo} must lie in [0, 1]"
+                        ))
+                    );
+                }
+                Material::Diffuse { albedo: *albedo }
+            }
+        };
+        material_index.insert(name.clone(), materials.len() as u32);
+        materials.push(built);
+    }
+    let material_time = t0.elapsed();
+
+    let lights = desc
+        .lights
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            build_light(l, scene_path)
+                .map_err(|e| anyhow!("{}", here(&format!("lights[{i}]: {e:#}"))))
+        })
+        .collect::<Result<Vec<_>>>()?;
+
+    let t1 = Instant::now();
+    let (accel, geometry_summary) =
+        crate::geometry::build_accel(desc, scene_path, &material_index, &materials)?;
+    let summary = format!(
+        "{geometry_summary}\nmaterials: {} built in {:.1} ms; lights: {}; geometry built in {:.2} s",
+        materials.len(),
+        material_time.as_secs_f64() * 1e3,
+        lights.len(),
+        t1.elapsed().as_secs_f64()
+    );
+    Ok(BuiltScene {
+        scene: Scene {
+            camera,
+            accel,
+            materials,
+            lights,
+        },
+        summary,
+    })
+}
+
+fn build_light(l: &LightDesc, scene_path: &Path) -> Result<Light> {
+    let check = |name: &str, v: Vec3| -> Result<()> {
+        if v.is_finite() && v.min_element() >= 0.0 {
+            Ok(())
+        } else {
+            bail!("{name} {v} must be finite and non-negative")
+        }
+    };
+    let check_scale = |rotation: f32, scale: f32| -> Result<()> {
+        if !rotation.is_finite() || !(scale.is_finite() && scale >= 0.0) {
+            bail!("rotation must be finite and scale finite and >= 0 (got {rotation}, {scale})");
+        }
+        Ok(())
+    };
+    Ok(match l {
+        LightDesc::Environment {
+            file,
+            rotation,
+            scale,
+        } => {
+            check_scale(*rotation, *scale)?;
+            let path = resolve(scene_path, file);
+            Light::Environment(EnvironmentMap::from_file(&path, *rotation, *scale)?)
+        }
+        LightDesc::Sky { rotation, scale } => {
+            check_scale(*rotation, *scale)?;
+            Light::Environment(EnvironmentMap::builtin_sky(*rotation, *scale)?)
+        }
+        LightDesc::Constant { radiance } => {
+            check("radiance", *radiance)?;
+            Light::Constant {
+                radiance: *radiance,
+            }
+        }
+        LightDesc::Distant {
+            direction,
+            irradiance,
+            angular_radius,
+        } => {
+            check("irradiance", *irradiance)?;
+            if !direction.is_finite() || direction.length() == 0.0 {
+                bail!("direction {direction} must be finite and non-zero");
+            }
+            if !(0.0..90.0).contains(angular_radius) {
+                bail!("angular_radius = {angular_radius} must lie in [0, 90) degrees");
+            }
+            let half = angular_radius.to_radians();
+            // Uniform disc radiance delivering `irradiance` at normal incidence:
+            // E = L · π sin²(half) (the cosine-weighted solid angle of the disc).
+            let radiance = if half > 0.0 {
+                *irradiance / (std::f32::consts::PI * half.sin().powi(2))
+            } else {
+                *irradiance
+            };
+            Light::Distant {
+                direction: direction.normalize(),
+                radiance,
+                half_angle_rad: half,
+            }
+        }
+        LightDesc::Point {
+            position,
+            intensity,
+        } => {
+            check("intensity", *intensity)?;
+            if !position.is_finite() {
+                bail!("position must be finite");
+            }
+            Light::Point {
+                position: *position,
+                intensity: *intensity,
+            }
+        }
+    })
+}
