@@ -233,6 +233,7 @@ pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
             accel,
             materials,
             lights,
+            density: None,
         },
         summary,
     })

@@ -54,3 +54,11 @@ pub trait Accel: Send + Sync {
     /// Bounds of all geometry.
     fn bounds(&self) -> Aabb;
 }
+
+/// Hair density along rays, for dual scattering: the expected number of fibers a ray crosses.
+/// Implemented by the voxel density grid in `tress-accel`; kept apart from [`Accel`] because it
+/// answers a statistical question, not an intersection one.
+pub trait FiberDensity: Send + Sync {
+    /// Expected number of fibers crossed along `ray` over `(0, ray.t_max)`.
+    fn fibers_crossed(&self, ray: &Ray) -> f32;
+}

@@ -20,7 +20,7 @@ pub mod scene;
 pub mod shading;
 pub mod stats;
 
-pub use accel::{Accel, Hit, HitKind, PrimId};
+pub use accel::{Accel, FiberDensity, Hit, HitKind, PrimId};
 pub use bcsdf::{Bcsdf, BcsdfSample, FiberFrame};
 pub use camera::Camera;
 pub use film::Image;

@@ -1,6 +1,6 @@
 //! The renderable scene: camera, geometry, materials, lights.
 
-use crate::accel::{Accel, Hit};
+use crate::accel::{Accel, FiberDensity, Hit};
 use crate::bcsdf::Bcsdf;
 use crate::camera::Camera;
 use crate::light::Light;
@@ -23,6 +23,8 @@ pub struct Scene {
     pub accel: Box<dyn Accel>,
     pub materials: Vec<Material>,
     pub lights: Vec<Light>,
+    /// Hair density for the dual-scattering integrators; `None` when no integrator needs it.
+    pub density: Option<Box<dyn FiberDensity>>,
 }
 
 thread_local! {

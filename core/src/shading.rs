@@ -11,8 +11,15 @@ use std::f32::consts::FRAC_1_PI;
 /// The scattering function at a shading point, with its local frame.
 #[derive(Clone, Copy, Debug)]
 pub enum Scattering<'a> {
-    Fiber { bcsdf: &'a dyn Bcsdf, frame: FiberFrame, h: f32 },
-    Diffuse { albedo: Rgb, frame: Frame },
+    Fiber {
+        bcsdf: &'a dyn Bcsdf,
+        frame: FiberFrame,
+        h: f32,
+    },
+    Diffuse {
+        albedo: Rgb,
+        frame: Frame,
+    },
     /// A material that does not apply to the geometry it was put on; absorbs everything.
     Black,
 }
@@ -42,15 +49,25 @@ impl<'a> ShadingPoint<'a> {
         let wo = -ray.dir;
         let material = materials.get(hit.material as usize);
         let scattering = match (hit.kind, material) {
-            (HitKind::Fiber { tangent, h, .. }, Some(Material::Hair(bcsdf))) => {
-                Scattering::Fiber { bcsdf: bcsdf.as_ref(), frame: FiberFrame::new(tangent, wo), h }
-            }
+            (HitKind::Fiber { tangent, h, .. }, Some(Material::Hair(bcsdf))) => Scattering::Fiber {
+                bcsdf: bcsdf.as_ref(),
+                frame: FiberFrame::new(tangent, wo),
+                h,
+            },
             (HitKind::Surface { normal }, Some(Material::Diffuse { albedo })) => {
-                Scattering::Diffuse { albedo: *albedo, frame: Frame::from_z(normal) }
+                Scattering::Diffuse {
+                    albedo: *albedo,
+                    frame: Frame::from_z(normal),
+                }
             }
             _ => Scattering::Black,
         };
-        ShadingPoint { p: hit.p, prim: hit.prim, wo, scattering }
+        ShadingPoint {
+            p: hit.p,
+            prim: hit.prim,
+            wo,
+            scattering,
+        }
     }
 
     pub fn is_fiber(&self) -> bool {
@@ -60,8 +77,12 @@ impl<'a> ShadingPoint<'a> {
     /// Scattering value toward world direction `wi` (cosine included).
     pub fn eval(&self, wi: Vec3) -> Rgb {
         match self.scattering {
-            Scattering::Fiber { bcsdf, frame, h } => bcsdf.eval(frame.to_local(self.wo), frame.to_local(wi), h),
-            Scattering::Diffuse { albedo, frame } => albedo * (frame.z.dot(wi).max(0.0) * FRAC_1_PI),
+            Scattering::Fiber { bcsdf, frame, h } => {
+                bcsdf.eval(frame.to_local(self.wo), frame.to_local(wi), h)
+            }
+            Scattering::Diffuse { albedo, frame } => {
+                albedo * (frame.z.dot(wi).max(0.0) * FRAC_1_PI)
+            }
             Scattering::Black => Rgb::ZERO,
         }
     }
@@ -69,7 +90,9 @@ impl<'a> ShadingPoint<'a> {
     /// Solid-angle density of [`ShadingPoint::sample`] producing `wi`.
     pub fn pdf(&self, wi: Vec3) -> f32 {
         match self.scattering {
-            Scattering::Fiber { bcsdf, frame, h } => bcsdf.pdf(frame.to_local(self.wo), frame.to_local(wi), h),
+            Scattering::Fiber { bcsdf, frame, h } => {
+                bcsdf.pdf(frame.to_local(self.wo), frame.to_local(wi), h)
+            }
             Scattering::Diffuse { frame, .. } => frame.z.dot(wi).max(0.0) * FRAC_1_PI,
             Scattering::Black => 0.0,
         }
@@ -80,12 +103,20 @@ impl<'a> ShadingPoint<'a> {
         match self.scattering {
             Scattering::Fiber { bcsdf, frame, h } => {
                 let s = bcsdf.sample(frame.to_local(self.wo), h, u)?;
-                Some(ScatterSample { wi: frame.to_world(s.wi), f: s.f, pdf: s.pdf })
+                Some(ScatterSample {
+                    wi: frame.to_world(s.wi),
+                    f: s.f,
+                    pdf: s.pdf,
+                })
             }
             Scattering::Diffuse { albedo, frame } => {
                 let local = sample_cosine_hemisphere(glam::Vec2::new(u[0], u[1]));
                 let pdf = local.z * FRAC_1_PI;
-                (pdf > 0.0).then(|| ScatterSample { wi: frame.to_world(local), f: albedo * pdf, pdf })
+                (pdf > 0.0).then(|| ScatterSample {
+                    wi: frame.to_world(local),
+                    f: albedo * pdf,
+                    pdf,
+                })
             }
             Scattering::Black => None,
         }

@@ -39,6 +39,7 @@ pub fn hair_ball_scene(bcsdf: Arc<dyn Bcsdf>, strands: u32, lights: Vec<Light>) 
         accel: Box::new(accel),
         materials: vec![Material::Hair(bcsdf)],
         lights,
+        density: None,
     }
 }
 
