@@ -15,6 +15,24 @@ pub enum BcsdfCommand {
     Furnace(FurnaceArgs),
     /// Evaluate f and pdf for directions read from a CSV file.
     Eval(EvalArgs),
+    /// Plot the longitudinal and azimuthal profiles of each lobe (PNG and SVG).
+    Plot(PlotArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct PlotArgs {
+    /// The hair model as RON.
+    #[arg(long)]
+    pub model: String,
+    /// Outgoing inclination θ_o in degrees.
+    #[arg(long, default_value_t = 30.0, allow_hyphen_values = true)]
+    pub theta_o: f32,
+    /// Offset h across the fiber; default: averaged over h ∈ [-1, 1].
+    #[arg(long, allow_hyphen_values = true)]
+    pub h: Option<f32>,
+    /// Output PNG (an SVG is written beside it).
+    #[arg(long, default_value = "lobes.png")]
+    pub out: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -54,6 +72,7 @@ pub fn run(cmd: BcsdfCommand) -> Result<()> {
     match cmd {
         BcsdfCommand::Furnace(a) => furnace(a),
         BcsdfCommand::Eval(a) => eval(a),
+        BcsdfCommand::Plot(a) => plot(a),
     }
 }
 
@@ -67,21 +86,26 @@ fn build_model(ron_text: &str) -> Result<Arc<dyn Bcsdf>> {
     model.build().map_err(|e| anyhow!("--model: {e}"))
 }
 
-/// Mean and standard error of f/pdf over `samples` importance samples at θ_o, h uniform.
-pub fn albedo(bcsdf: &dyn Bcsdf, theta_o: f32, samples: u32, seed: u64) -> ([f64; 3], [f64; 3]) {
+/// Mean and standard error of an albedo estimator over `samples` draws at θ_o with h uniform:
+/// `f/pdf` of the model's own sampler (`importance`), or `4π·f` for uniform sphere directions.
+pub fn albedo(bcsdf: &dyn Bcsdf, theta_o: f32, samples: u32, seed: u64, importance: bool) -> ([f64; 3], [f64; 3]) {
     let wo = fiber_direction(theta_o.sin(), theta_o.cos(), std::f32::consts::FRAC_PI_2);
     let mut rng = Sampler::from_seed(seed);
     let (mut sum, mut sum2) = ([0.0f64; 3], [0.0f64; 3]);
     for _ in 0..samples {
         let h = 2.0 * rng.next_1d() - 1.0;
-        if let Some(s) = bcsdf.sample(wo, h, rng.next_4d()) {
-            if s.pdf > 0.0 {
-                let w = s.f / s.pdf;
-                for c in 0..3 {
-                    sum[c] += w[c] as f64;
-                    sum2[c] += (w[c] as f64).powi(2);
-                }
+        let w = if importance {
+            match bcsdf.sample(wo, h, rng.next_4d()) {
+                Some(s) if s.pdf > 0.0 => s.f / s.pdf,
+                _ => Vec3::ZERO,
             }
+        } else {
+            let wi = tress_core::sampling::sample_uniform_sphere(rng.next_2d());
+            bcsdf.eval(wo, wi, h) * (4.0 * std::f32::consts::PI)
+        };
+        for c in 0..3 {
+            sum[c] += w[c] as f64;
+            sum2[c] += (w[c] as f64).powi(2);
         }
     }
     let n = samples as f64;
@@ -97,38 +121,26 @@ fn furnace(a: FurnaceArgs) -> Result<()> {
     }
     let mut out = String::new();
     if a.csv {
-        out.push_str("theta_o_deg,albedo_r,albedo_g,albedo_b,stderr_r,stderr_g,stderr_b\n");
+        out.push_str("theta_o_deg,albedo_r,albedo_g,albedo_b,stderr_r,stderr_g,stderr_b,uniform_r,uniform_g,uniform_b,uniform_stderr_r,uniform_stderr_g,uniform_stderr_b\n");
     } else {
-        writeln!(
-            out,
-            "{:>8}  {:>8} {:>8} {:>8}   {:>9}",
-            "θ_o (°)", "R", "G", "B", "std err"
-        )?;
+        writeln!(out, "albedo ∫ f cos θ_i dω, h uniform in [-1, 1]: importance-sampled, and a uniform-sphere check")?;
+        writeln!(out, "{:>8}  {:>8} {:>8} {:>8} {:>9}   {:>8} {:>8} {:>8} {:>9}", "θ_o (°)", "R", "G", "B", "std err", "unif R", "unif G", "unif B", "std err")?;
     }
     let mut t = -90.0f32;
     while t <= 90.0 + 1e-3 {
         // Exactly ±90° looks straight along the fiber, where every model degenerates.
         let theta = t.clamp(-89.5, 89.5);
-        let (m, se) = albedo(
-            bcsdf.as_ref(),
-            theta.to_radians(),
-            a.samples,
-            1 + t.to_bits() as u64,
-        );
+        let seed = 1 + t.to_bits() as u64;
+        let (m, se) = albedo(bcsdf.as_ref(), theta.to_radians(), a.samples, seed, true);
+        let (um, use_) = albedo(bcsdf.as_ref(), theta.to_radians(), a.samples, seed, false);
+        let max = |v: [f64; 3]| v.iter().cloned().fold(0.0, f64::max);
         if a.csv {
-            writeln!(
-                out,
-                "{theta},{},{},{},{},{},{}",
-                m[0], m[1], m[2], se[0], se[1], se[2]
-            )?;
+            writeln!(out, "{theta},{},{},{},{},{},{},{},{},{},{},{},{}", m[0], m[1], m[2], se[0], se[1], se[2], um[0], um[1], um[2], use_[0], use_[1], use_[2])?;
         } else {
             writeln!(
                 out,
-                "{theta:>8.1}  {:>8.4} {:>8.4} {:>8.4}   {:>9.2e}",
-                m[0],
-                m[1],
-                m[2],
-                se.iter().cloned().fold(0.0, f64::max)
+                "{theta:>8.1}  {:>8.4} {:>8.4} {:>8.4} {:>9.1e}   {:>8.4} {:>8.4} {:>8.4} {:>9.1e}",
+                m[0], m[1], m[2], max(se), um[0], um[1], um[2], max(use_)
             )?;
         }
         t += a.step;
@@ -198,5 +210,76 @@ fn eval(a: EvalArgs) -> Result<()> {
         Some(p) => crate::atomic_write(&p, out.as_bytes())?,
         None => print!("{out}"),
     }
+    Ok(())
+}
+
+/// Marginal profiles of `eval_lobe` (luminance): over θ_i (integrated over φ) and over φ
+/// (integrated over θ_i), each integrating to the lobe's albedo.
+fn lobe_profiles(bcsdf: &dyn Bcsdf, theta_o: f32, hs: &[f32], lobe: usize) -> (Vec<(f64, f64)>, Vec<(f64, f64)>) {
+    use std::f64::consts::PI;
+    const N_THETA: usize = 180;
+    const N_PHI: usize = 360;
+    let wo = fiber_direction(theta_o.sin(), theta_o.cos(), std::f32::consts::FRAC_PI_2);
+    let mut by_theta = vec![0.0f64; N_THETA];
+    let mut by_phi = vec![0.0f64; N_PHI];
+    let (d_theta, d_phi) = (PI / N_THETA as f64, 2.0 * PI / N_PHI as f64);
+    for (i, bt) in by_theta.iter_mut().enumerate() {
+        let theta = -PI / 2.0 + (i as f64 + 0.5) * d_theta;
+        let cos_t = theta.cos();
+        for (j, bp) in by_phi.iter_mut().enumerate() {
+            let phi_rel = -PI + (j as f64 + 0.5) * d_phi;
+            // φ_i = φ_o + Δφ with φ_o = π/2 in the local frame.
+            let wi = fiber_direction(theta.sin() as f32, cos_t as f32, (std::f64::consts::FRAC_PI_2 + phi_rel) as f32);
+            let v: f64 = hs.iter().map(|&h| tress_core::luminance(bcsdf.eval_lobe(wo, wi, h, lobe)) as f64).sum::<f64>() / hs.len() as f64;
+            *bt += v * cos_t * d_phi;
+            *bp += v * cos_t * d_theta;
+        }
+    }
+    (
+        by_theta.iter().enumerate().map(|(i, v)| ((-90.0 + (i as f64 + 0.5)), *v)).collect(),
+        by_phi.iter().enumerate().map(|(j, v)| ((-180.0 + (j as f64 + 0.5)), *v)).collect(),
+    )
+}
+
+fn plot(a: PlotArgs) -> Result<()> {
+    use crate::plot::{write_charts, Chart, Series};
+    let bcsdf = build_model(&a.model)?;
+    if !(-89.9..=89.9).contains(&a.theta_o) {
+        bail!("--theta-o must lie in [-89.9, 89.9] degrees");
+    }
+    let hs: Vec<f32> = match a.h {
+        Some(h) if (-1.0..=1.0).contains(&h) => vec![h],
+        Some(h) => bail!("--h = {h} must lie in [-1, 1]"),
+        None => (0..16).map(|i| -1.0 + (i as f32 + 0.5) / 8.0).collect(),
+    };
+    let names = bcsdf.lobe_names();
+    let (mut longitudinal, mut azimuthal) = (Vec::new(), Vec::new());
+    for (p, name) in names.iter().enumerate() {
+        let (lt, az) = lobe_profiles(bcsdf.as_ref(), a.theta_o.to_radians(), &hs, p);
+        longitudinal.push(Series { name: name.to_string(), points: lt, reference: false });
+        azimuthal.push(Series { name: name.to_string(), points: az, reference: false });
+    }
+    let h_text = a.h.map(|h| format!("h = {h}")).unwrap_or_else(|| "h averaged".into());
+    let charts = [
+        Chart {
+            title: format!("longitudinal, θ_o = {}°, {h_text}", a.theta_o),
+            x_label: "θ_i (degrees)".into(),
+            y_label: "∫ f cos θ_i dφ (per radian)".into(),
+            series: longitudinal,
+            log_x: false,
+            log_y: false,
+        },
+        Chart {
+            title: format!("azimuthal, θ_o = {}°, {h_text}", a.theta_o),
+            x_label: "φ_i − φ_o (degrees)".into(),
+            y_label: "∫ f cos θ_i dθ_i (per radian)".into(),
+            series: azimuthal,
+            log_x: false,
+            log_y: false,
+        },
+    ];
+    let stem = a.out.with_extension("");
+    write_charts(&stem, &charts, 640, 440)?;
+    eprintln!("wrote {} and {}", stem.with_extension("png").display(), stem.with_extension("svg").display());
     Ok(())
 }

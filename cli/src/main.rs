@@ -3,6 +3,7 @@
 mod bcsdf_cmd;
 mod geometry;
 mod integrators;
+mod plot;
 mod render_cmd;
 mod scene_desc;
 
