@@ -88,7 +88,13 @@ fn build_model(ron_text: &str) -> Result<Arc<dyn Bcsdf>> {
 
 /// Mean and standard error of an albedo estimator over `samples` draws at θ_o with h uniform:
 /// `f/pdf` of the model's own sampler (`importance`), or `4π·f` for uniform sphere directions.
-pub fn albedo(bcsdf: &dyn Bcsdf, theta_o: f32, samples: u32, seed: u64, importance: bool) -> ([f64; 3], [f64; 3]) {
+pub fn albedo(
+    bcsdf: &dyn Bcsdf,
+    theta_o: f32,
+    samples: u32,
+    seed: u64,
+    importance: bool,
+) -> ([f64; 3], [f64; 3]) {
     let wo = fiber_direction(theta_o.sin(), theta_o.cos(), std::f32::consts::FRAC_PI_2);
     let mut rng = Sampler::from_seed(seed);
     let (mut sum, mut sum2) = ([0.0f64; 3], [0.0f64; 3]);
@@ -124,7 +130,11 @@ fn furnace(a: FurnaceArgs) -> Result<()> {
         out.push_str("theta_o_deg,albedo_r,albedo_g,albedo_b,stderr_r,stderr_g,stderr_b,uniform_r,uniform_g,uniform_b,uniform_stderr_r,uniform_stderr_g,uniform_stderr_b\n");
     } else {
         writeln!(out, "albedo ∫ f cos θ_i dω, h uniform in [-1, 1]: importance-sampled, and a uniform-sphere check")?;
-        writeln!(out, "{:>8}  {:>8} {:>8} {:>8} {:>9}   {:>8} {:>8} {:>8} {:>9}", "θ_o (°)", "R", "G", "B", "std err", "unif R", "unif G", "unif B", "std err")?;
+        writeln!(
+            out,
+            "{:>8}  {:>8} {:>8} {:>8} {:>9}   {:>8} {:>8} {:>8} {:>9}",
+            "θ_o (°)", "R", "G", "B", "std err", "unif R", "unif G", "unif B", "std err"
+        )?;
     }
     let mut t = -90.0f32;
     while t <= 90.0 + 1e-3 {
@@ -135,12 +145,34 @@ fn furnace(a: FurnaceArgs) -> Result<()> {
         let (um, use_) = albedo(bcsdf.as_ref(), theta.to_radians(), a.samples, seed, false);
         let max = |v: [f64; 3]| v.iter().cloned().fold(0.0, f64::max);
         if a.csv {
-            writeln!(out, "{theta},{},{},{},{},{},{},{},{},{},{},{},{}", m[0], m[1], m[2], se[0], se[1], se[2], um[0], um[1], um[2], use_[0], use_[1], use_[2])?;
+            writeln!(
+                out,
+                "{theta},{},{},{},{},{},{},{},{},{},{},{},{}",
+                m[0],
+                m[1],
+                m[2],
+                se[0],
+                se[1],
+                se[2],
+                um[0],
+                um[1],
+                um[2],
+                use_[0],
+                use_[1],
+                use_[2]
+            )?;
         } else {
             writeln!(
                 out,
                 "{theta:>8.1}  {:>8.4} {:>8.4} {:>8.4} {:>9.1e}   {:>8.4} {:>8.4} {:>8.4} {:>9.1e}",
-                m[0], m[1], m[2], max(se), um[0], um[1], um[2], max(use_)
+                m[0],
+                m[1],
+                m[2],
+                max(se),
+                um[0],
+                um[1],
+                um[2],
+                max(use_)
             )?;
         }
         t += a.step;
@@ -215,7 +247,12 @@ fn eval(a: EvalArgs) -> Result<()> {
 
 /// Marginal profiles of `eval_lobe` (luminance): over θ_i (integrated over φ) and over φ
 /// (integrated over θ_i), each integrating to the lobe's albedo.
-fn lobe_profiles(bcsdf: &dyn Bcsdf, theta_o: f32, hs: &[f32], lobe: usize) -> (Vec<(f64, f64)>, Vec<(f64, f64)>) {
+fn lobe_profiles(
+    bcsdf: &dyn Bcsdf,
+    theta_o: f32,
+    hs: &[f32],
+    lobe: usize,
+) -> (Vec<(f64, f64)>, Vec<(f64, f64)>) {
     use std::f64::consts::PI;
     const N_THETA: usize = 180;
     const N_PHI: usize = 360;
@@ -229,15 +266,31 @@ fn lobe_profiles(bcsdf: &dyn Bcsdf, theta_o: f32, hs: &[f32], lobe: usize) -> (V
         for (j, bp) in by_phi.iter_mut().enumerate() {
             let phi_rel = -PI + (j as f64 + 0.5) * d_phi;
             // φ_i = φ_o + Δφ with φ_o = π/2 in the local frame.
-            let wi = fiber_direction(theta.sin() as f32, cos_t as f32, (std::f64::consts::FRAC_PI_2 + phi_rel) as f32);
-            let v: f64 = hs.iter().map(|&h| tress_core::luminance(bcsdf.eval_lobe(wo, wi, h, lobe)) as f64).sum::<f64>() / hs.len() as f64;
+            let wi = fiber_direction(
+                theta.sin() as f32,
+                cos_t as f32,
+                (std::f64::consts::FRAC_PI_2 + phi_rel) as f32,
+            );
+            let v: f64 = hs
+                .iter()
+                .map(|&h| tress_core::luminance(bcsdf.eval_lobe(wo, wi, h, lobe)) as f64)
+                .sum::<f64>()
+                / hs.len() as f64;
             *bt += v * cos_t * d_phi;
             *bp += v * cos_t * d_theta;
         }
     }
     (
-        by_theta.iter().enumerate().map(|(i, v)| ((-90.0 + (i as f64 + 0.5)), *v)).collect(),
-        by_phi.iter().enumerate().map(|(j, v)| ((-180.0 + (j as f64 + 0.5)), *v)).collect(),
+        by_theta
+            .iter()
+            .enumerate()
+            .map(|(i, v)| ((-90.0 + (i as f64 + 0.5)), *v))
+            .collect(),
+        by_phi
+            .iter()
+            .enumerate()
+            .map(|(j, v)| ((-180.0 + (j as f64 + 0.5)), *v))
+            .collect(),
     )
 }
 
@@ -256,10 +309,20 @@ fn plot(a: PlotArgs) -> Result<()> {
     let (mut longitudinal, mut azimuthal) = (Vec::new(), Vec::new());
     for (p, name) in names.iter().enumerate() {
         let (lt, az) = lobe_profiles(bcsdf.as_ref(), a.theta_o.to_radians(), &hs, p);
-        longitudinal.push(Series { name: name.to_string(), points: lt, reference: false });
-        azimuthal.push(Series { name: name.to_string(), points: az, reference: false });
+        longitudinal.push(Series {
+            name: name.to_string(),
+            points: lt,
+            reference: false,
+        });
+        azimuthal.push(Series {
+            name: name.to_string(),
+            points: az,
+            reference: false,
+        });
     }
-    let h_text = a.h.map(|h| format!("h = {h}")).unwrap_or_else(|| "h averaged".into());
+    let h_text =
+        a.h.map(|h| format!("h = {h}"))
+            .unwrap_or_else(|| "h averaged".into());
     let charts = [
         Chart {
             title: format!("longitudinal, θ_o = {}°, {h_text}", a.theta_o),
@@ -280,6 +343,10 @@ fn plot(a: PlotArgs) -> Result<()> {
     ];
     let stem = a.out.with_extension("");
     write_charts(&stem, &charts, 640, 440)?;
-    eprintln!("wrote {} and {}", stem.with_extension("png").display(), stem.with_extension("svg").display());
+    eprintln!(
+        "wrote {} and {}",
+        stem.with_extension("png").display(),
+        stem.with_extension("svg").display()
+    );
     Ok(())
 }

@@ -26,7 +26,10 @@ fn ensure_font() -> Result<()> {
                     .map_err(|_| format!("{p} is not a usable TrueType font"));
             }
         }
-        Err(format!("no TrueType font found for plot labels (looked in {}); install fonts-dejavu-core", FONT_PATHS.join(", ")))
+        Err(format!(
+            "no TrueType font found for plot labels (looked in {}); install fonts-dejavu-core",
+            FONT_PATHS.join(", ")
+        ))
     })
     .clone()
     .map_err(|e| anyhow!(e))
@@ -59,22 +62,29 @@ pub fn write_charts(stem: &Path, charts: &[Chart], panel_width: u32, height: u32
     let size = (panel_width * charts.len() as u32, height);
     let png = stem.with_extension("png");
     let svg = stem.with_extension("svg");
-    let dir = stem.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let dir = stem
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
 
     let tmp_png = tempfile::Builder::new().suffix(".png").tempfile_in(dir)?;
     {
         let root = BitMapBackend::new(tmp_png.path(), size).into_drawing_area();
         draw(&root, charts)?;
-        root.present().map_err(|e| anyhow!("drawing {}: {e}", png.display()))?;
+        root.present()
+            .map_err(|e| anyhow!("drawing {}: {e}", png.display()))?;
     }
-    tmp_png.persist(&png).with_context(|| format!("writing {}", png.display()))?;
+    tmp_png
+        .persist(&png)
+        .with_context(|| format!("writing {}", png.display()))?;
 
     let mut svg_text = String::new();
     {
         let root = SVGBackend::with_string(&mut svg_text, size).into_drawing_area();
         draw(&root, charts)?;
-        root.present().map_err(|e| anyhow!("drawing {}: {e}", svg.display()))?;
+        root.present()
+            .map_err(|e| anyhow!("drawing {}: {e}", svg.display()))?;
     }
     crate::atomic_write(&svg, svg_text.as_bytes())
 }
@@ -121,14 +131,34 @@ const PALETTE: [RGBColor; 8] = [
     RGBColor(23, 190, 207),
 ];
 
-fn draw_one<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, chart: &Chart) -> Result<(), Box<dyn std::error::Error>>
+fn draw_one<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    chart: &Chart,
+) -> Result<(), Box<dyn std::error::Error>>
 where
     DB::ErrorType: 'static,
 {
-    let xs = range(chart.series.iter().flat_map(|s| s.points.iter().map(|p| p.0)), chart.log_x);
-    let ys = range(chart.series.iter().filter(|s| !s.reference).flat_map(|s| s.points.iter().map(|p| p.1)), chart.log_y);
+    let xs = range(
+        chart
+            .series
+            .iter()
+            .flat_map(|s| s.points.iter().map(|p| p.0)),
+        chart.log_x,
+    );
+    let ys = range(
+        chart
+            .series
+            .iter()
+            .filter(|s| !s.reference)
+            .flat_map(|s| s.points.iter().map(|p| p.1)),
+        chart.log_y,
+    );
     let mut builder = ChartBuilder::on(area);
-    builder.caption(&chart.title, ("sans-serif", 18)).margin(12).x_label_area_size(40).y_label_area_size(70);
+    builder
+        .caption(&chart.title, ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(70);
     macro_rules! finish {
         ($ctx:expr) => {{
             let mut ctx = $ctx;
@@ -138,14 +168,27 @@ where
                 .label_style(("sans-serif", 13))
                 .draw()?;
             for (i, s) in chart.series.iter().enumerate() {
-                let color = if s.reference { RGBColor(150, 150, 150) } else { PALETTE[i % PALETTE.len()] };
+                let color = if s.reference {
+                    RGBColor(150, 150, 150)
+                } else {
+                    PALETTE[i % PALETTE.len()]
+                };
                 let pts: Vec<(f64, f64)> = s
                     .points
                     .iter()
                     .copied()
-                    .filter(|p| p.0.is_finite() && p.1.is_finite() && (!chart.log_y || p.1 > 0.0) && (!chart.log_x || p.0 > 0.0))
+                    .filter(|p| {
+                        p.0.is_finite()
+                            && p.1.is_finite()
+                            && (!chart.log_y || p.1 > 0.0)
+                            && (!chart.log_x || p.0 > 0.0)
+                    })
                     .collect();
-                let style = ShapeStyle { color: color.to_rgba(), filled: false, stroke_width: if s.reference { 1 } else { 2 } };
+                let style = ShapeStyle {
+                    color: color.to_rgba(),
+                    filled: false,
+                    stroke_width: if s.reference { 1 } else { 2 },
+                };
                 ctx.draw_series(LineSeries::new(pts.clone(), style))?
                     .label(s.name.as_str())
                     .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
@@ -165,7 +208,9 @@ where
         (false, false) => finish!(builder.build_cartesian_2d(xs.0..xs.1, ys.0..ys.1)?),
         (true, false) => finish!(builder.build_cartesian_2d((xs.0..xs.1).log_scale(), ys.0..ys.1)?),
         (false, true) => finish!(builder.build_cartesian_2d(xs.0..xs.1, (ys.0..ys.1).log_scale())?),
-        (true, true) => finish!(builder.build_cartesian_2d((xs.0..xs.1).log_scale(), (ys.0..ys.1).log_scale())?),
+        (true, true) => {
+            finish!(builder.build_cartesian_2d((xs.0..xs.1).log_scale(), (ys.0..ys.1).log_scale())?)
+        }
     }
     Ok(())
 }

@@ -114,13 +114,19 @@ pub fn load(path: &Path) -> Result<SceneDesc> {
     parse(&text).map_err(|e| anyhow!("{}:{e}", path.display()))
 }
 
-/// Parses scene text; the error is `line:column: message`.
+/// Parses scene text; the error is `line:column: message`, followed by the offending line with a
+/// caret under the column.
 pub fn parse(text: &str) -> std::result::Result<SceneDesc, String> {
     crate::ron_options()
         .from_str::<SceneDesc>(text)
         .map_err(|e| {
             let p = e.span.start;
-            format!("{}:{}: {}", p.line, p.col, e.code)
+            let mut msg = format!("{}:{}: {}", p.line, p.col, e.code);
+            if let Some(line) = text.lines().nth(p.line.saturating_sub(1)) {
+                let caret = " ".repeat(line.chars().take(p.col.saturating_sub(1)).count());
+                msg.push_str(&format!("\n    {line}\n    {caret}^"));
+            }
+            msg
         })
 }
 

@@ -1,0 +1,291 @@
+//! The `tress` binary end to end: rendering, outputs, and clear errors for bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn tress(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tress"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run tress")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+const GOOD_SCENE: &str = r#"(
+    camera: (look_from: (0, 0, 4), look_at: (0, 0, 0), fov: 35),
+    film: (width: 24, height: 20, spp: 2, seed: 3),
+    integrator: Path(max_depth: 20),
+    materials: {
+        "hair": Hair(Chiang(beta_m: 0.3, beta_n: 0.3, pigment: Melanin(eumelanin: 1.0))),
+        "grey": Diffuse(albedo: (0.5, 0.5, 0.5)),
+    },
+    objects: [
+        Hair(source: Procedural(style: Ball, strands: 300, radius: 0.01), material: "hair"),
+        Sphere(center: (0, -2, 0), radius: 1, material: "grey"),
+    ],
+    lights: [Sky(), Distant(direction: (0, -1, -1), irradiance: (2, 2, 2), angular_radius: 0.5)],
+)"#;
+
+fn scene_dir(text: &str) -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.ron");
+    std::fs::write(&path, text).unwrap();
+    (dir, path)
+}
+
+#[test]
+fn renders_exr_and_png_with_metadata() {
+    let (dir, _) = scene_dir(GOOD_SCENE);
+    let o = tress(
+        &["render", "scene.ron", "--out", "out/img.exr", "--quiet"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (image, attrs) = tress_core::image_io::read_exr(dir.path().join("out/img.exr")).unwrap();
+    assert_eq!((image.width, image.height), (24, 20));
+    assert!(image.mean() > 0.0);
+    let get = |k: &str| attrs.iter().find(|(n, _)| n == k).map(|(_, v)| v.clone());
+    assert_eq!(get("tress:spp").as_deref(), Some("2"));
+    assert_eq!(get("tress:seed").as_deref(), Some("3"));
+    assert!(get("tress:integrator").unwrap().contains("Path"));
+    assert!(get("tress:render_time_s").is_some());
+    assert!(dir.path().join("out/img.png").exists());
+}
+
+#[test]
+fn command_line_overrides_and_crop() {
+    let (dir, _) = scene_dir(GOOD_SCENE);
+    let o = tress(
+        &[
+            "render",
+            "scene.ron",
+            "--out",
+            "c.exr",
+            "--spp",
+            "3",
+            "--seed",
+            "9",
+            "--crop",
+            "4,2,20,18",
+            "--threads",
+            "1",
+            "--integrator",
+            "Path(max_depth: 5)",
+            "--quiet",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (image, attrs) = tress_core::image_io::read_exr(dir.path().join("c.exr")).unwrap();
+    assert_eq!(
+        (image.x0, image.y0, image.width, image.height),
+        (4, 2, 16, 16)
+    );
+    assert_eq!((image.full_width, image.full_height), (24, 20));
+    assert!(attrs.iter().any(|(k, v)| k == "tress:spp" && v == "3"));
+}
+
+#[test]
+fn info_describes_the_scene() {
+    let (dir, _) = scene_dir(GOOD_SCENE);
+    let o = tress(&["info", "scene.ron"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("300 strands"), "{out}");
+    assert!(out.contains("bounds"), "{out}");
+}
+
+/// Each bad scene must fail with a message naming the file and containing `expect`, and must
+/// leave no output behind.
+fn assert_fails(scene: &str, expect: &[&str]) {
+    let (dir, _) = scene_dir(scene);
+    let o = tress(
+        &["render", "scene.ron", "--out", "bad.exr", "--quiet"],
+        dir.path(),
+    );
+    let err = stderr(&o);
+    assert!(!o.status.success(), "expected failure, got success");
+    assert!(
+        err.contains("scene.ron"),
+        "message does not name the file: {err}"
+    );
+    for e in expect {
+        assert!(err.contains(e), "message lacks '{e}': {err}");
+    }
+    assert!(!err.contains("panicked"), "{err}");
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(
+        left,
+        vec![std::ffi::OsString::from("scene.ron")],
+        "output left behind"
+    );
+}
+
+#[test]
+fn bad_scenes_give_clear_errors() {
+    // Syntax error: file, line and column.
+    assert_fails(
+        &GOOD_SCENE.replace("fov: 35),", "fov: 35"),
+        &["scene.ron:3:"],
+    );
+    // Unknown field.
+    assert_fails(&GOOD_SCENE.replace("seed: 3", "seed: 3, sed: 4"), &["sed"]);
+    // Wrong type.
+    assert_fails(&GOOD_SCENE.replace("spp: 2", "spp: \"many\""), &["spp"]);
+    // Negative spp does not fit an unsigned count.
+    assert_fails(
+        &GOOD_SCENE.replace("spp: 2", "spp: -4"),
+        &["out of bounds", "spp"],
+    );
+    // Zero-size film.
+    assert_fails(
+        &GOOD_SCENE.replace("width: 24", "width: 0"),
+        &["film", "empty"],
+    );
+    // fov out of range.
+    assert_fails(&GOOD_SCENE.replace("fov: 35", "fov: 190"), &["fov"]);
+    // Roughness outside its domain.
+    assert_fails(
+        &GOOD_SCENE.replace("beta_m: 0.3", "beta_m: 1.7"),
+        &["beta_m"],
+    );
+    // Negative absorption.
+    assert_fails(
+        &GOOD_SCENE.replace("Melanin(eumelanin: 1.0)", "SigmaA(-0.5, 0.1, 0.1)"),
+        &["sigma_a"],
+    );
+    // Unknown material name.
+    assert_fails(
+        &GOOD_SCENE.replace("material: \"grey\"", "material: \"gray\""),
+        &["gray"],
+    );
+    // Missing referenced files.
+    assert_fails(
+        &GOOD_SCENE.replace(
+            "Procedural(style: Ball, strands: 300, radius: 0.01)",
+            "File(\"nowhere.hair\")",
+        ),
+        &["nowhere.hair"],
+    );
+    assert_fails(
+        &GOOD_SCENE.replace("Sky()", "Environment(file: \"missing.hdr\")"),
+        &["missing.hdr"],
+    );
+    // Unsupported image.
+    let (dir, _) = scene_dir(&GOOD_SCENE.replace("Sky()", "Environment(file: \"junk.exr\")"));
+    std::fs::write(dir.path().join("junk.exr"), b"not an exr").unwrap();
+    let o = tress(
+        &["render", "scene.ron", "--out", "bad.exr", "--quiet"],
+        dir.path(),
+    );
+    assert!(
+        !o.status.success() && stderr(&o).contains("junk.exr"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn bad_arguments_give_clear_errors() {
+    let (dir, _) = scene_dir(GOOD_SCENE);
+    let o = tress(
+        &["render", "scene.ron", "--integrator", "bogus", "--quiet"],
+        dir.path(),
+    );
+    assert!(
+        !o.status.success() && stderr(&o).contains("unknown integrator 'bogus'"),
+        "{}",
+        stderr(&o)
+    );
+    let o = tress(
+        &["render", "scene.ron", "--crop", "0,0,99,99", "--quiet"],
+        dir.path(),
+    );
+    assert!(
+        !o.status.success() && stderr(&o).contains("crop"),
+        "{}",
+        stderr(&o)
+    );
+    let o = tress(&["render", "missing.ron"], dir.path());
+    assert!(
+        !o.status.success() && stderr(&o).contains("missing.ron"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn bcsdf_tools_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = "Chiang(beta_m: 0.3, beta_n: 0.3, pigment: SigmaA(0, 0, 0))";
+    let o = tress(
+        &[
+            "bcsdf",
+            "furnace",
+            "--model",
+            model,
+            "--samples",
+            "20000",
+            "--step",
+            "45",
+            "--csv",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = String::from_utf8_lossy(&o.stdout);
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    assert_eq!(rows.len(), 5);
+    for r in rows {
+        let albedo: f64 = r.split(',').nth(1).unwrap().parse().unwrap();
+        assert!((albedo - 1.0).abs() < 0.01, "{r}");
+    }
+    std::fs::write(
+        dir.path().join("dirs.csv"),
+        "h,wi_x,wi_y,wi_z,wo_x,wo_y,wo_z\n0.3,0.1,-0.5,0.2,-0.2,0.1,0.9\n",
+    )
+    .unwrap();
+    let o = tress(
+        &[
+            "bcsdf", "eval", "--model", model, "--input", "dirs.csv", "--output", "f.csv",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = std::fs::read_to_string(dir.path().join("f.csv")).unwrap();
+    assert!(
+        out.starts_with("f_r,f_g,f_b,pdf\n") && out.lines().count() == 2,
+        "{out}"
+    );
+    let o = tress(
+        &[
+            "bcsdf",
+            "plot",
+            "--model",
+            model,
+            "--theta-o",
+            "-20",
+            "--out",
+            "lobes.png",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(dir.path().join("lobes.png").exists() && dir.path().join("lobes.svg").exists());
+    let o = tress(
+        &["bcsdf", "furnace", "--model", "Chiang(beta_m: 2)"],
+        dir.path(),
+    );
+    assert!(
+        !o.status.success() && stderr(&o).contains("beta_m"),
+        "{}",
+        stderr(&o)
+    );
+}
