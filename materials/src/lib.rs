@@ -9,7 +9,10 @@ use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use tress_core::Bcsdf;
 
+pub mod chiang;
+pub mod deon;
 pub mod lambertian_fiber;
+pub mod marschner;
 pub mod pigment;
 
 /// An invalid model parameter.
@@ -98,4 +101,7 @@ macro_rules! hair_models {
 // THE registry: one line per model.
 hair_models! {
     LambertianFiber => lambertian_fiber::LambertianFiber,
+    Marschner => marschner::Marschner,
+    DEon => deon::DEon,
+    Chiang => chiang::Chiang,
 }

@@ -2,8 +2,9 @@
 //! or from a target colour (Chiang et al. 2016 §4.2), with the parameter names of pbrt, Mitsuba 3
 //! and Cycles.
 //!
-//! RON: `SigmaA((0.06, 0.10, 0.20))`, `Melanin(eumelanin: 1.3, pheomelanin: 0.2)`,
-//! `Color((0.8, 0.6, 0.4))`.
+//! RON (tress parses with `unwrap_variant_newtypes`, so a tuple variant takes its values
+//! directly): `SigmaA(0.06, 0.10, 0.20)`, `Melanin(eumelanin: 1.3, pheomelanin: 0.2)`,
+//! `Color(0.8, 0.6, 0.4)`.
 
 use crate::ParamError;
 use serde::{Deserialize, Serialize};
