@@ -11,6 +11,8 @@ use tress_core::Bcsdf;
 
 pub mod chiang;
 pub mod deon;
+pub mod dual_scattering;
+pub mod dual_scattering_sampling;
 pub mod lambertian_fiber;
 pub mod marschner;
 pub mod pigment;

@@ -1,0 +1,1665 @@
+//! Dual scattering (Zinke, Yuksel, Weber & Keyser 2008) for *any* [`Bcsdf`]: the per-θ tables,
+//! built by deterministic quadrature of `eval_lobe`, and the shading function both
+//! dual-scattering integrators share (hair-math.md §6).
+//!
+//! # What the tables measure
+//! For a fixed direction `w_fix` at inclination θ (local fiber frame, φ = π/2, so
+//! `w_fix = (sin θ, 0, cos θ)`), every quantity is an integral of `eval_lobe(w_fix, ω, h, t)`
+//! over ω ∈ S² and h ∈ [−1, 1] (averaged: weight ½). The fixed direction is the **light
+//! direction** ω_d and it sits in the `wo` slot: tress's models are energy conserving in that
+//! slot (`∫ eval(wo, ωi) dωi = albedo(wo)`, the white furnace), and for reciprocal models
+//! `eval(ω_d, ω)` is exactly the light arriving from ω_d and leaving toward ω. For
+//! non-reciprocal models (Chiang/pbrt: A_p, h and the tilt attach to `wo`) it is the standard
+//! approximation. By the fiber's rotational symmetry fixing φ = π/2 *is* the average over the
+//! incident azimuth.
+//!
+//! * **Forward / backward.** Light travels along −ω_d; passing straight through the fiber it
+//!   leaves toward φ = −π/2 (relative azimuth π). The forward half-space Ω_f is therefore
+//!   `ω.z < 0` (|φ − π/2| > π/2), the backward half-space Ω_b is `ω.z > 0`.
+//! * `ā_f = ∫_{Ω_f} eval dω`, `ā_b = ∫_{Ω_b} eval dω` (h-averaged): energy fractions, so
+//!   `ā_f + ā_b` is the fiber's albedo for that light (1 for a white energy-conserving fiber).
+//! * Per lobe t: `a_f^t`, `a_b^t` as above, and the energy-weighted mean α_t and **variance**
+//!   β_t² of the longitudinal offset θ_h = (θ_fix + θ)/2 from the specular cone (θ = −θ_fix ⇔
+//!   θ_h = 0), over the whole sphere — one α_t, β_t² per lobe, as in the paper's formulas.
+//!   Using θ_h units throughout is self-consistent: a crossing that offsets θ_h by x deflects
+//!   the light's inclination by 2x, and an inclination spread of variance V widens the θ_h of
+//!   the next scattering by V/4, so n crossings add exactly n·β̄_f² to M^G's variance.
+//! * `ᾱ_{f|b} = Σ_t a_{f|b}^t α_t / Σ_t a_{f|b}^t`, `β̄²_{f|b}` likewise with the weights on
+//!   the variances (§6.2, §6.9).
+//! * `Ā_b`, `Δ_b` (eqs. 14, 16), on the effective ā_f, ā_b of the next item.
+//! * **Non-conserving models.** Marschner's model scatters ≈ 2× the incident energy (§2.5), so
+//!   its ā_f exceeds 1 and `1/(1 − ā_f²)` passes its pole. Clamping ā_f to 0.99 alone (§6.5) is
+//!   not enough: Marschner's blond then gets Ā_b ≈ 10³ (measured). The multiple-scattering
+//!   terms therefore use `ā_{f|b} / max(1, ā_f + ā_b)` — the forward/backward *split* of the
+//!   energy, which a fiber cannot exceed — and then clamp ā_f to [`A_F_MAX`]. For an
+//!   energy-conserving model both steps are inert (the clamp only guards ā_b → 0).
+//! * `σ_b` (eq. 17): the paper prints the denominator as `ā_b + ā_b³(2β̄_f + 3β̄_b)`, which adds
+//!   radians to a pure number. We read eq. 17 as the ā-weighted mean of the standard deviations
+//!   of the two back-scattering paths it sums, i.e. denominator `ā_b + ā_b³`:
+//!   `σ_b = (1 + d_b ā_f²) · (√(2β̄_f² + β̄_b²) + ā_b² √(2β̄_f² + 3β̄_b²)) / (1 + ā_b²)`,
+//!   which lies between the two paths' spreads (tested) and is finite for ā_b → 0. The
+//!   tables store the d_b-free part σ_b0; [`DsGlobals::sigma_b2`] applies `(1 + d_b ā_f²)`.
+//! * `N_t^G = a_f^t / (2π)`. For a model of Marschner's form `f = M_t(θ_h) N_t(φ) / cos²θ_d`
+//!   with M_t a unit-area Gaussian *in θ_h*, the energy per radian of azimuth is
+//!   `∫ f cos²θ dθ ≈ 2 N_t` on the specular cone (dθ = 2 dθ_h, cos θ = cos θ_d there), so the
+//!   lobe's N_t is half its energy per radian, and the paper's `N^G = (1/π)∫_{Ω_f} N_t dφ` is
+//!   `a_f^t / (2π)`. This makes `f_s_scatter` computable from the tables for any model.
+//!
+//! # Quadrature
+//! Midpoint rule in θ ∈ [−π/2, π/2] (`theta_quad` nodes) and in φ over the whole circle
+//! (`phi_quad` nodes, even, so both half-space boundaries fall between nodes); Gauss–Legendre
+//! in h (`h_nodes`). The midpoint rule integrates a smooth lobe lying inside the interval (in φ:
+//! any periodic integrand) with an error that decays like exp(−2π²σ²/Δ²) for a lobe of width σ
+//! and node spacing Δ, so spacing ≈ lobe width already gives ~1e-8; only lobes cut by the
+//! θ = ±π/2 ends fall back to O(Δ²). Near-field models (Chiang) have, for each h, an azimuthal
+//! lobe as narrow as the azimuthal roughness (logistic scale 0.024 rad at β_n = 0.1); its
+//! per-h error oscillates with h faster than any affordable h rule resolves, so `phi_quad` is
+//! doubled (at most 3 times) until the half-space energies at θ ≈ 0 and θ ≈ 1.2 change by
+//! < 1e-3. Models that ignore h, or are mirror symmetric in it, are detected and integrated
+//! over one h / over [0, 1] (see `HDomain`). At the defaults, against a 128 (h) × 384 (θ) ×
+//! 384 (φ) quadrature, every registered test model's tables are accurate to 1.5e-3 in ā
+//! (Marschner; ≤ 4.5e-4 for the others), 1.5e-4 rad in α and 1 % in β².
+//!
+//! The table's θ nodes are cell centres `θ_k = −π/2 + (k + ½)·π/N` (never exactly along the
+//! fiber); lookups interpolate linearly and clamp beyond the first/last node.
+//!
+//! # Shading
+//! [`DualScatteringShading::eval`] is the paper's F (§6.3) in tress's value convention
+//! (cos θ_i included: `L_o = ∫ L(ω_d) F dω_d`), with each term normalised to the energy the
+//! paper assigns it (see `eval` for why the literal constants cannot be used here). The tables are indexed by **θ of the light
+//! direction ω_d** (θ_i; §6.8), consistent with how they were built; the per-lobe α_t, β_t²
+//! and N_t^G of `f_s_scatter` come from the same lookup.
+//!
+//! As specified, F is not normalised in tress's units: with M^G and the back-scattering
+//! Gaussian unit-area in θ_h (dθ_i = 2 dθ_h) and f_back spread over the whole azimuth circle,
+//! `d_b f_back_direct` alone returns up to 8·d_b·Ā_b of a uniform environment (less where the
+//! Gaussian is cut at θ = ±π/2). Measured `∫ F dω_d` at θ_o = 0 (red channel, test
+//! `default_tables_for_every_model`): white Chiang (β = 0.3) 2.98 with n = 0 and the light
+//! visible (of which f_s: 1.00), 3.43 scattered only with n = 1; brown Chiang 0.43 (f_s: 0.40)
+//! and 0.13.
+
+use crate::ParamError;
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::f32::consts::PI;
+use std::f64::consts::PI as PI64;
+use std::sync::{Arc, Mutex, OnceLock};
+use std::time::{Duration, Instant};
+use tress_core::math::{safe_asin, safe_sqrt, Rgb, Vec2, Vec3};
+use tress_core::sampling::sample_uniform_sphere;
+use tress_core::Bcsdf;
+
+/// Upper clamp of ā_f wherever it enters T_f, Ā_b, Δ_b or σ_b (their 1/(1 − ā_f²) poles).
+pub const A_F_MAX: f32 = 0.99;
+
+/// Smallest variance (rad²) a Gaussian is evaluated with: lobes carrying no energy have zero
+/// measured variance and would otherwise give 0·∞.
+const MIN_VARIANCE: f32 = 1e-6;
+
+/// cos θ_d is clamped here before dividing by cos²θ_d (hair-math §9).
+const MIN_COS_THETA_D: f32 = 1e-5;
+
+/// Resolution of the tables and of the quadrature that fills them.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DualScatteringSettings {
+    /// Table nodes over θ ∈ [−π/2, π/2] (cell centres).
+    pub theta_nodes: usize,
+    /// Gauss–Legendre nodes over h ∈ [−1, 1].
+    pub h_nodes: usize,
+    /// Midpoint nodes over the integrated direction's inclination.
+    pub theta_quad: usize,
+    /// Midpoint nodes over the integrated direction's azimuth (even); a minimum, doubled
+    /// automatically for narrow azimuthal lobes (module docs, "Quadrature").
+    pub phi_quad: usize,
+}
+
+impl Default for DualScatteringSettings {
+    fn default() -> Self {
+        DualScatteringSettings {
+            theta_nodes: 64,
+            h_nodes: 32,
+            theta_quad: 64,
+            phi_quad: 96,
+        }
+    }
+}
+
+impl DualScatteringSettings {
+    fn validate(&self) -> Result<(), ParamError> {
+        let check = |field: &'static str, v: usize, lo: usize| {
+            if (lo..=4096).contains(&v) {
+                Ok(())
+            } else {
+                Err(ParamError::new(
+                    field,
+                    v,
+                    format!("must lie in [{lo}, 4096]"),
+                ))
+            }
+        };
+        check("theta_nodes", self.theta_nodes, 2)?;
+        check("h_nodes", self.h_nodes, 1)?;
+        check("theta_quad", self.theta_quad, 2)?;
+        check("phi_quad", self.phi_quad, 2)?;
+        if !self.phi_quad.is_multiple_of(2) {
+            return Err(ParamError::new(
+                "phi_quad",
+                self.phi_quad,
+                "must be even (the half-space boundaries must fall between nodes)",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The paper's density factors d_f (forward) and d_b (backward), in [0, 1].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DensityFactors {
+    pub d_f: f32,
+    pub d_b: f32,
+}
+
+impl Default for DensityFactors {
+    /// 0.7 for both, as Zinke et al. suggest and every public implementation uses.
+    fn default() -> Self {
+        DensityFactors { d_f: 0.7, d_b: 0.7 }
+    }
+}
+
+/// Why the tables could not be built.
+#[derive(Debug, Clone, thiserror::Error, PartialEq)]
+pub enum DualScatteringError {
+    #[error("dual-scattering settings: {0}")]
+    Param(#[from] ParamError),
+    #[error(
+        "the BCSDF returned a non-finite value (lobe {lobe}, light inclination θ = {theta} rad)"
+    )]
+    NonFinite { lobe: &'static str, theta: f32 },
+}
+
+/// The global (lobe-summed) quantities at one light inclination θ, per RGB channel.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DsGlobals {
+    /// ā_f: energy scattered into the forward half-space, as measured.
+    pub a_f: Rgb,
+    /// ā_b: energy scattered into the backward half-space, as measured.
+    pub a_b: Rgb,
+    /// ā_f, ā_b as the multiple-scattering terms (T_f, Ā_b, Δ_b, σ_b) use them: scaled by
+    /// 1/max(1, ā_f + ā_b), then ā_f clamped to [`A_F_MAX`] (module docs, "Non-conserving
+    /// models"). Equal to the measured values for any model that conserves energy.
+    pub a_f_eff: Rgb,
+    pub a_b_eff: Rgb,
+    /// ᾱ_f, ᾱ_b: lobe-weighted mean longitudinal shifts (rad, θ_h units).
+    pub alpha_f: Rgb,
+    pub alpha_b: Rgb,
+    /// β̄_f², β̄_b²: lobe-weighted longitudinal **variances** (rad², θ_h units).
+    pub beta2_f: Rgb,
+    pub beta2_b: Rgb,
+    /// Ā_b (eq. 14): average back-scattering attenuation.
+    pub big_a_b: Rgb,
+    /// Δ_b (eq. 16): average longitudinal shift of back scattering (rad).
+    pub delta_b: Rgb,
+    /// σ_b without its `(1 + d_b ā_f²)` factor (eq. 17, module docs): a standard deviation.
+    pub sigma_b0: Rgb,
+}
+
+impl DsGlobals {
+    /// σ_b² (eq. 17) for the backward density factor `d_b`: a variance.
+    pub fn sigma_b2(&self, d_b: f32) -> Rgb {
+        let a_f = self.a_f_eff;
+        let s = (Rgb::ONE + d_b * a_f * a_f) * self.sigma_b0;
+        s * s
+    }
+
+    fn lerp(&self, o: &Self, t: f32) -> Self {
+        DsGlobals {
+            a_f: self.a_f.lerp(o.a_f, t),
+            a_b: self.a_b.lerp(o.a_b, t),
+            a_f_eff: self.a_f_eff.lerp(o.a_f_eff, t),
+            a_b_eff: self.a_b_eff.lerp(o.a_b_eff, t),
+            alpha_f: self.alpha_f.lerp(o.alpha_f, t),
+            alpha_b: self.alpha_b.lerp(o.alpha_b, t),
+            beta2_f: self.beta2_f.lerp(o.beta2_f, t),
+            beta2_b: self.beta2_b.lerp(o.beta2_b, t),
+            big_a_b: self.big_a_b.lerp(o.big_a_b, t),
+            delta_b: self.delta_b.lerp(o.delta_b, t),
+            sigma_b0: self.sigma_b0.lerp(o.sigma_b0, t),
+        }
+    }
+}
+
+/// One lobe's quantities at one light inclination θ, per RGB channel.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DsLobe {
+    /// a_f^t, a_b^t: the lobe's energy in the forward / backward half-space.
+    pub a_f: Rgb,
+    pub a_b: Rgb,
+    /// α_t: energy-weighted mean of θ_h (rad); 0 where the lobe carries no energy.
+    pub alpha: Rgb,
+    /// β_t²: energy-weighted variance of θ_h (rad²); 0 where the lobe carries no energy.
+    pub beta2: Rgb,
+}
+
+impl DsLobe {
+    /// N_t^G, the mean of the lobe's azimuthal function over the forward half-circle
+    /// (module docs): `a_f^t / (2π)`.
+    pub fn n_g(&self) -> Rgb {
+        self.a_f / (2.0 * PI)
+    }
+
+    fn lerp(&self, o: &Self, t: f32) -> Self {
+        DsLobe {
+            a_f: self.a_f.lerp(o.a_f, t),
+            a_b: self.a_b.lerp(o.a_b, t),
+            alpha: self.alpha.lerp(o.alpha, t),
+            beta2: self.beta2.lerp(o.beta2, t),
+        }
+    }
+}
+
+/// The dual-scattering tables of one BCSDF (module docs).
+#[derive(Clone, Debug)]
+pub struct DualScatteringTables {
+    settings: DualScatteringSettings,
+    lobe_names: &'static [&'static str],
+    globals: Vec<DsGlobals>,
+    /// `theta_nodes × lobes`, node-major.
+    lobes: Vec<DsLobe>,
+    build_time: Duration,
+}
+
+impl DualScatteringTables {
+    /// Integrates `bcsdf` numerically (module docs); runs on all cores, deterministically.
+    pub fn new(
+        bcsdf: &dyn Bcsdf,
+        settings: &DualScatteringSettings,
+    ) -> Result<Self, DualScatteringError> {
+        settings.validate()?;
+        Self::build(bcsdf, settings, h_domain(bcsdf))
+    }
+
+    fn build(
+        bcsdf: &dyn Bcsdf,
+        settings: &DualScatteringSettings,
+        domain: HDomain,
+    ) -> Result<Self, DualScatteringError> {
+        let start = Instant::now();
+        let n = settings.theta_nodes;
+        let quad = Quadrature::new(settings, domain, refined_phi_quad(bcsdf, settings, domain)?);
+        let threads = std::thread::available_parallelism()
+            .map_or(1, |c| c.get())
+            .min(n);
+        // Thread j computes nodes j, j + threads, …: each node is independent, so the result
+        // does not depend on the thread count, and interleaving balances the cheap and the
+        // expensive inclinations.
+        let mut per_node: Vec<Option<Result<NodeMoments, DualScatteringError>>> =
+            (0..n).map(|_| None).collect();
+        std::thread::scope(|s| {
+            let handles: Vec<_> = (0..threads)
+                .map(|j| {
+                    let quad = &quad;
+                    s.spawn(move || {
+                        (j..n)
+                            .step_by(threads)
+                            .map(|k| (k, quad.node(bcsdf, node_theta(k, n))))
+                            .collect::<Vec<_>>()
+                    })
+                })
+                .collect();
+            for h in handles {
+                for (k, m) in h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)) {
+                    per_node[k] = Some(m);
+                }
+            }
+        });
+        let lobe_names = bcsdf.lobe_names();
+        let mut globals = Vec::with_capacity(n);
+        let mut lobes = Vec::with_capacity(n * lobe_names.len());
+        for m in per_node.into_iter().flatten() {
+            let (g, l) = m?.finish();
+            globals.push(g);
+            lobes.extend(l);
+        }
+        let build_time = start.elapsed();
+        let albedo_max = globals
+            .iter()
+            .map(|g| (g.a_f + g.a_b).max_element())
+            .fold(0.0f32, f32::max);
+        if albedo_max > 1.0 {
+            tracing::warn!(
+                "dual scattering: the fiber scatters up to {albedo_max:.3} of the incident energy \
+                 (not energy conserving); T_f, Ā_b, Δ_b and σ_b use ā_f, ā_b scaled to a total of 1"
+            );
+        }
+        tracing::info!(
+            "dual-scattering tables for {} lobe(s), {} θ nodes, quadrature h {} ({:?}) × θ {} × φ {}: \
+             built in {:.3} s",
+            lobe_names.len(),
+            n,
+            quad.h.len(),
+            domain,
+            settings.theta_quad,
+            quad.phi.len(),
+            build_time.as_secs_f64()
+        );
+        Ok(DualScatteringTables {
+            settings: settings.clone(),
+            lobe_names,
+            globals,
+            lobes,
+            build_time,
+        })
+    }
+
+    /// The settings the tables were built with.
+    pub fn settings(&self) -> &DualScatteringSettings {
+        &self.settings
+    }
+
+    /// The BCSDF's lobe names; lobe indices follow this order.
+    pub fn lobe_names(&self) -> &'static [&'static str] {
+        self.lobe_names
+    }
+
+    /// Wall-clock time the quadrature took.
+    pub fn build_time(&self) -> Duration {
+        self.build_time
+    }
+
+    /// The inclinations of the table nodes, ascending.
+    pub fn node_thetas(&self) -> impl Iterator<Item = f32> + '_ {
+        let n = self.globals.len();
+        (0..n).map(move |k| node_theta(k, n) as f32)
+    }
+
+    /// Global quantities at light inclination `theta` (rad), linearly interpolated.
+    pub fn globals(&self, theta: f32) -> DsGlobals {
+        let (i, t) = self.locate(theta);
+        self.globals[i].lerp(&self.globals[i + 1], t)
+    }
+
+    /// Lobe `lobe`'s quantities at light inclination `theta`; zero for an index past the last
+    /// lobe (like `Bcsdf::eval_lobe`).
+    pub fn lobe(&self, theta: f32, lobe: usize) -> DsLobe {
+        let nl = self.lobe_names.len();
+        if lobe >= nl {
+            return DsLobe::default();
+        }
+        let (i, t) = self.locate(theta);
+        self.lobes[i * nl + lobe].lerp(&self.lobes[(i + 1) * nl + lobe], t)
+    }
+
+    /// Lower node index and interpolation weight, clamped to the end nodes.
+    fn locate(&self, theta: f32) -> (usize, f32) {
+        let n = self.globals.len();
+        let u = (theta + 0.5 * PI) * (n as f32 / PI) - 0.5;
+        // NaN maps to the first node rather than out of bounds.
+        let u = if u.is_nan() {
+            0.0
+        } else {
+            u.clamp(0.0, (n - 1) as f32)
+        };
+        let i = (u as usize).min(n - 2);
+        (i, u - i as f32)
+    }
+}
+
+/// Which part of the h range the quadrature must cover.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum HDomain {
+    /// The model ignores h (far-field models such as Marschner's and d'Eon's integrate it
+    /// analytically): one node suffices.
+    Ignored,
+    /// Mirror symmetry of a circular fiber, `f(h, Δφ) = f(−h, −Δφ)` (hair-math §8.11): the
+    /// mirror Δφ → −Δφ keeps both half-spaces and θ, so every moment of −h equals that of h and
+    /// h ∈ [0, 1] suffices.
+    Mirror,
+    Full,
+}
+
+/// Probes `bcsdf` at 256 fixed pseudo-random direction pairs (the fixed direction in the
+/// tables' position, φ = π/2) for the symmetries of [`HDomain`]. A model lacking a symmetry
+/// violates it almost everywhere, so agreement on all probes is conclusive in practice;
+/// independence of h is checked bit for bit, the mirror to a relative 1e-3 (it maps φ through
+/// a different rounding).
+fn h_domain(bcsdf: &dyn Bcsdf) -> HDomain {
+    let mut rng = tress_core::rng::Sampler::from_seed(0xD5A1);
+    let probes: Vec<(Vec3, Vec3)> = (0..256)
+        .map(|_| {
+            let u = rng.next_4d();
+            let theta = PI * (u[0] - 0.5);
+            let wo = Vec3::new(theta.sin(), 0.0, theta.cos());
+            (wo, sample_uniform_sphere(Vec2::new(u[1], u[2])))
+        })
+        .collect();
+    let lobes = 0..bcsdf.lobe_names().len();
+    let ignored = probes.iter().all(|&(wo, wi)| {
+        lobes.clone().all(|t| {
+            let f0 = bcsdf.eval_lobe(wo, wi, -0.9, t);
+            [-0.3, 0.2, 0.8]
+                .into_iter()
+                .all(|h| bcsdf.eval_lobe(wo, wi, h, t) == f0)
+        })
+    });
+    if ignored {
+        return HDomain::Ignored;
+    }
+    let mirror = probes.iter().all(|&(wo, wi)| {
+        let wi_m = Vec3::new(wi.x, -wi.y, wi.z);
+        lobes.clone().all(|t| {
+            [0.15, 0.5, 0.85].into_iter().all(|h| {
+                let a = bcsdf.eval_lobe(wo, wi, h, t);
+                let b = bcsdf.eval_lobe(wo, wi_m, -h, t);
+                (a - b)
+                    .abs()
+                    .cmple(1e-3 * a.abs().max(b.abs()) + Rgb::splat(1e-6))
+                    .all()
+            })
+        })
+    });
+    if mirror {
+        HDomain::Mirror
+    } else {
+        HDomain::Full
+    }
+}
+
+/// Largest automatic refinement of `phi_quad` (module docs, "Quadrature").
+const MAX_PHI_DOUBLINGS: u32 = 3;
+
+/// `phi_quad`, doubled until the half-space energies at two pilot inclinations (the nodes
+/// nearest θ = 0 and θ = 1.2 rad, where the per-h errors average out differently) change by
+/// less than 1e-3, at most [`MAX_PHI_DOUBLINGS`] times.
+fn refined_phi_quad(
+    bcsdf: &dyn Bcsdf,
+    settings: &DualScatteringSettings,
+    domain: HDomain,
+) -> Result<usize, DualScatteringError> {
+    let n = settings.theta_nodes;
+    let nearest = |theta: f64| (((theta / PI64 + 0.5) * n as f64) as usize).min(n - 1);
+    let pilots = [nearest(0.0), nearest(1.2)].map(|k| node_theta(k, n));
+    let energies = |phi_quad: usize| -> Result<Vec<DVec3>, DualScatteringError> {
+        let quad = Quadrature::new(settings, domain, phi_quad);
+        let mut e = Vec::new();
+        for theta in pilots {
+            let m = quad.node(bcsdf, theta)?;
+            e.push(m.lobes.iter().map(|l| l.e_f).sum());
+            e.push(m.lobes.iter().map(|l| l.e_b).sum());
+        }
+        Ok(e)
+    };
+    let mut phi_quad = settings.phi_quad;
+    let mut coarse = energies(phi_quad)?;
+    for _ in 0..MAX_PHI_DOUBLINGS {
+        let fine = energies(2 * phi_quad)?;
+        let change = coarse
+            .iter()
+            .zip(&fine)
+            .map(|(c, f)| (*c - *f).abs().max_element())
+            .fold(0.0, f64::max);
+        if change < 1e-3 {
+            break;
+        }
+        phi_quad *= 2;
+        coarse = fine;
+    }
+    Ok(phi_quad)
+}
+
+/// θ of table node `k` of `n` (cell centres).
+fn node_theta(k: usize, n: usize) -> f64 {
+    -0.5 * PI64 + (k as f64 + 0.5) * PI64 / n as f64
+}
+
+/// Nodes and weights of the (h, θ, φ) quadrature.
+struct Quadrature {
+    /// (h, weight): the weights average over [−1, 1] (module docs of [`HDomain`]).
+    h: Vec<(f32, f64)>,
+    /// (sin θ, cos θ, θ, cos θ·Δθ·Δφ): the solid-angle weight of one (θ, φ) cell.
+    theta: Vec<(f64, f64, f64, f64)>,
+    /// (cos φ, sin φ); the first half (φ < 0) is the forward half-space.
+    phi: Vec<(f64, f64)>,
+}
+
+impl Quadrature {
+    fn new(s: &DualScatteringSettings, domain: HDomain, phi_quad: usize) -> Self {
+        let d_theta = PI64 / s.theta_quad as f64;
+        let d_phi = 2.0 * PI64 / phi_quad as f64;
+        // (h, weight): the weights average over [−1, 1].
+        let h = match domain {
+            HDomain::Ignored => vec![(0.0, 1.0)],
+            // Gauss–Legendre on [0, 1] with the node density of the full rule.
+            HDomain::Mirror => gauss_legendre(s.h_nodes.div_ceil(2))
+                .into_iter()
+                .map(|(x, w)| (0.5 * (x + 1.0) as f32, 0.5 * w))
+                .collect(),
+            HDomain::Full => gauss_legendre(s.h_nodes)
+                .into_iter()
+                .map(|(x, w)| (x as f32, 0.5 * w))
+                .collect(),
+        };
+        Quadrature {
+            h,
+            theta: (0..s.theta_quad)
+                .map(|j| {
+                    let t = -0.5 * PI64 + (j as f64 + 0.5) * d_theta;
+                    (t.sin(), t.cos(), t, t.cos() * d_theta * d_phi)
+                })
+                .collect(),
+            phi: (0..phi_quad)
+                .map(|k| {
+                    let p = -PI64 + (k as f64 + 0.5) * d_phi;
+                    (p.cos(), p.sin())
+                })
+                .collect(),
+        }
+    }
+
+    /// Energy moments of every lobe for the light at inclination `theta_fix`.
+    fn node(&self, bcsdf: &dyn Bcsdf, theta_fix: f64) -> Result<NodeMoments, DualScatteringError> {
+        let names = bcsdf.lobe_names();
+        let w_fix = Vec3::new(theta_fix.sin() as f32, 0.0, theta_fix.cos() as f32);
+        let half = self.phi.len() / 2;
+        let mut lobes = vec![LobeMoments::default(); names.len()];
+        for &(h, wh) in &self.h {
+            for &(sin_t, cos_t, theta, w_cell) in &self.theta {
+                let theta_h = 0.5 * (theta_fix + theta);
+                let w = wh * w_cell;
+                for (k, &(cos_p, sin_p)) in self.phi.iter().enumerate() {
+                    let wi =
+                        Vec3::new(sin_t as f32, (cos_t * cos_p) as f32, (cos_t * sin_p) as f32);
+                    let forward = k < half;
+                    for (t, m) in lobes.iter_mut().enumerate() {
+                        let v = bcsdf.eval_lobe(w_fix, wi, h, t).as_dvec3() * w;
+                        if forward {
+                            m.e_f += v;
+                        } else {
+                            m.e_b += v;
+                        }
+                        m.m1 += v * theta_h;
+                        m.m2 += v * (theta_h * theta_h);
+                    }
+                }
+            }
+        }
+        for (m, &lobe) in lobes.iter().zip(names) {
+            if !(m.e_f + m.e_b + m.m1 + m.m2).is_finite() {
+                return Err(DualScatteringError::NonFinite {
+                    lobe,
+                    theta: theta_fix as f32,
+                });
+            }
+        }
+        Ok(NodeMoments { lobes })
+    }
+}
+
+#[derive(Clone, Copy, Default)]
+struct LobeMoments {
+    /// Energy in the forward / backward half-space.
+    e_f: DVec3,
+    e_b: DVec3,
+    /// Σ energy·θ_h and Σ energy·θ_h² over the sphere.
+    m1: DVec3,
+    m2: DVec3,
+}
+
+struct NodeMoments {
+    lobes: Vec<LobeMoments>,
+}
+
+/// `num / den` per channel, 0 where `den` carries no energy.
+fn ratio(num: DVec3, den: DVec3) -> DVec3 {
+    let f = |n: f64, d: f64| if d > 1e-30 { n / d } else { 0.0 };
+    DVec3::new(f(num.x, den.x), f(num.y, den.y), f(num.z, den.z))
+}
+
+impl NodeMoments {
+    /// Per-lobe statistics and the global quantities of §6.2.
+    fn finish(self) -> (DsGlobals, Vec<DsLobe>) {
+        let mut a_f = DVec3::ZERO;
+        let mut a_b = DVec3::ZERO;
+        let (mut alpha_f, mut alpha_b) = (DVec3::ZERO, DVec3::ZERO);
+        let (mut beta2_f, mut beta2_b) = (DVec3::ZERO, DVec3::ZERO);
+        let lobes: Vec<DsLobe> = self
+            .lobes
+            .iter()
+            .map(|m| {
+                let e = m.e_f + m.e_b;
+                let alpha = ratio(m.m1, e);
+                let beta2 = (ratio(m.m2, e) - alpha * alpha).max(DVec3::ZERO);
+                a_f += m.e_f;
+                a_b += m.e_b;
+                alpha_f += m.e_f * alpha;
+                alpha_b += m.e_b * alpha;
+                beta2_f += m.e_f * beta2;
+                beta2_b += m.e_b * beta2;
+                DsLobe {
+                    a_f: m.e_f.as_vec3(),
+                    a_b: m.e_b.as_vec3(),
+                    alpha: alpha.as_vec3(),
+                    beta2: beta2.as_vec3(),
+                }
+            })
+            .collect();
+        let alpha_f = ratio(alpha_f, a_f);
+        let alpha_b = ratio(alpha_b, a_b);
+        let beta2_f = ratio(beta2_f, a_f);
+        let beta2_b = ratio(beta2_b, a_b);
+
+        // Eqs. 14, 16, 17 per channel, on energy fractions of at most 1 in total, with ā_f
+        // clamped away from the pole at 1.
+        let scale = DVec3::ONE / (a_f + a_b).max(DVec3::ONE);
+        let af = (a_f * scale).min(DVec3::splat(A_F_MAX as f64));
+        let ab = a_b * scale;
+        let af2 = af * af;
+        let ab2 = ab * ab;
+        let one = DVec3::ONE;
+        let q = one - af2;
+        let big_a_b = ab * af2 / q + ab2 * ab * af2 / (q * q * q);
+        let delta_b = alpha_b * (one - 2.0 * ab2 / (q * q))
+            + alpha_f * (2.0 * q * q + 4.0 * af2 * ab2) / (q * q * q);
+        let s1 = (2.0 * beta2_f + beta2_b).map(f64::sqrt);
+        let s3 = (2.0 * beta2_f + 3.0 * beta2_b).map(f64::sqrt);
+        let sigma_b0 = (s1 + ab2 * s3) / (one + ab2);
+
+        let globals = DsGlobals {
+            a_f: a_f.as_vec3(),
+            a_b: a_b.as_vec3(),
+            a_f_eff: af.as_vec3(),
+            a_b_eff: ab.as_vec3(),
+            alpha_f: alpha_f.as_vec3(),
+            alpha_b: alpha_b.as_vec3(),
+            beta2_f: beta2_f.as_vec3(),
+            beta2_b: beta2_b.as_vec3(),
+            big_a_b: big_a_b.as_vec3(),
+            delta_b: delta_b.as_vec3(),
+            sigma_b0: sigma_b0.as_vec3(),
+        };
+        (globals, lobes)
+    }
+}
+
+/// Gauss–Legendre nodes and weights on [−1, 1] (Newton iteration on P_n).
+fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
+    (0..n)
+        .map(|i| {
+            // Tricomi's initial guess for the i-th root, descending from +1.
+            let mut x = (PI64 * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+            let mut dp = 1.0;
+            for _ in 0..100 {
+                let (mut p0, mut p1) = (1.0, x);
+                for k in 2..=n {
+                    let k = k as f64;
+                    (p0, p1) = (p1, ((2.0 * k - 1.0) * x * p1 - (k - 1.0) * p0) / k);
+                }
+                // P_n = p1, P_{n−1} = p0 (also for n = 1, where the loop is empty).
+                dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
+                let dx = p1 / dp;
+                x -= dx;
+                if dx.abs() < 1e-15 {
+                    break;
+                }
+            }
+            (x, 2.0 / ((1.0 - x * x) * dp * dp))
+        })
+        .collect()
+}
+
+/// Tables built once per (BCSDF, settings) and shared, e.g. by both dual-scattering integrators
+/// in one comparison run.
+///
+/// The key is the BCSDF's `Debug` text plus the settings: every tress model derives `Debug`
+/// over its parameters, so equal parameters share tables.
+#[derive(Debug, Default)]
+pub struct DualScatteringCache {
+    tables: Mutex<HashMap<String, Arc<DualScatteringTables>>>,
+}
+
+impl DualScatteringCache {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The process-wide cache.
+    pub fn global() -> &'static DualScatteringCache {
+        static CACHE: OnceLock<DualScatteringCache> = OnceLock::new();
+        CACHE.get_or_init(DualScatteringCache::new)
+    }
+
+    /// The tables for `bcsdf` at `settings`, built on first use. Builds are serialised (the
+    /// lock is held while building), so concurrent requests never build the same tables twice.
+    pub fn get_or_build(
+        &self,
+        bcsdf: &dyn Bcsdf,
+        settings: &DualScatteringSettings,
+    ) -> Result<Arc<DualScatteringTables>, DualScatteringError> {
+        let key = format!("{bcsdf:?} | {settings:?}");
+        // A panic while building leaves no entry behind, so a poisoned map is still valid.
+        let mut map = self.tables.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(t) = map.get(&key) {
+            return Ok(t.clone());
+        }
+        let t = Arc::new(DualScatteringTables::new(bcsdf, settings)?);
+        map.insert(key, t.clone());
+        Ok(t)
+    }
+
+    /// Number of cached tables.
+    pub fn len(&self) -> usize {
+        self.tables.lock().unwrap_or_else(|e| e.into_inner()).len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Unit-area Gaussian of variance `v` (clamped to [`MIN_VARIANCE`]), per channel.
+#[inline]
+fn gaussian(x: Rgb, v: Rgb) -> Rgb {
+    let v = v.max(Rgb::splat(MIN_VARIANCE));
+    let e = -(x * x) / (2.0 * v);
+    Rgb::new(e.x.exp(), e.y.exp(), e.z.exp()) / (2.0 * PI * v).map(f32::sqrt)
+}
+
+/// Density in θ_i of θ_h ~ N(mean, var) with θ_i = 2θ_h − θ_o, renormalised to
+/// θ_i ∈ [−π/2, π/2]: `½ g(θ_h − mean; var) / P(θ_i in range)`, per channel.
+fn theta_i_density(theta_h: f32, theta_o: f32, mean: Rgb, var: Rgb) -> Rgb {
+    let var = var.max(Rgb::splat(MIN_VARIANCE));
+    let (lo, hi) = (0.5 * (theta_o - PI / 2.0), 0.5 * (theta_o + PI / 2.0));
+    let inside = Rgb::from_array(std::array::from_fn(|c| {
+        let sd = var[c].sqrt() * std::f32::consts::SQRT_2;
+        (0.5 * (erf((hi - mean[c]) / sd) - erf((lo - mean[c]) / sd))).max(1e-6)
+    }));
+    0.5 * gaussian(Rgb::splat(theta_h) - mean, var) / inside
+}
+
+/// erf(x), Abramowitz & Stegun 7.1.26 (absolute error < 1.5e-7).
+fn erf(x: f32) -> f32 {
+    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
+    let poly = t
+        * (0.254_829_6
+            + t * (-0.284_496_74 + t * (1.421_413_7 + t * (-1.453_152_1 + t * 1.061_405_4))));
+    (1.0 - poly * (-x * x).exp()).copysign(x)
+}
+
+/// The forward-scattering state of the light after crossing `n` fibers (§6.1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ForwardScattering {
+    /// T_f = d_f · ā_f(θ)^n, with the effective ā_f ([`DsGlobals::a_f_eff`]).
+    pub t_f: Rgb,
+    /// σ̄_f² = n · β̄_f²(θ): a variance (rad², θ_h units).
+    pub sigma2_f: Rgb,
+}
+
+/// The dual-scattering shading function F of one hair material (§6.3), shared by both
+/// dual-scattering integrators.
+#[derive(Clone, Debug)]
+pub struct DualScatteringShading {
+    bcsdf: Arc<dyn Bcsdf>,
+    tables: Arc<DualScatteringTables>,
+    factors: DensityFactors,
+}
+
+impl DualScatteringShading {
+    /// `tables` must have been built from `bcsdf`; `factors` must lie in [0, 1].
+    pub fn new(
+        bcsdf: Arc<dyn Bcsdf>,
+        tables: Arc<DualScatteringTables>,
+        factors: DensityFactors,
+    ) -> Result<Self, ParamError> {
+        crate::check_range("d_f", factors.d_f, 0.0, 1.0)?;
+        crate::check_range("d_b", factors.d_b, 0.0, 1.0)?;
+        Ok(DualScatteringShading {
+            bcsdf,
+            tables,
+            factors,
+        })
+    }
+
+    pub fn bcsdf(&self) -> &dyn Bcsdf {
+        self.bcsdf.as_ref()
+    }
+
+    pub fn tables(&self) -> &DualScatteringTables {
+        &self.tables
+    }
+
+    pub fn factors(&self) -> DensityFactors {
+        self.factors
+    }
+
+    /// T_f and σ̄_f² for light arriving from local direction `wi` through `n` fibers
+    /// (constant-θ approximation: every crossing at the light's inclination). Negative or NaN
+    /// `n` counts as 0.
+    pub fn forward(&self, wi: Vec3, n: f32) -> ForwardScattering {
+        let n = n.max(0.0);
+        let g = self.tables.globals(safe_asin(wi.x));
+        let a_f = g.a_f_eff;
+        ForwardScattering {
+            t_f: self.factors.d_f * Rgb::new(a_f.x.powf(n), a_f.y.powf(n), a_f.z.powf(n)),
+            sigma2_f: n * g.beta2_f,
+        }
+    }
+
+    /// F(wo, wi) for light from local direction `wi` (ω_d) seen from `wo`, at offset `h`, where
+    /// the light crossed `n` fibers and reaches the point unscattered with fraction
+    /// `direct_fraction` ∈ [0, 1] (1: unoccluded shadow ray):
+    ///
+    /// `F = direct·(f_s + d_b f_back_direct cos θ_i)
+    ///    + max(T_f − direct, 0)·d_f·(f_s_scatter + d_b f_back_scatter)·cos θ_i`.
+    ///
+    /// `f_s = bcsdf.eval(wo, wi, h)` (cos θ_i included, tress's convention), so
+    /// `L_o = ∫ L(ω_d) F dω_d`. d_f appears both inside T_f and as the factor of the scattered
+    /// term, as in the paper's pseudo-code and hair-math §6.3. The clamp at 0 is ours: with
+    /// n = 0 the paper's T_f = d_f < 1 = direct would make the scattered term negative; with it
+    /// F at n = 0, direct = 1 is exactly `f_s + d_b f_back_direct cos θ_i` (§8.14).
+    ///
+    /// **Normalisation.** The paper's constants (`2Ā_b g/(π cos²θ_d)` for f_back, `π` before
+    /// f_back_scatter, Gaussians of unit area in θ_h) were written for Marschner's lobes, which
+    /// return about twice the incident energy (hair-math §2.5: dθ_i = 2 dθ_h). Taken literally
+    /// with tress's energy-conserving models, F returns ≈3× the light a white fiber receives
+    /// (measured: ∫F dω_d = 2.98 for a white Chiang fiber at n = 0). Here every term is a
+    /// proper density carrying the energy the paper assigns it: the longitudinal Gaussian in
+    /// θ_h becomes a density in θ_i (`½ g(θ_h − μ; v)`, renormalised to the part of it inside
+    /// θ_i ∈ [−π/2, π/2]), the solid-angle factor is `1/cos θ_i` (Zinke's `1/cos²θ_d` times
+    /// tress's cos θ_i only matches it on the specular cone, and loses up to a third of a broad
+    /// lobe's energy away from it), and f_back is confined to the backward half-space
+    /// (`wi.z > 0`, the light's side) with azimuthal density 1/π. So
+    /// `∫ d_b f_back_direct cos θ_i dω = d_b Ā_b` and `∫ f_s_scatter cos θ_i dω = ā_f`
+    /// (N^G = a_f^t/2π over the whole circle).
+    pub fn eval(&self, wo: Vec3, wi: Vec3, h: f32, n: f32, direct_fraction: f32) -> Rgb {
+        let direct = if direct_fraction.is_nan() {
+            0.0
+        } else {
+            direct_fraction.clamp(0.0, 1.0)
+        };
+        let DensityFactors { d_f, d_b } = self.factors;
+        let theta_i = safe_asin(wi.x);
+        let theta_o = safe_asin(wo.x);
+        let theta_h = 0.5 * (theta_i + theta_o);
+        let g = self.tables.globals(theta_i);
+        let sigma_b2 = g.sigma_b2(d_b);
+        let backward = wi.z > 0.0;
+        let inv_cos_i = 1.0 / safe_sqrt(1.0 - wi.x * wi.x).max(MIN_COS_THETA_D);
+        // Longitudinal density in θ_i of a Gaussian in θ_h (module docs).
+        let lobe = |mean: Rgb, var: Rgb| theta_i_density(theta_h, theta_o, mean, var);
+        let back = |extra_var: Rgb| {
+            if backward {
+                g.big_a_b * lobe(g.delta_b, sigma_b2 + extra_var) * (inv_cos_i / PI)
+            } else {
+                Rgb::ZERO
+            }
+        };
+
+        let mut f = Rgb::ZERO;
+        if direct > 0.0 {
+            f += direct * (self.bcsdf.eval(wo, wi, h) + d_b * back(Rgb::ZERO));
+        }
+        let fwd = self.forward(wi, n);
+        let w_scatter = (fwd.t_f - Rgb::splat(direct)).max(Rgb::ZERO);
+        if w_scatter.max_element() > 0.0 {
+            let mut f_s_scatter = Rgb::ZERO;
+            for t in 0..self.tables.lobe_names().len() {
+                let l = self.tables.lobe(theta_i, t);
+                f_s_scatter += lobe(l.alpha, l.beta2 + fwd.sigma2_f) * l.n_g();
+            }
+            f_s_scatter *= inv_cos_i;
+            f += w_scatter * d_f * (f_s_scatter + d_b * back(fwd.sigma2_f));
+        }
+        f
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pigment::Pigment;
+    use crate::{chiang, deon, lambertian_fiber, HairModel};
+    use tress_core::rng::Sampler;
+
+    /// Coarse but complete tables, for the range checks.
+    fn coarse() -> DualScatteringSettings {
+        DualScatteringSettings {
+            theta_nodes: 12,
+            h_nodes: 12,
+            theta_quad: 48,
+            phi_quad: 64,
+        }
+    }
+
+    /// Tables through the process-wide cache, so the tests share each build.
+    fn tables(b: &dyn Bcsdf, s: &DualScatteringSettings) -> Arc<DualScatteringTables> {
+        DualScatteringCache::global().get_or_build(b, s).unwrap()
+    }
+
+    fn all_models() -> Vec<(String, Arc<dyn Bcsdf>, bool)> {
+        HairModel::test_instances()
+            .into_iter()
+            .map(|t| (t.name, t.params.build().unwrap(), t.white_furnace))
+            .collect()
+    }
+
+    fn model(name: &str) -> Arc<dyn Bcsdf> {
+        let inst = HairModel::test_instances()
+            .into_iter()
+            .find(|t| t.name == name)
+            .unwrap_or_else(|| panic!("no test instance {name}"));
+        inst.params.build().unwrap()
+    }
+
+    fn lambertian(albedo: (f32, f32, f32)) -> Arc<dyn Bcsdf> {
+        Arc::new(
+            lambertian_fiber::LambertianFiber::new(&lambertian_fiber::Params { albedo }).unwrap(),
+        )
+    }
+
+    fn chiang_with(sigma_a: f32) -> Arc<dyn Bcsdf> {
+        Arc::new(
+            chiang::Chiang::new(&chiang::Params {
+                pigment: Pigment::SigmaA((sigma_a, sigma_a, sigma_a)),
+                ..Default::default()
+            })
+            .unwrap(),
+        )
+    }
+
+    fn channels(v: Rgb) -> [f32; 3] {
+        v.to_array()
+    }
+
+    fn random_pair(rng: &mut Sampler) -> (Vec3, Vec3, f32) {
+        let u = rng.next_4d();
+        (
+            sample_uniform_sphere(Vec2::new(u[0], u[1])),
+            sample_uniform_sphere(Vec2::new(u[2], u[3])),
+            2.0 * rng.next_1d() - 1.0,
+        )
+    }
+
+    #[test]
+    fn gauss_legendre_is_exact_to_degree_2n_minus_1() {
+        for n in [1, 2, 5, 12, 32] {
+            let q = gauss_legendre(n);
+            for deg in 0..2 * n {
+                let exact = if deg % 2 == 1 {
+                    0.0
+                } else {
+                    2.0 / (deg as f64 + 1.0)
+                };
+                let got: f64 = q.iter().map(|&(x, w)| w * x.powi(deg as i32)).sum();
+                assert!(
+                    (got - exact).abs() < 1e-12,
+                    "n {n} degree {deg}: {got} vs {exact}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn invalid_settings_are_rejected_with_the_field_name() {
+        let b = lambertian((1.0, 1.0, 1.0));
+        for (s, field) in [
+            (
+                DualScatteringSettings {
+                    phi_quad: 33,
+                    ..coarse()
+                },
+                "phi_quad",
+            ),
+            (
+                DualScatteringSettings {
+                    theta_nodes: 1,
+                    ..coarse()
+                },
+                "theta_nodes",
+            ),
+            (
+                DualScatteringSettings {
+                    h_nodes: 0,
+                    ..coarse()
+                },
+                "h_nodes",
+            ),
+            (
+                DualScatteringSettings {
+                    theta_quad: 100_000,
+                    ..coarse()
+                },
+                "theta_quad",
+            ),
+        ] {
+            match DualScatteringTables::new(b.as_ref(), &s) {
+                Err(DualScatteringError::Param(e)) => assert_eq!(e.field, field),
+                other => panic!("{field}: expected a parameter error, got {other:?}"),
+            }
+        }
+        let t = tables(b.as_ref(), &coarse());
+        let bad = DensityFactors { d_f: 1.5, d_b: 0.7 };
+        assert_eq!(
+            DualScatteringShading::new(b, t, bad).unwrap_err().field,
+            "d_f"
+        );
+    }
+
+    /// A Lambertian fiber scatters uniformly in azimuth with a cos θ profile: ā_f = ā_b = ½·albedo,
+    /// α = θ/2 (θ_h of a θ_i symmetric about 0), β² = var(θ_i)/4 = π²/48 − 1/8, and eqs. 14, 16,
+    /// 17 evaluated by hand.
+    #[test]
+    fn lambertian_fiber_matches_the_analytic_oracle() {
+        let t = tables(lambertian((1.0, 1.0, 1.0)).as_ref(), &coarse());
+        let beta2 = PI * PI / 48.0 - 0.125;
+        let big_a_b = 0.5 * 0.25 / 0.75 + 0.125 * 0.25 / (0.75f32 * 0.75 * 0.75);
+        let delta_factor = (1.0 - 2.0 * 0.25 / 0.5625) + (2.0 * 0.5625 + 4.0 * 0.0625) / 0.421875;
+        let sigma_b0 = ((3.0 * beta2).sqrt() + 0.25 * (5.0 * beta2).sqrt()) / 1.25;
+        let thetas: Vec<f32> = t.node_thetas().collect();
+        for th in thetas {
+            let g = t.globals(th);
+            let close = |what: &str, got: Rgb, want: f32, tol: f32| {
+                for c in channels(got) {
+                    assert!((c - want).abs() <= tol, "θ {th}: {what} {c} vs {want}");
+                }
+            };
+            close("ā_f", g.a_f, 0.5, 1e-6);
+            close("ā_b", g.a_b, 0.5, 1e-6);
+            close("ᾱ_f", g.alpha_f, th / 2.0, 1e-5);
+            close("ᾱ_b", g.alpha_b, th / 2.0, 1e-5);
+            close("β̄_f²", g.beta2_f, beta2, 1e-5);
+            close("β̄_b²", g.beta2_b, beta2, 1e-5);
+            close("Ā_b", g.big_a_b, big_a_b, 1e-5);
+            close("Δ_b", g.delta_b, delta_factor * th / 2.0, 1e-4);
+            close("σ_b0", g.sigma_b0, sigma_b0, 1e-5);
+            close("N^G", t.lobe(th, 0).n_g(), 0.5 / (2.0 * PI), 1e-6);
+        }
+        // A coloured fiber splits each channel's albedo in half.
+        let brown = tables(lambertian((0.5, 0.3, 0.1)).as_ref(), &coarse());
+        let g = brown.globals(0.3);
+        assert!((g.a_f - Rgb::new(0.25, 0.15, 0.05)).abs().max_element() < 1e-6);
+        assert!((g.a_b - g.a_f).abs().max_element() < 1e-6);
+    }
+
+    #[test]
+    fn lookups_interpolate_linearly_and_clamp_at_the_ends() {
+        let t = tables(model("Chiang/brown").as_ref(), &coarse());
+        let nodes: Vec<f32> = t.node_thetas().collect();
+        for (k, &th) in nodes.iter().enumerate() {
+            let d = t.globals(th).a_f - t.globals[k].a_f;
+            assert!(d.abs().max_element() < 1e-6, "node {k}: {d}");
+        }
+        let mid = 0.5 * (nodes[3] + nodes[4]);
+        let want = 0.5 * (t.globals[3].big_a_b + t.globals[4].big_a_b);
+        assert!((t.globals(mid).big_a_b - want).abs().max_element() < 1e-6);
+        assert_eq!(t.globals(-1.6), t.globals[0]);
+        assert_eq!(t.globals(1.6), *t.globals.last().unwrap());
+        assert_eq!(t.globals(f32::NAN), t.globals[0]);
+        assert_eq!(t.lobe(0.1, 99), DsLobe::default());
+    }
+
+    /// §6.5 ranges on every registered model (coarse tables).
+    #[test]
+    fn tables_lie_in_the_sanity_ranges_for_every_model() {
+        for (name, b, _) in all_models() {
+            let t = tables(b.as_ref(), &coarse());
+            let nl = t.lobe_names().len();
+            for th in t.node_thetas().collect::<Vec<_>>() {
+                let g = t.globals(th);
+                let lobes: Vec<DsLobe> = (0..nl).map(|l| t.lobe(th, l)).collect();
+                let ctx = format!("{name} θ {th:.3}");
+                for c in 0..3 {
+                    let (af, ab) = (g.a_f[c], g.a_b[c]);
+                    assert!(af >= 0.0 && ab >= 0.0, "{ctx}: ā_f {af}, ā_b {ab}");
+                    let (afe, abe) = (g.a_f_eff[c], g.a_b_eff[c]);
+                    assert!(
+                        afe <= A_F_MAX && afe + abe <= 1.0 + 1e-6,
+                        "{ctx}: effective {afe} {abe}"
+                    );
+                    assert!(
+                        g.big_a_b[c] >= 0.0 && g.big_a_b[c].is_finite(),
+                        "{ctx}: Ā_b {}",
+                        g.big_a_b[c]
+                    );
+                    assert!(g.delta_b[c].is_finite(), "{ctx}: Δ_b");
+                    assert!(
+                        g.sigma_b2(0.7)[c] > 0.0,
+                        "{ctx}: σ_b² {}",
+                        g.sigma_b2(0.7)[c]
+                    );
+                    // Eq. 17 as read here: σ_b0 lies between the two back-scattering paths' spreads.
+                    let s1 = (2.0 * g.beta2_f[c] + g.beta2_b[c]).sqrt();
+                    let s3 = (2.0 * g.beta2_f[c] + 3.0 * g.beta2_b[c]).sqrt();
+                    assert!(
+                        g.sigma_b0[c] >= s1 * (1.0 - 1e-5) && g.sigma_b0[c] <= s3 * (1.0 + 1e-5),
+                        "{ctx}: σ_b0"
+                    );
+                    // Lobe-weighted means and variances lie within the lobes' range.
+                    for (half, mean, var, energy) in [
+                        (
+                            "f",
+                            g.alpha_f[c],
+                            g.beta2_f[c],
+                            lobes.iter().map(|l| l.a_f[c]).collect::<Vec<_>>(),
+                        ),
+                        (
+                            "b",
+                            g.alpha_b[c],
+                            g.beta2_b[c],
+                            lobes.iter().map(|l| l.a_b[c]).collect::<Vec<_>>(),
+                        ),
+                    ] {
+                        let used: Vec<&DsLobe> = lobes
+                            .iter()
+                            .zip(&energy)
+                            .filter(|(_, &e)| e > 0.0)
+                            .map(|(l, _)| l)
+                            .collect();
+                        assert!(!used.is_empty(), "{ctx}: no lobe scatters into half {half}");
+                        let (lo, hi) = used.iter().fold((f32::MAX, f32::MIN), |(lo, hi), l| {
+                            (lo.min(l.alpha[c]), hi.max(l.alpha[c]))
+                        });
+                        assert!(
+                            mean >= lo - 1e-5 && mean <= hi + 1e-5,
+                            "{ctx}: ᾱ_{half} {mean} ∉ [{lo}, {hi}]"
+                        );
+                        let (lo, hi) = used.iter().fold((f32::MAX, f32::MIN), |(lo, hi), l| {
+                            (lo.min(l.beta2[c]), hi.max(l.beta2[c]))
+                        });
+                        assert!(
+                            var >= lo - 1e-6 && var <= hi + 1e-6,
+                            "{ctx}: β̄²_{half} {var} ∉ [{lo}, {hi}]"
+                        );
+                        assert!(var > 0.0, "{ctx}: β̄²_{half} = {var}");
+                    }
+                    for (l, lobe) in lobes.iter().enumerate() {
+                        if lobe.a_f[c] + lobe.a_b[c] > 1e-6 {
+                            assert!(lobe.beta2[c] > 0.0, "{ctx}: lobe {l} β² {}", lobe.beta2[c]);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// White energy-conserving fibers: the quadrature must put all the energy somewhere.
+    #[test]
+    fn white_fibers_scatter_all_energy() {
+        let s = DualScatteringSettings {
+            theta_nodes: 4,
+            ..Default::default()
+        };
+        let mut checked = 0;
+        for (name, b, white) in all_models() {
+            if !white {
+                continue;
+            }
+            checked += 1;
+            let t = tables(b.as_ref(), &s);
+            for g in &t.globals {
+                let total = g.a_f + g.a_b;
+                assert!(
+                    (total - Rgb::ONE).abs().max_element() < 0.01,
+                    "{name}: ā_f + ā_b = {total}"
+                );
+            }
+        }
+        assert!(checked >= 3, "only {checked} white test instances");
+    }
+
+    /// Monte Carlo estimates of (ā_f, ā_b) at inclination θ with their standard errors:
+    /// h uniform, ω uniform on the sphere, estimator eval·4π split by the half-space.
+    fn monte_carlo(b: &dyn Bcsdf, theta: f32, samples: usize, seed: u64) -> [(Rgb, Rgb); 2] {
+        let mut rng = Sampler::from_seed(seed);
+        let w_fix = Vec3::new(theta.sin(), 0.0, theta.cos());
+        let mut sum = [DVec3::ZERO; 2];
+        let mut sum2 = [DVec3::ZERO; 2];
+        for _ in 0..samples {
+            let wi = sample_uniform_sphere(rng.next_2d());
+            let h = 2.0 * rng.next_1d() - 1.0;
+            let x = b.eval(w_fix, wi, h).as_dvec3() * (4.0 * PI64);
+            let half = if wi.z < 0.0 { 0 } else { 1 };
+            sum[half] += x;
+            sum2[half] += x * x;
+        }
+        let n = samples as f64;
+        [0, 1].map(|k| {
+            let mean = sum[k] / n;
+            let var = (sum2[k] / n - mean * mean) / (n - 1.0);
+            (mean.as_vec3(), var.map(f64::sqrt).as_vec3())
+        })
+    }
+
+    #[test]
+    fn fractions_match_brute_force_monte_carlo() {
+        let s = DualScatteringSettings {
+            theta_nodes: 8,
+            ..Default::default()
+        };
+        for name in [
+            "Chiang/brown",
+            "Chiang/blond",
+            "DEon/blond",
+            "Marschner/brown",
+        ] {
+            let b = model(name);
+            let t = tables(b.as_ref(), &s);
+            let nodes: Vec<f32> = t.node_thetas().collect();
+            for (i, th) in [nodes[1], nodes[4], nodes[6]].into_iter().enumerate() {
+                let g = t.globals(th);
+                let mc = monte_carlo(b.as_ref(), th, 1 << 18, 17 + i as u64);
+                for ((what, quad), (mean, se)) in
+                    [("ā_f", g.a_f), ("ā_b", g.a_b)].into_iter().zip(mc)
+                {
+                    // 4.5 standard errors (72 comparisons at α = 0.01, Šidák) plus the
+                    // quadrature's own error, ≤ 1e-3 against a 4× finer quadrature.
+                    let tol = 4.5 * se + Rgb::splat(1e-3);
+                    assert!(
+                        (quad - mean).abs().cmple(tol).all(),
+                        "{name} θ {th:.3}: {what} quadrature {quad} vs Monte Carlo {mean} ± {se}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// The transmission lobe must land in the forward half-space (φ_i ≈ φ_o + π = −π/2).
+    #[test]
+    fn tt_lobe_lands_in_the_forward_half() {
+        let mut checked = 0;
+        for (name, b, _) in all_models() {
+            let Some(tt) = b.lobe_names().iter().position(|&n| n == "TT") else {
+                continue;
+            };
+            let r = b.lobe_names().iter().position(|&n| n == "R");
+            let t = tables(b.as_ref(), &coarse());
+            for th in t
+                .node_thetas()
+                .filter(|th| th.abs() < 1.0)
+                .collect::<Vec<_>>()
+            {
+                let l = t.lobe(th, tt);
+                let share = l.a_f / (l.a_f + l.a_b);
+                assert!(
+                    share.min_element() > 0.6,
+                    "{name} θ {th:.3}: TT forward share {share}"
+                );
+                if let Some(r) = r {
+                    let l = t.lobe(th, r);
+                    let r_share = l.a_f / (l.a_f + l.a_b);
+                    assert!(
+                        share.cmpgt(r_share).all(),
+                        "{name} θ {th:.3}: TT {share} vs R {r_share}"
+                    );
+                }
+            }
+            checked += 1;
+        }
+        assert!(checked > 0, "no registered model has a TT lobe");
+    }
+
+    #[test]
+    fn blond_fibers_scatter_mostly_forward() {
+        let mut checked = 0;
+        for (name, b, _) in all_models() {
+            if !name.ends_with("/blond") {
+                continue;
+            }
+            checked += 1;
+            let t = tables(b.as_ref(), &coarse());
+            for th in [-0.5f32, 0.0, 0.5] {
+                let g = t.globals(th);
+                assert!(
+                    g.a_f.cmpgt(4.0 * g.a_b).all(),
+                    "{name} θ {th}: ā_f {} ā_b {}",
+                    g.a_f,
+                    g.a_b
+                );
+            }
+            // ā_b rises toward grazing inclinations (§6.5).
+            assert!(t.globals(1.3).a_b.cmpgt(t.globals(0.0).a_b).all(), "{name}");
+        }
+        assert!(checked >= 2, "only {checked} blond test instances");
+    }
+
+    /// §8.14: opaque fibers only reflect (Fresnel), so ā_f is the R lobe's forward part and the
+    /// multiple back-scattering vanishes.
+    #[test]
+    fn opaque_fibers_have_no_transmission_and_no_multiple_back_scattering() {
+        let b = chiang_with(100.0);
+        let t = tables(b.as_ref(), &coarse());
+        let r = b.lobe_names().iter().position(|&n| n == "R").unwrap();
+        for th in t.node_thetas().collect::<Vec<_>>() {
+            let g = t.globals(th);
+            assert!(
+                (g.a_f - t.lobe(th, r).a_f).abs().max_element() < 1e-6,
+                "θ {th}: {}",
+                g.a_f
+            );
+            for l in (0..b.lobe_names().len()).filter(|&l| l != r) {
+                let e = t.lobe(th, l).a_f + t.lobe(th, l).a_b;
+                assert!(e.max_element() < 1e-6, "θ {th}: lobe {l} carries {e}");
+            }
+            // Away from grazing, Fresnel reflection is weak: ā_f small, Ā_b ≈ 0.
+            if th.abs() < 1.0 {
+                assert!(g.a_f.max_element() < 0.1, "θ {th}: ā_f {}", g.a_f);
+                assert!(g.big_a_b.max_element() < 1e-3, "θ {th}: Ā_b {}", g.big_a_b);
+            }
+        }
+        // The same fiber, transparent: transmission dominates and Ā_b is substantial.
+        let clear = tables(chiang_with(0.0).as_ref(), &coarse());
+        let g = clear.globals(0.0);
+        assert!(
+            g.a_f.min_element() > 0.6 && g.big_a_b.min_element() > 0.1,
+            "{g:?}"
+        );
+    }
+
+    fn shading(b: Arc<dyn Bcsdf>, factors: DensityFactors) -> DualScatteringShading {
+        let t = tables(b.as_ref(), &coarse());
+        DualScatteringShading::new(b, t, factors).unwrap()
+    }
+
+    /// §8.14: with no fibers in the way and the light fully visible, F is the single-fiber BCSDF
+    /// plus the local back-scattering term, exactly.
+    #[test]
+    fn with_no_fibers_crossed_f_is_single_scattering_plus_local_back_scattering() {
+        let mut rng = Sampler::from_seed(3);
+        for name in [
+            "Chiang/brown",
+            "Marschner/blond",
+            "DEon/blond",
+            "LambertianFiber/brown",
+        ] {
+            let b = model(name);
+            let ds = shading(b.clone(), DensityFactors::default());
+            let no_back = shading(b.clone(), DensityFactors { d_f: 0.7, d_b: 0.0 });
+            for _ in 0..200 {
+                let (wo, wi, h) = random_pair(&mut rng);
+                let fs = b.eval(wo, wi, h);
+                assert_eq!(no_back.eval(wo, wi, h, 0.0, 1.0), fs, "{name}");
+                // f_back_direct from the tables, written out independently of `eval`.
+                let (ti, to) = (wi.x.asin(), wo.x.asin());
+                let g = ds.tables().globals(ti);
+                let x = Rgb::splat(0.5 * (ti + to)) - g.delta_b;
+                let v = g.sigma_b2(0.7);
+                let gauss = Rgb::from_array(std::array::from_fn(|c| {
+                    (-x[c] * x[c] / (2.0 * v[c])).exp() / (2.0 * PI * v[c]).sqrt()
+                }));
+                // Backward half-space only, a density in θ_i renormalised to [−π/2, π/2],
+                // solid angle 1/cos θ_i (see `eval`'s normalisation).
+                let backward = if wi.z > 0.0 { 1.0 } else { 0.0 };
+                let (lo, hi) = (0.5 * (to - PI / 2.0), 0.5 * (to + PI / 2.0));
+                let inside = Rgb::from_array(std::array::from_fn(|c| {
+                    let sd = (2.0 * v[c]).sqrt();
+                    0.5 * (erf((hi - g.delta_b[c]) / sd) - erf((lo - g.delta_b[c]) / sd))
+                }));
+                let f_back =
+                    backward * 0.5 * g.big_a_b * gauss / inside / (PI * (1.0 - wi.x * wi.x).sqrt());
+                let want = fs + 0.7 * f_back;
+                let got = ds.eval(wo, wi, h, 0.0, 1.0);
+                assert!(
+                    (got - want)
+                        .abs()
+                        .cmple(1e-5 * want.abs() + Rgb::splat(1e-7))
+                        .all(),
+                    "{name}: {got} vs {want}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn transmittance_decreases_and_spread_grows_linearly_with_fibers_crossed() {
+        for (name, b, _) in all_models() {
+            let ds = shading(b, DensityFactors::default());
+            for wi in [
+                Vec3::new(0.0, 0.6, 0.8),
+                Vec3::new(0.7, 0.0, -0.714).normalize(),
+            ] {
+                let one = ds.forward(wi, 1.0);
+                let mut prev = ds.forward(wi, 0.0);
+                assert_eq!(prev.t_f, Rgb::splat(0.7), "{name}: T_f(0) = d_f");
+                assert_eq!(prev.sigma2_f, Rgb::ZERO);
+                for k in 1..=40 {
+                    let n = 0.5 * k as f32;
+                    let f = ds.forward(wi, n);
+                    assert!(
+                        f.t_f.cmplt(prev.t_f).all(),
+                        "{name} n {n}: {} !< {}",
+                        f.t_f,
+                        prev.t_f
+                    );
+                    let lin = n * one.sigma2_f;
+                    assert!(
+                        (f.sigma2_f - lin).abs().cmple(1e-6 * lin).all(),
+                        "{name} n {n}"
+                    );
+                    prev = f;
+                }
+            }
+        }
+    }
+
+    /// F is finite and non-negative for every model, with and without fibers in the way.
+    #[test]
+    fn shading_is_finite_and_non_negative_for_every_model() {
+        let mut rng = Sampler::from_seed(11);
+        for (name, b, _) in all_models() {
+            let ds = shading(b, DensityFactors::default());
+            for i in 0..300 {
+                let (wo, wi, h) = random_pair(&mut rng);
+                let n = (i % 7) as f32 * 1.5;
+                let direct = if i % 3 == 0 { 1.0 } else { 0.0 };
+                let f = ds.eval(wo, wi, h, n, direct);
+                assert!(
+                    f.is_finite() && f.min_element() >= 0.0,
+                    "{name} n {n}: F = {f}"
+                );
+            }
+            // Along the fiber and with nonsense inputs.
+            let f = ds.eval(Vec3::X, -Vec3::X, 1.0, f32::NAN, f32::NAN);
+            assert!(f.is_finite() && f.min_element() >= 0.0, "{name}: F = {f}");
+        }
+    }
+
+    #[test]
+    fn cache_builds_each_table_once() {
+        let cache = DualScatteringCache::new();
+        let a = model("DEon/brown");
+        let same = model("DEon/brown");
+        let other = model("DEon/blond");
+        let t1 = cache.get_or_build(a.as_ref(), &coarse()).unwrap();
+        let t2 = cache.get_or_build(same.as_ref(), &coarse()).unwrap();
+        assert!(Arc::ptr_eq(&t1, &t2));
+        let t3 = cache.get_or_build(other.as_ref(), &coarse()).unwrap();
+        assert!(!Arc::ptr_eq(&t1, &t3));
+        let finer = DualScatteringSettings {
+            theta_nodes: 16,
+            ..coarse()
+        };
+        cache.get_or_build(a.as_ref(), &finer).unwrap();
+        assert_eq!(cache.len(), 3);
+    }
+
+    /// A fiber that prefers one side: breaks the mirror symmetry h → −h, Δφ → −Δφ.
+    #[derive(Debug)]
+    struct Skewed(Arc<dyn Bcsdf>);
+
+    impl Bcsdf for Skewed {
+        fn eval(&self, wo: Vec3, wi: Vec3, h: f32) -> Rgb {
+            self.0.eval(wo, wi, h) * (1.0 + 0.5 * h)
+        }
+        fn sample(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<tress_core::BcsdfSample> {
+            self.0.sample(wo, h, u)
+        }
+        fn pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> f32 {
+            self.0.pdf(wo, wi, h)
+        }
+    }
+
+    #[test]
+    fn h_symmetries_are_detected() {
+        assert_eq!(h_domain(model("Chiang/brown").as_ref()), HDomain::Mirror);
+        assert_eq!(
+            h_domain(lambertian((0.5, 0.5, 0.5)).as_ref()),
+            HDomain::Ignored
+        );
+        let d = deon::DEon::new(&deon::Params::default()).unwrap();
+        assert_eq!(h_domain(&d), HDomain::Ignored, "d'Eon's model ignores h");
+        assert_eq!(h_domain(&Skewed(model("Chiang/brown"))), HDomain::Full);
+        assert_eq!(
+            h_domain(&Skewed(lambertian((0.5, 0.5, 0.5)))),
+            HDomain::Full
+        );
+    }
+
+    /// Integrating h over [0, 1] under the mirror symmetry gives the tables of the full range,
+    /// up to the two rules' quadrature error.
+    #[test]
+    fn mirror_symmetric_tables_equal_full_range_tables() {
+        let b = model("Chiang/blond");
+        let s = DualScatteringSettings {
+            theta_nodes: 4,
+            h_nodes: 48,
+            ..coarse()
+        };
+        let mirror = DualScatteringTables::build(b.as_ref(), &s, HDomain::Mirror).unwrap();
+        let full = DualScatteringTables::build(b.as_ref(), &s, HDomain::Full).unwrap();
+        for (m, f) in mirror.globals.iter().zip(&full.globals) {
+            for (what, x, y, tol) in [
+                ("ā_f", m.a_f, f.a_f, 2e-4),
+                ("ā_b", m.a_b, f.a_b, 2e-4),
+                ("ᾱ_f", m.alpha_f, f.alpha_f, 5e-5),
+                ("ᾱ_b", m.alpha_b, f.alpha_b, 5e-5),
+                ("β̄²_f", m.beta2_f, f.beta2_f, 1e-5),
+                ("β̄²_b", m.beta2_b, f.beta2_b, 1e-5),
+            ] {
+                assert!(
+                    (x - y).abs().max_element() < tol,
+                    "{what}: mirror {x} vs full {y}"
+                );
+            }
+        }
+    }
+
+    /// Default-resolution tables for every model: build times and the figures of the report
+    /// (run with `--ignored --nocapture`), and the white-furnace and range checks at full accuracy.
+    #[test]
+    #[ignore]
+    fn default_tables_for_every_model() {
+        for theta_nodes in [64, 128] {
+            let s = DualScatteringSettings {
+                theta_nodes,
+                ..Default::default()
+            };
+            for (name, b, white) in all_models() {
+                let t = DualScatteringTables::new(b.as_ref(), &s).unwrap();
+                println!(
+                    "{name:30} {theta_nodes:4} nodes: {:6.2} s",
+                    t.build_time().as_secs_f64()
+                );
+                for th in [0.0f32, 0.6, 1.2] {
+                    let g = t.globals(th);
+                    println!(
+                        "  θ {th:3.1}: ā_f {:.3?} ā_b {:.3?} ᾱ_f {:.3?} ᾱ_b {:.3?} β̄²_f {:.4?} β̄²_b {:.4?} Ā_b {:.3?} Δ_b {:.3?} σ_b² {:.4?}",
+                        g.a_f.to_array(), g.a_b.to_array(), g.alpha_f.to_array(), g.alpha_b.to_array(),
+                        g.beta2_f.to_array(), g.beta2_b.to_array(), g.big_a_b.to_array(),
+                        g.delta_b.to_array(), g.sigma_b2(0.7).to_array()
+                    );
+                    if white {
+                        assert!(
+                            (g.a_f + g.a_b - Rgb::ONE).abs().max_element() < 0.005,
+                            "{name}"
+                        );
+                    }
+                    assert!(
+                        g.big_a_b.is_finite() && g.sigma_b2(0.7).min_element() > 0.0,
+                        "{name}"
+                    );
+                    if theta_nodes == 64 {
+                        let ds = DualScatteringShading::new(
+                            b.clone(),
+                            Arc::new(t.clone()),
+                            DensityFactors::default(),
+                        )
+                        .unwrap();
+                        let wo = Vec3::new(th.sin(), 0.0, th.cos());
+                        println!(
+                            "        ∫F dω_d: n = 0, direct {:.3?}; scattered only, n = 1 {:.3?}, n = 4 {:.3?}",
+                            returned_energy(&ds, wo, 0.0, 1.0),
+                            returned_energy(&ds, wo, 1.0, 0.0),
+                            returned_energy(&ds, wo, 4.0, 0.0)
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// `∫ F(wo, ω_d) dω_d`, h averaged: the radiance F returns toward `wo` under a uniform
+    /// environment of radiance 1 (midpoint rule, 128 × 256 directions, 8 Gauss–Legendre h).
+    fn returned_energy(ds: &DualScatteringShading, wo: Vec3, n: f32, direct: f32) -> [f32; 3] {
+        let (nt, np) = (128, 256);
+        let cell = PI / nt as f32 * 2.0 * PI / np as f32;
+        let mut sum = Rgb::ZERO;
+        for (h, wh) in gauss_legendre(8) {
+            for j in 0..nt {
+                let t = -0.5 * PI + (j as f32 + 0.5) * PI / nt as f32;
+                for k in 0..np {
+                    let p = (k as f32 + 0.5) * 2.0 * PI / np as f32;
+                    let wi = Vec3::new(t.sin(), t.cos() * p.cos(), t.cos() * p.sin());
+                    sum +=
+                        ds.eval(wo, wi, h as f32, n, direct) * (0.5 * wh as f32 * t.cos() * cell);
+                }
+            }
+        }
+        sum.to_array()
+    }
+
+    /// The normalisation of `eval`: with the light visible and no fibers crossed, a white
+    /// fiber's F returns its albedo (1) plus d_b·Ā_b of local back-scattering; with all the light
+    /// scattered (direct = 0), d_f·T_f·(ā_f + d_b Ā_b) — not the ≈3× of the literal constants.
+    #[test]
+    fn f_returns_the_energy_each_term_is_assigned() {
+        let b = model("Chiang/white_default");
+        let ds = shading(b.clone(), DensityFactors::default());
+        let wo = Vec3::new(0.0, 0.0, 1.0);
+        let theta_i = 0.0; // light on the specular cone of wo
+        let g = ds.tables().globals(theta_i);
+        let energy = |n: f32, direct: f32| {
+            // ∫ F dω_d by midpoint quadrature over (sin θ, φ): dω = ds dφ.
+            let (ns, np) = (400, 400);
+            let mut sum = Rgb::ZERO;
+            for i in 0..ns {
+                let sn = -1.0 + (i as f32 + 0.5) * 2.0 / ns as f32;
+                for j in 0..np {
+                    let phi = (j as f32 + 0.5) * 2.0 * PI / np as f32;
+                    let wi = tress_core::math::fiber_direction(sn, (1.0 - sn * sn).sqrt(), phi);
+                    let hs = [-0.75f32, -0.25, 0.25, 0.75];
+                    sum += hs
+                        .iter()
+                        .map(|&h| ds.eval(wo, wi, h, n, direct))
+                        .sum::<Rgb>()
+                        / hs.len() as f32;
+                }
+            }
+            sum.x * (2.0 / ns as f32) * (2.0 * PI / np as f32)
+        };
+        let direct = energy(0.0, 1.0);
+        let want_direct = 1.0 + 0.7 * g.big_a_b.x;
+        assert!(
+            (direct - want_direct).abs() < 0.03 * want_direct,
+            "{direct} vs {want_direct}"
+        );
+        let n = 3.0;
+        let scattered = energy(n, 0.0);
+        let t_f = ds.forward(Vec3::new(0.0, 0.0, -1.0), n).t_f.x;
+        let want = t_f * 0.7 * (g.a_f.x + 0.7 * g.big_a_b.x);
+        assert!(
+            (scattered - want).abs() < 0.05 * want,
+            "{scattered} vs {want}"
+        );
+    }
+}
