@@ -51,6 +51,9 @@ pub trait Accel: Send + Sync {
     fn intersect(&self, ray: &Ray) -> Option<Hit>;
     /// Whether anything blocks `(0, ray.t_max)`, skipping `ray.exclude`.
     fn occluded(&self, ray: &Ray) -> bool;
+    /// Whether a surface that is not hair (a mesh, a sphere) blocks `(0, ray.t_max)`; fibers are
+    /// transparent to this query (dual scattering accounts for them statistically).
+    fn occluded_by_surfaces(&self, ray: &Ray) -> bool;
     /// Bounds of all geometry.
     fn bounds(&self) -> Aabb;
 }

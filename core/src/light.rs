@@ -153,6 +153,16 @@ impl Light {
         }
     }
 
+    /// Whether the light is a delta distribution in direction (a point, or a distant light
+    /// without a disc): it can only be reached by sampling it.
+    pub fn is_delta(&self) -> bool {
+        match self {
+            Light::Point { .. } => true,
+            Light::Distant { half_angle_rad, .. } => *half_angle_rad <= 0.0,
+            _ => false,
+        }
+    }
+
     /// Whether the light is at infinity (seen by escaping rays, no distance).
     pub fn is_infinite(&self) -> bool {
         !matches!(self, Light::Point { .. })

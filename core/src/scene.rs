@@ -51,6 +51,13 @@ impl Scene {
         self.accel.occluded(ray)
     }
 
+    /// Visibility against non-hair surfaces only, counted in the ray statistics.
+    #[inline]
+    pub fn occluded_by_surfaces(&self, ray: &Ray) -> bool {
+        RAYS_TRACED.with(|c| c.set(c.get() + 1));
+        self.accel.occluded_by_surfaces(ray)
+    }
+
     pub fn bounds(&self) -> Aabb {
         self.accel.bounds()
     }
