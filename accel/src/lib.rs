@@ -21,6 +21,10 @@
 //!
 //! `examples/preview.rs` renders a quick shaded preview of any hair source.
 //!
+//! For dual scattering, [`DensityGrid::build`] turns the hair of a built [`EmbreeAccel`] into a
+//! sparse voxel grid answering [`tress_core::FiberDensity`] (the expected number of fibers a
+//! ray crosses); [`EmbreeAccel::count_fibers_crossed`] is its brute-force reference.
+//!
 //! # Fibers: flat curves, the local frame and `h`
 //!
 //! Hair is drawn with Embree's *flat* curves: ribbons of the fiber's width that always face the
@@ -67,6 +71,7 @@
 
 mod curves;
 pub mod cyhair;
+pub mod density;
 mod error;
 pub mod geometry;
 pub mod mesh;
@@ -77,6 +82,7 @@ pub mod tfx;
 
 pub use curves::CurveBasis;
 pub use cyhair::HairFile;
+pub use density::{DensityGrid, DensityInfo, DensitySettings};
 pub use error::{Error, Result};
 pub use geometry::{HairAttribute, HairGeometry, Rotation, Transform};
 pub use mesh::TriangleMesh;

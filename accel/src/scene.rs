@@ -27,11 +27,17 @@ const NO_ID: u32 = u32::MAX;
 struct Exclude {
     geom: u32,
     prim: u32,
+    /// Null, except in [`EmbreeAccel::count_fibers_crossed`]: there the filters record every
+    /// kept hit (primitive and distance) here and reject it, so traversal goes on to the end
+    /// of the ray.
+    hits: *mut Vec<(PrimId, f32)>,
+    /// Set by [`Accel::occluded_by_surfaces`]: fibers are transparent to the query.
+    skip_hair: bool,
 }
 
 /// Everything needed to turn a curve hit into a fiber hit and to filter self-intersections.
 #[derive(Debug)]
-struct CurveData {
+pub(crate) struct CurveData {
     basis: CurveBasis,
     material: u32,
     /// Embree control points: position and radius.
@@ -413,7 +419,7 @@ impl SceneBuilder {
         let data = Arc::new(data);
         let filter_data = Arc::clone(&data);
         install_filters(&mut geometry, move |ex: &Exclude, geom, prim, org, dir| {
-            geom != ex.geom || filter_data.keep(ex.prim, prim, org, dir)
+            !ex.skip_hair && (geom != ex.geom || filter_data.keep(ex.prim, prim, org, dir))
         });
         let info = ObjectInfo {
             name: name.clone(),
@@ -631,7 +637,7 @@ fn apply_filter<F>(
     // SAFETY: the scenes built here are private to `EmbreeAccel`, whose every query passes an
     // `IntersectContextExt<Exclude>`.
     let ex = unsafe { *ctx.ext::<Exclude>() };
-    if ex.geom == NO_ID {
+    if ex.geom == NO_ID && ex.hits.is_null() && !ex.skip_hair {
         return;
     }
     for i in 0..rays.len() {
@@ -640,7 +646,13 @@ fn apply_filter<F>(
         }
         let org = Vec3::from(rays.org(i));
         let dir = Vec3::from(rays.dir(i));
-        if !keep(&ex, hits.geom_id(i), hits.prim_id(i), org, dir) {
+        let (geom, prim) = (hits.geom_id(i), hits.prim_id(i));
+        if !keep(&ex, geom, prim, org, dir) {
+            valid[i] = 0;
+        } else if !ex.hits.is_null() {
+            // SAFETY: set only by `count_fibers_crossed`, whose vector outlives the (synchronous)
+            // query and is not otherwise touched during it.
+            unsafe { (*ex.hits).push((PrimId { geom, prim }, rays.tfar(i))) };
             valid[i] = 0;
         }
     }
@@ -675,10 +687,14 @@ impl EmbreeAccel {
             Exclude {
                 geom: NO_ID,
                 prim: NO_ID,
+                hits: std::ptr::null_mut(),
+                skip_hair: false,
             },
             |p| Exclude {
                 geom: p.geom,
                 prim: p.prim,
+                hits: std::ptr::null_mut(),
+                skip_hair: false,
             },
         );
         IntersectContextExt::incoherent(ex)
@@ -694,6 +710,74 @@ impl EmbreeAccel {
             u32::MAX,
             0,
         )
+    }
+}
+
+// What the density grid (`density.rs`) needs: the world-space fibers Embree intersects, and a
+// brute-force crossing count to calibrate and test it against.
+impl CurveData {
+    pub(crate) fn basis(&self) -> CurveBasis {
+        self.basis
+    }
+
+    /// Curve segments (Embree primitives).
+    pub(crate) fn segments(&self) -> usize {
+        self.seg_first_cp.len()
+    }
+
+    /// The control points (position, radius) of segment `prim`, `basis().order()` of them.
+    pub(crate) fn control_points(&self, prim: usize) -> &[Vec4] {
+        let first = self.seg_first_cp[prim] as usize;
+        &self.cps[first..first + self.basis.order()]
+    }
+
+    /// Whether two segments belong to the same strand.
+    pub(crate) fn same_strand(&self, a: usize, b: usize) -> bool {
+        self.seg_strand[a] == self.seg_strand[b]
+    }
+}
+
+impl EmbreeAccel {
+    /// The hair geometries with their Embree geometry ids.
+    pub(crate) fn hair_curves(&self) -> impl Iterator<Item = (u32, &Arc<CurveData>)> {
+        self.geoms.iter().enumerate().filter_map(|(id, g)| match g {
+            GeomData::Hair(c) => Some((id as u32, c)),
+            _ => None,
+        })
+    }
+
+    /// Brute-force count of the fibers crossed along `ray` over `(0, ray.t_max)`: the distinct
+    /// hair segments hit, with the same `ray.exclude` rule as [`Accel::intersect`]; meshes and
+    /// spheres neither count nor block. Flat ribbons face the ray, so a fiber crossed is one
+    /// hit, except through a joint, where the rounded ends of both segments are hit: such a
+    /// pair (consecutive segments of a strand hit within the sum of their radii in depth)
+    /// counts once. For calibrating and testing [`crate::DensityGrid`]; it traverses the whole
+    /// ray.
+    pub fn count_fibers_crossed(&self, ray: &Ray) -> u32 {
+        let mut hits: Vec<(PrimId, f32)> = Vec::new();
+        let mut ctx = Self::context(ray);
+        ctx.ext.hits = &mut hits;
+        let mut r = Self::embree_ray(ray);
+        self.scene.occluded(&mut ctx, &mut r);
+        // Embree may report a primitive more than once (spatial splits, curve subdivision).
+        hits.sort_unstable_by_key(|(h, _)| (h.geom, h.prim));
+        hits.dedup_by_key(|(h, _)| *h);
+        let mut count = 0;
+        for (i, &(h, t)) in hits.iter().enumerate() {
+            let GeomData::Hair(c) = &self.geoms[h.geom as usize] else {
+                continue;
+            };
+            let through_joint = i > 0 && {
+                let (p, tp) = hits[i - 1];
+                let (a, b) = (p.prim as usize, h.prim as usize);
+                p.geom == h.geom
+                    && a + 1 == b
+                    && c.same_strand(a, b)
+                    && (t - tp).abs() <= c.capsules[a].r + c.capsules[b].r
+            };
+            count += u32::from(!through_joint);
+        }
+        count
     }
 }
 
@@ -732,6 +816,16 @@ impl Accel for EmbreeAccel {
 
     fn occluded(&self, ray: &Ray) -> bool {
         let mut ctx = Self::context(ray);
+        let mut r = Self::embree_ray(ray);
+        self.scene.occluded(&mut ctx, &mut r)
+    }
+
+    fn occluded_by_surfaces(&self, ray: &Ray) -> bool {
+        if self.info.triangles == 0 && self.info.spheres == 0 {
+            return false;
+        }
+        let mut ctx = Self::context(ray);
+        ctx.ext.skip_hair = true;
         let mut r = Self::embree_ray(ray);
         self.scene.occluded(&mut ctx, &mut r)
     }

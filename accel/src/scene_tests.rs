@@ -618,3 +618,30 @@ fn concurrent_queries_match_serial_ones() {
     });
     assert_eq!([ra, rb].concat(), serial);
 }
+
+/// `occluded_by_surfaces` sees spheres and meshes through hair, and never hair itself.
+#[test]
+fn surface_occlusion_ignores_fibers() {
+    let fiber = hair(&[line(Vec3::new(-1.0, 0.0, 2.0), Vec3::new(1.0, 0.0, 2.0), 4)], 0.05);
+    let accel = SceneBuilder::new()
+        .unwrap()
+        .add_hair(&fiber, &HairOptions::default(), 0)
+        .unwrap()
+        .add_sphere(Vec3::new(0.0, 0.0, -3.0), 1.0, 1)
+        .unwrap()
+        .build()
+        .unwrap();
+    // Through the fiber into the sphere: blocked by both queries.
+    let to_sphere = Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z);
+    assert!(accel.occluded(&to_sphere) && accel.occluded_by_surfaces(&to_sphere));
+    // Through the fiber only (stopping before the sphere): hair blocks, no surface does.
+    let through_hair = to_sphere.with_t_max(4.0);
+    assert!(accel.occluded(&through_hair));
+    assert!(!accel.occluded_by_surfaces(&through_hair));
+    // Missing everything.
+    let miss = Ray::new(Vec3::new(0.0, 5.0, 5.0), -Vec3::Z);
+    assert!(!accel.occluded(&miss) && !accel.occluded_by_surfaces(&miss));
+    // Hair-only scenes answer without tracing.
+    let hair_only = SceneBuilder::new().unwrap().add_hair(&fiber, &HairOptions::default(), 0).unwrap().build().unwrap();
+    assert!(!hair_only.occluded_by_surfaces(&to_sphere));
+}
