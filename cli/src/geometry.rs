@@ -6,8 +6,8 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use tress_accel::{HairOptions, HairSource, SceneBuilder, Transform, TriangleMesh};
-use tress_core::{Accel, Material};
+use tress_accel::{EmbreeAccel, HairOptions, HairSource, SceneBuilder, Transform, TriangleMesh};
+use tress_core::Material;
 
 /// An object of the scene, referring to a material by name.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -49,7 +49,7 @@ pub fn build_accel(
     scene_path: &Path,
     material_index: &BTreeMap<String, u32>,
     materials: &[Material],
-) -> Result<(Box<dyn Accel>, String)> {
+) -> Result<(EmbreeAccel, String)> {
     let here = |i: usize, what: String| anyhow!("{}: objects[{i}]: {what}", scene_path.display());
     let mut builder = SceneBuilder::new()?;
     for (i, object) in desc.objects.iter().enumerate() {
@@ -117,5 +117,5 @@ pub fn build_accel(
         .build()
         .map_err(|e| anyhow!("{}: {e}", scene_path.display()))?;
     let summary = accel.info().to_string();
-    Ok((Box::new(accel), summary))
+    Ok((accel, summary))
 }

@@ -1,7 +1,9 @@
 //! THE registry of integrators: one enum variant per integrator crate.
 
 use serde::{Deserialize, Serialize};
-use tress_core::Integrator;
+use tress_accel::DensitySettings;
+use tress_core::{Integrator, Scene};
+use tress_dual_uniform::DualSettings;
 
 /// An integrator and its settings, as written in scene files (`integrator: Path(max_depth: 64)`)
 /// or on the command line (`--integrator path`, `--integrator 'Path(max_depth: 8)'`).
@@ -9,6 +11,10 @@ use tress_core::Integrator;
 pub enum IntegratorDesc {
     /// Brute-force path tracing with MIS: the ground truth.
     Path(#[serde(default)] tress_path::PathSettings),
+    /// Dual scattering (Zinke et al. 2008), light directions sampled uniformly.
+    DualUniform(#[serde(default)] DualSettings),
+    /// Dual scattering with MIS of light sampling and shading-function sampling.
+    DualMis(#[serde(default)] DualSettings),
 }
 
 impl Default for IntegratorDesc {
@@ -19,12 +25,14 @@ impl Default for IntegratorDesc {
 
 impl IntegratorDesc {
     /// Command-line names, in registration order.
-    pub const NAMES: &'static [&'static str] = &["path"];
+    pub const NAMES: &'static [&'static str] = &["path", "dual-uniform", "dual-mis"];
 
     /// The short name used in file names, reports and EXR headers.
     pub fn name(&self) -> &'static str {
         match self {
             IntegratorDesc::Path(_) => "path",
+            IntegratorDesc::DualUniform(_) => "dual-uniform",
+            IntegratorDesc::DualMis(_) => "dual-mis",
         }
     }
 
@@ -32,6 +40,8 @@ impl IntegratorDesc {
     pub fn from_name(name: &str) -> Option<Self> {
         match name.to_ascii_lowercase().replace('_', "-").as_str() {
             "path" => Some(IntegratorDesc::Path(Default::default())),
+            "dual-uniform" => Some(IntegratorDesc::DualUniform(Default::default())),
+            "dual-mis" => Some(IntegratorDesc::DualMis(Default::default())),
             _ => None,
         }
     }
@@ -46,10 +56,32 @@ impl IntegratorDesc {
         })
     }
 
-    pub fn build(&self) -> Box<dyn Integrator> {
+    /// The hair density grid the integrator needs in the scene, if any.
+    pub fn density_grid(&self) -> Option<DensitySettings> {
         match self {
-            IntegratorDesc::Path(s) => Box::new(tress_path::PathTracer::new(s.clone())),
+            IntegratorDesc::Path(_) => None,
+            IntegratorDesc::DualUniform(s) | IntegratorDesc::DualMis(s) => Some(DensitySettings {
+                resolution: s.grid_resolution,
+                ..Default::default()
+            }),
         }
+    }
+
+    /// Builds the integrator for `scene` (dual scattering precomputes its tables here).
+    pub fn build(&self, scene: &Scene) -> anyhow::Result<Box<dyn Integrator>> {
+        Ok(match self {
+            IntegratorDesc::Path(s) => Box::new(tress_path::PathTracer::new(s.clone())),
+            IntegratorDesc::DualUniform(s) => Box::new(tress_dual_uniform::DualUniform::new(
+                s.clone(),
+                scene,
+                tress_dual_uniform::UniformDirections,
+            )?),
+            IntegratorDesc::DualMis(s) => Box::new(tress_dual_mis::DualMis::new(
+                s.clone(),
+                scene,
+                tress_dual_mis::MisDirections,
+            )?),
+        })
     }
 }
 

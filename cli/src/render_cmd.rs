@@ -100,7 +100,21 @@ pub fn render(args: RenderArgs) -> Result<()> {
     if verbose {
         eprintln!("{}", built.summary);
     }
-    let integrator = desc.integrator.build();
+    let t_integrator = std::time::Instant::now();
+    let integrator = desc.integrator.build(&built.scene).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: integrator {}: {e:#}",
+            args.scene.display(),
+            desc.integrator.name()
+        )
+    })?;
+    if verbose && !matches!(desc.integrator, IntegratorDesc::Path(_)) {
+        eprintln!(
+            "{} set up in {:.2} s (dual-scattering tables)",
+            desc.integrator.name(),
+            t_integrator.elapsed().as_secs_f64()
+        );
+    }
     let [x0, y0, x1, y1] = desc.film.window();
     let total = (x1 - x0) as u64 * (y1 - y0) as u64 * desc.film.spp as u64;
     let bar = progress_bar(total, verbose);

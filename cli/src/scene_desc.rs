@@ -226,20 +226,35 @@ pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
     let t1 = Instant::now();
     let (accel, geometry_summary) =
         crate::geometry::build_accel(desc, scene_path, &material_index, &materials)?;
-    let summary = format!(
+    let geometry_time = t1.elapsed();
+    let mut summary = format!(
         "{geometry_summary}\nmaterials: {} built in {:.1} ms; lights: {}; geometry built in {:.2} s",
         materials.len(),
         material_time.as_secs_f64() * 1e3,
         lights.len(),
-        t1.elapsed().as_secs_f64()
+        geometry_time.as_secs_f64()
     );
+    let density: Option<Box<dyn tress_core::FiberDensity>> = match desc.integrator.density_grid() {
+        Some(settings) if accel.info().strands > 0 => {
+            let t2 = Instant::now();
+            let grid = tress_accel::DensityGrid::build(&accel, &settings)
+                .map_err(|e| anyhow!("{}: density grid: {e}", scene_path.display()))?;
+            summary.push_str(&format!(
+                "\n{} built in {:.2} s",
+                grid.info(),
+                t2.elapsed().as_secs_f64()
+            ));
+            Some(Box::new(grid))
+        }
+        _ => None,
+    };
     Ok(BuiltScene {
         scene: Scene {
             camera,
-            accel,
+            accel: Box::new(accel),
             materials,
             lights,
-            density: None,
+            density,
         },
         summary,
     })
