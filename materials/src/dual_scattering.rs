@@ -86,7 +86,7 @@ use std::f32::consts::PI;
 use std::f64::consts::PI as PI64;
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
-use tress_core::math::{safe_asin, safe_sqrt, Rgb, Vec2, Vec3};
+use tress_core::math::{safe_asin, Rgb, Vec2, Vec3};
 use tress_core::sampling::sample_uniform_sphere;
 use tress_core::Bcsdf;
 
@@ -96,9 +96,6 @@ pub const A_F_MAX: f32 = 0.99;
 /// Smallest variance (rad²) a Gaussian is evaluated with: lobes carrying no energy have zero
 /// measured variance and would otherwise give 0·∞.
 const MIN_VARIANCE: f32 = 1e-6;
-
-/// cos θ_d is clamped here before dividing by cos²θ_d (hair-math §9).
-const MIN_COS_THETA_D: f32 = 1e-5;
 
 /// Resolution of the tables and of the quadrature that fills them.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -759,23 +756,24 @@ impl DualScatteringCache {
 }
 
 /// Unit-area Gaussian of variance `v` (clamped to [`MIN_VARIANCE`]), per channel.
-#[inline]
-fn gaussian(x: Rgb, v: Rgb) -> Rgb {
-    let v = v.max(Rgb::splat(MIN_VARIANCE));
-    let e = -(x * x) / (2.0 * v);
-    Rgb::new(e.x.exp(), e.y.exp(), e.z.exp()) / (2.0 * PI * v).map(f32::sqrt)
-}
 
-/// Density in θ_i of θ_h ~ N(mean, var) with θ_i = 2θ_h − θ_o, renormalised to
-/// θ_i ∈ [−π/2, π/2]: `½ g(θ_h − mean; var) / P(θ_i in range)`, per channel.
-fn theta_i_density(theta_h: f32, theta_o: f32, mean: Rgb, var: Rgb) -> Rgb {
-    let var = var.max(Rgb::splat(MIN_VARIANCE));
-    let (lo, hi) = (0.5 * (theta_o - PI / 2.0), 0.5 * (theta_o + PI / 2.0));
-    let inside = Rgb::from_array(std::array::from_fn(|c| {
-        let sd = var[c].sqrt() * std::f32::consts::SQRT_2;
-        (0.5 * (erf((hi - mean[c]) / sd) - erf((lo - mean[c]) / sd))).max(1e-6)
-    }));
-    0.5 * gaussian(Rgb::splat(theta_h) - mean, var) / inside
+/// Longitudinal density of a lobe whose θ_h ~ N(mean, var) (θ_i = 2θ_h − θ_o), expressed as
+/// a truncated Gaussian in s = sin θ_i on [−1, 1] with the matching centre and width (its
+/// linearisation at the centre). Since dω = ds dφ, a term `E·p(s)·p(φ)` carries exactly the
+/// energy E and has no 1/cos θ_i pole (which would give the estimators infinite variance).
+fn longitudinal_density(s: f32, theta_o: f32, mean: Rgb, var: Rgb) -> Rgb {
+    Rgb::from_array(std::array::from_fn(|c| {
+        let centre = (2.0 * mean[c] - theta_o).clamp(-PI / 2.0, PI / 2.0);
+        let sd_theta = 2.0 * var[c].max(MIN_VARIANCE).sqrt();
+        let sd = (sd_theta * centre.cos())
+            .max(0.5 * sd_theta * sd_theta)
+            .max(1e-3);
+        let mu = centre.sin();
+        let k = std::f32::consts::SQRT_2 * sd;
+        let inside = (0.5 * (erf((1.0 - mu) / k) - erf((-1.0 - mu) / k))).max(1e-6);
+        let x = s - mu;
+        (-(x * x) / (2.0 * sd * sd)).exp() / ((2.0 * PI).sqrt() * sd * inside)
+    }))
 }
 
 /// erf(x), Abramowitz & Stegun 7.1.26 (absolute error < 1.5e-7).
@@ -865,10 +863,10 @@ impl DualScatteringShading {
     /// with tress's energy-conserving models, F returns ≈3× the light a white fiber receives
     /// (measured: ∫F dω_d = 2.98 for a white Chiang fiber at n = 0). Here every term is a
     /// proper density carrying the energy the paper assigns it: the longitudinal Gaussian in
-    /// θ_h becomes a density in θ_i (`½ g(θ_h − μ; v)`, renormalised to the part of it inside
-    /// θ_i ∈ [−π/2, π/2]), the solid-angle factor is `1/cos θ_i` (Zinke's `1/cos²θ_d` times
-    /// tress's cos θ_i only matches it on the specular cone, and loses up to a third of a broad
-    /// lobe's energy away from it), and f_back is confined to the backward half-space
+    /// θ_h becomes a truncated Gaussian in sin θ_i with the same centre and width (Zinke's
+    /// `1/cos²θ_d` times tress's cos θ_i only normalises on the specular cone, and loses up to
+    /// a third of a broad lobe's energy away from it; a density in θ_i would need a 1/cos θ_i
+    /// factor that gives every estimator infinite variance), and f_back is confined to the backward half-space
     /// (`wi.z > 0`, the light's side) with azimuthal density 1/π. So
     /// `∫ d_b f_back_direct cos θ_i dω = d_b Ā_b` and `∫ f_s_scatter cos θ_i dω = ā_f`
     /// (N^G = a_f^t/2π over the whole circle).
@@ -881,16 +879,14 @@ impl DualScatteringShading {
         let DensityFactors { d_f, d_b } = self.factors;
         let theta_i = safe_asin(wi.x);
         let theta_o = safe_asin(wo.x);
-        let theta_h = 0.5 * (theta_i + theta_o);
         let g = self.tables.globals(theta_i);
         let sigma_b2 = g.sigma_b2(d_b);
         let backward = wi.z > 0.0;
-        let inv_cos_i = 1.0 / safe_sqrt(1.0 - wi.x * wi.x).max(MIN_COS_THETA_D);
-        // Longitudinal density in θ_i of a Gaussian in θ_h (module docs).
-        let lobe = |mean: Rgb, var: Rgb| theta_i_density(theta_h, theta_o, mean, var);
+        // Longitudinal density in sin θ_i of a Gaussian in θ_h (see `longitudinal_density`).
+        let lobe = |mean: Rgb, var: Rgb| longitudinal_density(wi.x, theta_o, mean, var);
         let back = |extra_var: Rgb| {
             if backward {
-                g.big_a_b * lobe(g.delta_b, sigma_b2 + extra_var) * (inv_cos_i / PI)
+                g.big_a_b * lobe(g.delta_b, sigma_b2 + extra_var) / PI
             } else {
                 Rgb::ZERO
             }
@@ -908,7 +904,6 @@ impl DualScatteringShading {
                 let l = self.tables.lobe(theta_i, t);
                 f_s_scatter += lobe(l.alpha, l.beta2 + fwd.sigma2_f) * l.n_g();
             }
-            f_s_scatter *= inv_cos_i;
             f += w_scatter * d_f * (f_s_scatter + d_b * back(fwd.sigma2_f));
         }
         f
@@ -1387,16 +1382,10 @@ mod tests {
                 let gauss = Rgb::from_array(std::array::from_fn(|c| {
                     (-x[c] * x[c] / (2.0 * v[c])).exp() / (2.0 * PI * v[c]).sqrt()
                 }));
-                // Backward half-space only, a density in θ_i renormalised to [−π/2, π/2],
-                // solid angle 1/cos θ_i (see `eval`'s normalisation).
+                // Backward half-space only, longitudinal density in sin θ_i (see `eval`).
                 let backward = if wi.z > 0.0 { 1.0 } else { 0.0 };
-                let (lo, hi) = (0.5 * (to - PI / 2.0), 0.5 * (to + PI / 2.0));
-                let inside = Rgb::from_array(std::array::from_fn(|c| {
-                    let sd = (2.0 * v[c]).sqrt();
-                    0.5 * (erf((hi - g.delta_b[c]) / sd) - erf((lo - g.delta_b[c]) / sd))
-                }));
-                let f_back =
-                    backward * 0.5 * g.big_a_b * gauss / inside / (PI * (1.0 - wi.x * wi.x).sqrt());
+                let p_s = longitudinal_density(wi.x, to, g.delta_b, v);
+                let f_back = backward * g.big_a_b * p_s / PI;
                 let want = fs + 0.7 * f_back;
                 let got = ds.eval(wo, wi, h, 0.0, 1.0);
                 assert!(

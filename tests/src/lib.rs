@@ -11,18 +11,7 @@ use tress_core::{Bcsdf, Camera, Material, Scene};
 /// A ball of `strands` fibers of radius 0.01 around the origin (radius 1), seen from +z, with
 /// `bcsdf` and the given lights.
 pub fn hair_ball_scene(bcsdf: Arc<dyn Bcsdf>, strands: u32, lights: Vec<Light>) -> Scene {
-    let hair = ProceduralHair {
-        style: HairStyle::Ball,
-        seed: 3,
-        strands,
-        points_per_strand: 16,
-        radius: 0.01,
-        length: 2.0,
-        center: Vec3::ZERO,
-        sphere_radius: 1.0,
-    }
-    .generate()
-    .expect("procedural hair");
+    let hair = hair_ball(strands);
     let accel = SceneBuilder::new()
         .and_then(|b| b.add_hair(&hair, &HairOptions::default(), 0))
         .and_then(|b| b.build())
@@ -72,4 +61,41 @@ pub fn shared_data(rel: &str) -> Option<PathBuf> {
         );
         None
     }
+}
+
+/// Adds the hair density grid the dual-scattering integrators need, built from the scene's
+/// own fibers.
+pub fn with_density_grid(mut scene: Scene, hair: &tress_accel::HairGeometry) -> Scene {
+    let accel = SceneBuilder::new()
+        .and_then(|b| b.add_hair(hair, &HairOptions::default(), 0))
+        .and_then(|b| b.build())
+        .expect("embree scene");
+    let grid = tress_accel::DensityGrid::build(&accel, &Default::default()).expect("density grid");
+    scene.accel = Box::new(accel);
+    scene.density = Some(Box::new(grid));
+    scene
+}
+
+/// The hair ball of [`hair_ball_scene`], as geometry.
+pub fn hair_ball(strands: u32) -> tress_accel::HairGeometry {
+    ProceduralHair {
+        style: HairStyle::Ball,
+        seed: 3,
+        strands,
+        points_per_strand: 16,
+        radius: 0.01,
+        length: 2.0,
+        center: Vec3::ZERO,
+        sphere_radius: 1.0,
+    }
+    .generate()
+    .expect("procedural hair")
+}
+
+/// Mean and standard error of `values`.
+pub fn mean_and_standard_error(values: &[f64]) -> (f64, f64) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    (mean, (var / n).sqrt())
 }
