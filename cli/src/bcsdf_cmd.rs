@@ -245,6 +245,9 @@ fn eval(a: EvalArgs) -> Result<()> {
     Ok(())
 }
 
+/// A sampled curve: (x, y) points.
+type Profile = Vec<(f64, f64)>;
+
 /// Marginal profiles of `eval_lobe` (luminance): over θ_i (integrated over φ) and over φ
 /// (integrated over θ_i), each integrating to the lobe's albedo.
 fn lobe_profiles(
@@ -252,7 +255,7 @@ fn lobe_profiles(
     theta_o: f32,
     hs: &[f32],
     lobe: usize,
-) -> (Vec<(f64, f64)>, Vec<(f64, f64)>) {
+) -> (Profile, Profile) {
     use std::f64::consts::PI;
     const N_THETA: usize = 180;
     const N_PHI: usize = 360;

@@ -269,7 +269,7 @@ fn build_light(l: &LightDesc, scene_path: &Path) -> Result<Light> {
         }
     };
     let check_scale = |rotation: f32, scale: f32| -> Result<()> {
-        if !rotation.is_finite() || !(scale.is_finite() && scale >= 0.0) {
+        if !(rotation.is_finite() && scale.is_finite() && scale >= 0.0) {
             bail!("rotation must be finite and scale finite and >= 0 (got {rotation}, {scale})");
         }
         Ok(())

@@ -755,8 +755,6 @@ impl DualScatteringCache {
     }
 }
 
-/// Unit-area Gaussian of variance `v` (clamped to [`MIN_VARIANCE`]), per channel.
-
 /// Longitudinal density of a lobe whose θ_h ~ N(mean, var) (θ_i = 2θ_h − θ_o), expressed as
 /// a truncated Gaussian in s = sin θ_i on [−1, 1] with the matching centre and width (its
 /// linearisation at the centre). Since dω = ds dφ, a term `E·p(s)·p(φ)` carries exactly the
@@ -1377,11 +1375,7 @@ mod tests {
                 // f_back_direct from the tables, written out independently of `eval`.
                 let (ti, to) = (wi.x.asin(), wo.x.asin());
                 let g = ds.tables().globals(ti);
-                let x = Rgb::splat(0.5 * (ti + to)) - g.delta_b;
                 let v = g.sigma_b2(0.7);
-                let gauss = Rgb::from_array(std::array::from_fn(|c| {
-                    (-x[c] * x[c] / (2.0 * v[c])).exp() / (2.0 * PI * v[c]).sqrt()
-                }));
                 // Backward half-space only, longitudinal density in sin θ_i (see `eval`).
                 let backward = if wi.z > 0.0 { 1.0 } else { 0.0 };
                 let p_s = longitudinal_density(wi.x, to, g.delta_b, v);
