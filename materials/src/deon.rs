@@ -611,20 +611,24 @@ impl DEon {
     }
 
     /// Σ_p M_p N_p; the residual term only if `with_residual` (tests evaluate R+TT+TRT alone).
-    fn eval_lobes(&self, wo: Vec3, wi: Vec3, with_residual: bool) -> Rgb {
+    /// The lobes `lobes` (0 R, 1 TT, 2 TRT, 3 the p ≥ 3 residual) summed.
+    fn eval_lobes(&self, wo: Vec3, wi: Vec3, lobes: std::ops::Range<usize>) -> Rgb {
         let o = Angles::new(wo);
         let (sin_i, cos_i) = sin_cos_theta(wi);
         let phi = o.relative_phi(wi);
         let row = RowLerp::new(o.cos as f32);
         let col = PhiLerp::new(phi);
         let mut f = Rgb::ZERO;
-        for (long, az) in self.long.iter().zip(&self.az) {
+        for (p, (long, az)) in self.long.iter().zip(&self.az).enumerate() {
+            if !lobes.contains(&p) {
+                continue;
+            }
             let m = long.eval(sin_i, cos_i, o.sin, o.cos) as f32;
             if m > 0.0 {
                 f += az.value(row, col) * m;
             }
         }
-        if with_residual {
+        if lobes.contains(&3) {
             let m = self.long_residual.eval(sin_i, cos_i, o.sin, o.cos) as f32;
             f += row.lerp(&self.residual) * (m / std::f32::consts::TAU);
         }
@@ -684,7 +688,15 @@ impl Angles {
 
 impl Bcsdf for DEon {
     fn eval(&self, wo: Vec3, wi: Vec3, _h: f32) -> Rgb {
-        self.eval_lobes(wo, wi, true)
+        self.eval_lobes(wo, wi, 0..4)
+    }
+
+    fn lobe_names(&self) -> &'static [&'static str] {
+        &["R", "TT", "TRT", "residual"]
+    }
+
+    fn eval_lobe(&self, wo: Vec3, wi: Vec3, _h: f32, p: usize) -> Rgb {
+        self.eval_lobes(wo, wi, p..p + 1)
     }
 
     fn sample(&self, wo: Vec3, _h: f32, u: [f32; 4]) -> Option<BcsdfSample> {
@@ -720,7 +732,7 @@ impl Bcsdf for DEon {
             (s, c, std::f32::consts::TAU * u[3] - std::f32::consts::PI)
         };
         let wi = o.direction(sin_i, cos_i, phi);
-        let f = self.eval_lobes(wo, wi, true);
+        let f = self.eval_lobes(wo, wi, 0..4);
         let pdf = luminance(f) / total;
         (pdf > 0.0 && pdf.is_finite()).then_some(BcsdfSample { wi, f, pdf })
     }
@@ -731,7 +743,7 @@ impl Bcsdf for DEon {
         let row = RowLerp::new(Angles::new(wo).cos as f32);
         let total: f32 = self.lobe_weights(row).iter().sum();
         if total > 0.0 {
-            luminance(self.eval_lobes(wo, wi, true)) / total
+            luminance(self.eval_lobes(wo, wi, 0..4)) / total
         } else {
             0.0
         }
@@ -956,7 +968,7 @@ mod tests {
                 );
                 if deg == 0.0 || deg == 80.0 {
                     let three =
-                        sphere_quadrature(1000, 512, |wi| m.eval_lobes(wo, wi, false).x as f64);
+                        sphere_quadrature(1000, 512, |wi| m.eval_lobes(wo, wi, 0..3).x as f64);
                     let want = if deg == 0.0 { 0.992 } else { 0.886 };
                     println!("{name} θ_o = {deg}°: R+TT+TRT only {three:.5}");
                     assert!(

@@ -283,6 +283,11 @@ impl Marschner {
 
     /// S(ω_i, ω_o) per channel.
     fn s(&self, a: &Angles) -> [f64; 3] {
+        self.s_lobes(a, 0..3)
+    }
+
+    /// S restricted to the lobes `lobes` (0 R, 1 TT, 2 TRT).
+    fn s_lobes(&self, a: &Angles, lobes: std::ops::Range<usize>) -> [f64; 3] {
         let slice = self.slice(self.eta, a.theta_d);
         let trt = if self.eta_star[0] == self.eta_star[1] {
             slice
@@ -291,7 +296,7 @@ impl Marschner {
         };
         let cos_d = a.theta_d.cos().max(1e-5);
         let mut out = [0.0; 3];
-        for p in 0..3 {
+        for p in lobes {
             let m = gaussian(a.theta_h - self.alpha[p], self.var[p]);
             let n = self.n_p(p, &slice, &trt, a.phi);
             for (o, v) in out.iter_mut().zip(n) {
@@ -433,6 +438,18 @@ impl Bcsdf for Marschner {
         let a = Angles::new(wo, wi);
         let s = self.s(&a);
         Rgb::from_array(s.map(|v| (v * a.cos_i) as f32))
+    }
+
+    fn lobe_names(&self) -> &'static [&'static str] {
+        &["R", "TT", "TRT"]
+    }
+
+    fn eval_lobe(&self, wo: Vec3, wi: Vec3, _h: f32, p: usize) -> Rgb {
+        if p >= 3 {
+            return Rgb::ZERO;
+        }
+        let a = Angles::new(wo, wi);
+        Rgb::from_array(self.s_lobes(&a, p..p + 1).map(|v| (v * a.cos_i) as f32))
     }
 
     fn sample(&self, wo: Vec3, _h: f32, u: [f32; 4]) -> Option<BcsdfSample> {

@@ -697,3 +697,35 @@ fn eval_cost() {
         println!("{:<32}{e:>12.1}{p:>12.1}{s:>12.1}", t.name);
     }
 }
+
+/// Every model's lobes (`eval_lobe`) sum to `eval`: the per-lobe plots and dual-scattering
+/// tables rely on it.
+#[test]
+fn lobes_sum_to_eval() {
+    let mut rng = tress_core::Sampler::from_seed(77);
+    for inst in HairModel::test_instances() {
+        let b = inst.params.build().unwrap();
+        let lobes = b.lobe_names().len();
+        for _ in 0..500 {
+            let wo = tress_core::sampling::sample_uniform_sphere(rng.next_2d());
+            let wi = tress_core::sampling::sample_uniform_sphere(rng.next_2d());
+            let h = 2.0 * rng.next_1d() - 1.0;
+            let total = b.eval(wo, wi, h);
+            let sum: tress_core::Rgb = (0..lobes).map(|p| b.eval_lobe(wo, wi, h, p)).sum();
+            assert!(
+                (total - sum)
+                    .abs()
+                    .cmple(1e-4 * total.abs() + tress_core::Rgb::splat(1e-6))
+                    .all(),
+                "{}: eval {total} vs Σ lobes {sum}",
+                inst.name
+            );
+            assert_eq!(
+                b.eval_lobe(wo, wi, h, lobes),
+                tress_core::Rgb::ZERO,
+                "{}",
+                inst.name
+            );
+        }
+    }
+}
