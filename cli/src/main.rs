@@ -1,10 +1,12 @@
 //! `tress`: the command-line renderer.
 
 mod bcsdf_cmd;
+mod diff;
 mod geometry;
 mod integrators;
 mod plot;
 mod render_cmd;
+mod study;
 mod scene_desc;
 
 use anyhow::Result;
@@ -31,6 +33,10 @@ enum Command {
     /// Tools for adding and tuning hair models: furnace, eval.
     #[command(subcommand)]
     Bcsdf(bcsdf_cmd::BcsdfCommand),
+    /// Comparative convergence study of integrators (error vs spp and time, report, plots).
+    Study(study::StudyArgs),
+    /// Error metrics of an EXR against a reference EXR, and an error heat map.
+    Diff(diff::DiffArgs),
 }
 
 fn main() {
@@ -52,6 +58,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::Render(args) => render_cmd::render(args),
         Command::Info { scene } => render_cmd::info(&scene),
         Command::Bcsdf(cmd) => bcsdf_cmd::run(cmd),
+        Command::Study(args) => study::run(args),
+        Command::Diff(args) => diff::run(args),
     }
 }
 

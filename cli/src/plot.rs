@@ -1,4 +1,5 @@
-//! Line charts (PNG and SVG) with plotters, for `tress bcsdf plot` and the study reports.
+//! Charts with plotters for `tress bcsdf plot`, `tress diff` and `tress study`: line charts (PNG
+//! and SVG, linear or log axes), colour-mapped heat maps with a colour bar, and image sheets (PNG).
 
 use anyhow::{anyhow, bail, Context, Result};
 use plotters::coord::Shift;
@@ -111,7 +112,13 @@ fn range(values: impl Iterator<Item = f64>, log: bool) -> (f64, f64) {
         return if log { (0.1, 1.0) } else { (0.0, 1.0) };
     }
     if log {
-        (lo / 1.5, hi * 1.5)
+        let (lo, hi) = (lo / 1.5, hi * 1.5);
+        // plotters labels log axes at powers of ten: keep one inside the range.
+        if lo.log10().ceil() > hi.log10().floor() {
+            (10f64.powf(lo.log10().floor()), hi)
+        } else {
+            (lo, hi)
+        }
     } else if hi - lo < 1e-12 {
         (lo - 0.5, hi + 0.5)
     } else {
@@ -162,9 +169,15 @@ where
     macro_rules! finish {
         ($ctx:expr) => {{
             let mut ctx = $ctx;
+            let fx = |v: &f64| tick_label(*v, chart.log_x);
+            let fy = |v: &f64| tick_label(*v, chart.log_y);
             ctx.configure_mesh()
                 .x_desc(chart.x_label.as_str())
                 .y_desc(chart.y_label.as_str())
+                .x_label_formatter(&fx)
+                .y_label_formatter(&fy)
+                .bold_line_style(RGBColor(215, 215, 215))
+                .light_line_style(RGBColor(244, 244, 244))
                 .label_style(("sans-serif", 13))
                 .draw()?;
             for (i, s) in chart.series.iter().enumerate() {
@@ -173,7 +186,7 @@ where
                 } else {
                     PALETTE[i % PALETTE.len()]
                 };
-                let pts: Vec<(f64, f64)> = s
+                let mut pts: Vec<(f64, f64)> = s
                     .points
                     .iter()
                     .copied()
@@ -184,6 +197,11 @@ where
                             && (!chart.log_x || p.0 > 0.0)
                     })
                     .collect();
+                if s.reference {
+                    // Reference lines do not set the axis range, and plotters does not clip, so
+                    // clip them here lest they run over the labels.
+                    pts = clip_polyline(&pts, xs, ys, chart.log_x, chart.log_y);
+                }
                 let style = ShapeStyle {
                     color: color.to_rgba(),
                     filled: false,
@@ -204,13 +222,566 @@ where
                 .draw()?;
         }};
     }
+    // Log axes get explicit ticks: plotters' own start at the first power of ten in range.
+    let log_axis = |r: (f64, f64)| {
+        let (bold, light) = log_ticks(r);
+        (r.0..r.1)
+            .log_scale()
+            .with_key_points(bold)
+            .with_light_points(light)
+    };
     match (chart.log_x, chart.log_y) {
         (false, false) => finish!(builder.build_cartesian_2d(xs.0..xs.1, ys.0..ys.1)?),
-        (true, false) => finish!(builder.build_cartesian_2d((xs.0..xs.1).log_scale(), ys.0..ys.1)?),
-        (false, true) => finish!(builder.build_cartesian_2d(xs.0..xs.1, (ys.0..ys.1).log_scale())?),
-        (true, true) => {
-            finish!(builder.build_cartesian_2d((xs.0..xs.1).log_scale(), (ys.0..ys.1).log_scale())?)
-        }
+        (true, false) => finish!(builder.build_cartesian_2d(log_axis(xs), ys.0..ys.1)?),
+        (false, true) => finish!(builder.build_cartesian_2d(xs.0..xs.1, log_axis(ys))?),
+        (true, true) => finish!(builder.build_cartesian_2d(log_axis(xs), log_axis(ys))?),
     }
     Ok(())
+}
+
+/// Labelled and minor ticks of a log axis over `r`: the 1, 2, 5 multiples of each power of ten
+/// with minor ticks at every integer multiple, or over more than four decades the powers of ten
+/// with minor ticks at their 2 and 5 multiples.
+fn log_ticks(r: (f64, f64)) -> (Vec<f64>, Vec<f64>) {
+    let (lo, hi) = r;
+    let at = |mults: &[f64]| -> Vec<f64> {
+        let mut v = Vec::new();
+        for k in lo.log10().floor() as i32..=hi.log10().ceil() as i32 {
+            for m in mults {
+                // Dividing by 10^|k| rounds 0.3 to the double nearest 0.3, as the labels expect.
+                let t = if k >= 0 {
+                    m * 10f64.powi(k)
+                } else {
+                    m / 10f64.powi(-k)
+                };
+                if t >= lo * (1.0 - 1e-12) && t <= hi * (1.0 + 1e-12) {
+                    v.push(t);
+                }
+            }
+        }
+        v
+    };
+    if (hi / lo).log10() > 4.0 {
+        (at(&[1.0]), at(&[1.0, 2.0, 5.0]))
+    } else {
+        (
+            at(&[1.0, 2.0, 5.0]),
+            at(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]),
+        )
+    }
+}
+
+/// A short tick label: up to four significant digits, exponent notation for very small or large
+/// values; on log axes only the 1, 2 and 5 multiples of a power of ten are labelled (plotters
+/// puts a tick at every integer multiple, which would overlap).
+fn tick_label(v: f64, log: bool) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let a = v.abs();
+    let e = a.log10().floor();
+    if log {
+        let m = (a / 10f64.powf(e)).round() as i64;
+        if ![1, 2, 5, 10].contains(&m) {
+            return String::new();
+        }
+    }
+    if (1e-3..1e5).contains(&a) {
+        let decimals = (3.0 - e).clamp(0.0, 6.0) as usize;
+        let s = format!("{v:.decimals$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    } else {
+        let s = format!("{v:.2e}");
+        // 2.50e-4 → 2.5e-4, 1.00e-6 → 1e-6
+        match s.split_once('e') {
+            Some((m, x)) if m.contains('.') => {
+                format!("{}e{x}", m.trim_end_matches('0').trim_end_matches('.'))
+            }
+            _ => s,
+        }
+    }
+}
+
+/// The visible part of a polyline inside the axis ranges (in log space on log axes): its first
+/// contiguous run, which is all of it for the straight reference lines it is used for.
+fn clip_polyline(
+    pts: &[(f64, f64)],
+    xs: (f64, f64),
+    ys: (f64, f64),
+    log_x: bool,
+    log_y: bool,
+) -> Vec<(f64, f64)> {
+    let fwd = |v: f64, log: bool| if log { v.log10() } else { v };
+    let inv = |v: f64, log: bool| if log { 10f64.powf(v) } else { v };
+    let (x0, x1) = (fwd(xs.0, log_x), fwd(xs.1, log_x));
+    let (y0, y1) = (fwd(ys.0, log_y), fwd(ys.1, log_y));
+    let mut out: Vec<(f64, f64)> = Vec::new();
+    for w in pts.windows(2) {
+        let (ax, ay) = (fwd(w[0].0, log_x), fwd(w[0].1, log_y));
+        let (bx, by) = (fwd(w[1].0, log_x), fwd(w[1].1, log_y));
+        // Liang–Barsky: the parameter interval [t0, t1] of the segment inside the box.
+        let (dx, dy) = (bx - ax, by - ay);
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        let mut visible = true;
+        for (p, q) in [(-dx, ax - x0), (dx, x1 - ax), (-dy, ay - y0), (dy, y1 - ay)] {
+            if p == 0.0 {
+                if q < 0.0 {
+                    visible = false;
+                }
+            } else {
+                let r = q / p;
+                if p < 0.0 {
+                    t0 = t0.max(r);
+                } else {
+                    t1 = t1.min(r);
+                }
+            }
+        }
+        if !visible || t0 > t1 {
+            if !out.is_empty() {
+                break;
+            }
+            continue;
+        }
+        let at = |t: f64| (inv(ax + t * dx, log_x), inv(ay + t * dy, log_y));
+        if out.is_empty() {
+            out.push(at(t0));
+        }
+        out.push(at(t1));
+        if t1 < 1.0 {
+            break;
+        }
+    }
+    out
+}
+
+/// A logarithmic colour scale `[lo, hi]` (values outside are clamped to its ends).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LogScale {
+    pub lo: f64,
+    pub hi: f64,
+}
+
+impl LogScale {
+    /// From the 1st to the 99.5th percentile of the positive finite values, widened to at least
+    /// one decade about their geometric middle; `[1e-3, 1]` when no value is positive.
+    pub fn fit(values: &[f32]) -> LogScale {
+        let mut v: Vec<f32> = values
+            .iter()
+            .copied()
+            .filter(|x| x.is_finite() && *x > 0.0)
+            .collect();
+        if v.is_empty() {
+            return LogScale { lo: 1e-3, hi: 1.0 };
+        }
+        v.sort_by(f32::total_cmp);
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize] as f64;
+        let (lo, hi) = (at(0.01), at(0.995));
+        let mid = (lo * hi).sqrt();
+        if hi / lo < 10.0 {
+            LogScale {
+                lo: mid / 10f64.sqrt(),
+                hi: mid * 10f64.sqrt(),
+            }
+        } else {
+            LogScale { lo, hi }
+        }
+    }
+
+    /// Position of `v` on the scale, in [0, 1].
+    fn position(&self, v: f64) -> f64 {
+        if v.is_nan() || v <= self.lo {
+            return 0.0;
+        }
+        ((v / self.lo).log10() / (self.hi / self.lo).log10()).clamp(0.0, 1.0)
+    }
+}
+
+/// Control points of a perceptually ordered dark-to-bright colour map (black, purple, red,
+/// orange, pale yellow): low error is dark.
+const HEAT: [(f64, [u8; 3]); 9] = [
+    (0.0, [0, 0, 4]),
+    (0.125, [31, 12, 72]),
+    (0.25, [85, 15, 109]),
+    (0.375, [136, 34, 106]),
+    (0.5, [186, 54, 85]),
+    (0.625, [227, 89, 51]),
+    (0.75, [249, 140, 10]),
+    (0.875, [249, 201, 50]),
+    (1.0, [252, 255, 164]),
+];
+
+/// The heat colour at `t` ∈ [0, 1].
+pub fn heat_color(t: f64) -> [u8; 3] {
+    let t = t.clamp(0.0, 1.0);
+    let i = HEAT
+        .iter()
+        .rposition(|(p, _)| *p <= t)
+        .unwrap_or(0)
+        .min(HEAT.len() - 2);
+    let ((p0, c0), (p1, c1)) = (HEAT[i], HEAT[i + 1]);
+    let f = (t - p0) / (p1 - p0);
+    [0, 1, 2].map(|k| (c0[k] as f64 + f * (c1[k] as f64 - c0[k] as f64)).round() as u8)
+}
+
+/// Non-finite errors are painted in this colour, which the heat map never uses.
+const NON_FINITE: [u8; 3] = [0, 255, 0];
+
+/// One panel of a heat-map figure: `width × height` values, row-major.
+pub struct HeatPanel {
+    pub title: String,
+    pub width: u32,
+    pub height: u32,
+    pub values: Vec<f32>,
+}
+
+/// An 8-bit sRGB picture (a crop of a render) for an image sheet.
+#[derive(Clone, Debug)]
+pub struct Picture {
+    pub width: u32,
+    pub height: u32,
+    /// Row-major RGB bytes.
+    pub rgb: Vec<u8>,
+}
+
+impl Picture {
+    /// Nearest-neighbour resampling to `w × h` (pixelated, so single-pixel noise stays visible).
+    fn resized(&self, w: u32, h: u32) -> Picture {
+        let mut rgb = Vec::with_capacity(w as usize * h as usize * 3);
+        for y in 0..h {
+            let sy = (y as u64 * self.height as u64 / h as u64) as usize;
+            for x in 0..w {
+                let sx = (x as u64 * self.width as u64 / w as u64) as usize;
+                let i = (sy * self.width as usize + sx) * 3;
+                rgb.extend_from_slice(&self.rgb[i..i + 3]);
+            }
+        }
+        Picture {
+            width: w,
+            height: h,
+            rgb,
+        }
+    }
+}
+
+/// Linear radiance to an 8-bit sRGB byte: scaled by `gain`, clamped to [0, 1] (NaN → 0).
+pub fn srgb8(c: f32, gain: f32) -> u8 {
+    let v = (c * gain).clamp(0.0, 1.0);
+    let v = if v.is_nan() { 0.0 } else { v };
+    let s = if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0 + 0.5) as u8
+}
+
+/// Display size of a `w × h` picture: enlarged by an integer factor until its long side reaches
+/// `min_side`, or shrunk so it does not exceed `max_side`.
+fn display_size(w: u32, h: u32, min_side: u32, max_side: u32) -> (u32, u32) {
+    let long = w.max(h).max(1);
+    if long < min_side {
+        let k = min_side.div_ceil(long);
+        (w * k, h * k)
+    } else if long > max_side {
+        let s = max_side as f64 / long as f64;
+        (
+            ((w as f64 * s).round() as u32).max(1),
+            ((h as f64 * s).round() as u32).max(1),
+        )
+    } else {
+        (w, h)
+    }
+}
+
+const MARGIN: u32 = 12;
+const GAP: u32 = 12;
+const TITLE_H: u32 = 24;
+
+/// Width of `text` in pixels at `size` (registers the font first).
+fn text_width(text: &str, size: u32) -> Result<u32> {
+    ensure_font()?;
+    ("sans-serif", size)
+        .into_font()
+        .box_size(text)
+        .map(|(w, _)| w)
+        .map_err(|e| anyhow!("measuring text: {e:?}"))
+}
+
+fn text_style(size: u32) -> TextStyle<'static> {
+    ("sans-serif", size).into_font().color(&BLACK)
+}
+
+/// Draws `root` into `path` (PNG) through a temporary file, so readers never see a partial image.
+fn write_bitmap(
+    path: &Path,
+    size: (u32, u32),
+    draw: impl FnOnce(&DrawingArea<BitMapBackend, Shift>) -> Result<()>,
+) -> Result<()> {
+    ensure_font()?;
+    if path.extension().and_then(|e| e.to_str()) != Some("png") {
+        bail!("{}: expected a .png file name", path.display());
+    }
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let tmp = tempfile::Builder::new().suffix(".png").tempfile_in(dir)?;
+    {
+        let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| anyhow!("{e:?}"))?;
+        draw(&root)?;
+        root.present()
+            .map_err(|e| anyhow!("drawing {}: {e}", path.display()))?;
+    }
+    tmp.persist(path)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+fn blit(root: &DrawingArea<BitMapBackend, Shift>, pos: (i32, i32), pic: &Picture) -> Result<()> {
+    let element = BitMapElement::with_owned_buffer(pos, (pic.width, pic.height), pic.rgb.clone())
+        .ok_or_else(|| anyhow!("picture buffer does not match its size"))?;
+    root.draw(&element).map_err(|e| anyhow!("{e:?}"))
+}
+
+fn draw_text(
+    root: &DrawingArea<BitMapBackend, Shift>,
+    text: &str,
+    size: u32,
+    pos: (i32, i32),
+) -> Result<()> {
+    root.draw_text(text, &text_style(size), pos)
+        .map_err(|e| anyhow!("{e:?}"))
+}
+
+/// Heat maps side by side, one per panel, colour-mapped on the shared logarithmic `scale`, with a
+/// colour bar labelled in powers of ten and `label` (what the values are) underneath; PNG.
+pub fn write_heat_maps(
+    path: &Path,
+    panels: &[HeatPanel],
+    scale: LogScale,
+    label: &str,
+) -> Result<()> {
+    if panels.is_empty() {
+        bail!("no heat map to draw");
+    }
+    let sizes: Vec<(u32, u32)> = panels
+        .iter()
+        .map(|p| display_size(p.width, p.height, 256, 512))
+        .collect();
+    let max_h = sizes.iter().map(|s| s.1).max().unwrap_or(1);
+    // Each panel's slot is wide enough for its title.
+    let slots = panels
+        .iter()
+        .zip(&sizes)
+        .map(|(p, s)| Ok(s.0.max(text_width(&p.title, 15)?)))
+        .collect::<Result<Vec<u32>>>()?;
+    let caption = format!(
+        "colour: {label}, log scale {:.2e} .. {:.2e} (green: not finite)",
+        scale.lo, scale.hi
+    );
+    const BAR_W: u32 = 18;
+    const BAR_LABELS: u32 = 64;
+    let width = (MARGIN + slots.iter().map(|w| w + GAP).sum::<u32>() + BAR_W + BAR_LABELS)
+        .max(2 * MARGIN + text_width(&caption, 13)?);
+    let height = MARGIN + TITLE_H + max_h + 8 + 20 + MARGIN;
+    write_bitmap(path, (width, height), |root| {
+        let mut x = MARGIN as i32;
+        let top = (MARGIN + TITLE_H) as i32;
+        for ((panel, &(dw, dh)), slot) in panels.iter().zip(&sizes).zip(&slots) {
+            if panel.values.len() != panel.width as usize * panel.height as usize {
+                bail!("heat map '{}' has the wrong number of values", panel.title);
+            }
+            let mut rgb = Vec::with_capacity(panel.values.len() * 3);
+            for v in &panel.values {
+                let c = if v.is_finite() {
+                    heat_color(scale.position(*v as f64))
+                } else {
+                    NON_FINITE
+                };
+                rgb.extend_from_slice(&c);
+            }
+            let pic = Picture {
+                width: panel.width,
+                height: panel.height,
+                rgb,
+            }
+            .resized(dw, dh);
+            blit(root, (x, top), &pic)?;
+            draw_text(root, &panel.title, 15, (x, MARGIN as i32))?;
+            x += (slot + GAP) as i32;
+        }
+        // Colour bar: bright (high error) at the top.
+        let bar: Vec<u8> = (0..max_h)
+            .flat_map(|y| {
+                let c = heat_color(1.0 - y as f64 / (max_h - 1).max(1) as f64);
+                (0..BAR_W).flat_map(move |_| c)
+            })
+            .collect();
+        blit(
+            root,
+            (x, top),
+            &Picture {
+                width: BAR_W,
+                height: max_h,
+                rgb: bar,
+            },
+        )?;
+        let y_of = |v: f64| top + ((1.0 - scale.position(v)) * (max_h - 1) as f64).round() as i32;
+        let mut ticks: Vec<f64> = Vec::new();
+        let (k0, k1) = (
+            scale.lo.log10().ceil() as i32,
+            scale.hi.log10().floor() as i32,
+        );
+        for k in k0..=k1 {
+            ticks.push(10f64.powi(k));
+        }
+        if ticks.len() < 2 {
+            ticks = vec![scale.lo, scale.hi];
+        }
+        let bx = x + BAR_W as i32;
+        for t in ticks {
+            let y = y_of(t);
+            root.draw(&PathElement::new(vec![(bx, y), (bx + 4, y)], BLACK))
+                .map_err(|e| anyhow!("{e:?}"))?;
+            draw_text(root, &format!("{t:.0e}"), 13, (bx + 6, y - 7))?;
+        }
+        draw_text(root, &caption, 13, (MARGIN as i32, top + max_h as i32 + 8))
+    })
+}
+
+/// A grid of pictures with a title, row labels on the left and column labels on top (an empty
+/// cell is left white); PNG. All pictures are shown at the size of the largest one, enlarged by
+/// an integer factor when small so single pixels stay visible.
+pub fn write_image_sheet(
+    path: &Path,
+    title: &str,
+    row_labels: &[String],
+    col_labels: &[String],
+    cells: &[Vec<Option<Picture>>],
+) -> Result<()> {
+    let (mut cw, mut ch) = (1u32, 1u32);
+    for p in cells.iter().flatten().flatten() {
+        cw = cw.max(p.width);
+        ch = ch.max(p.height);
+    }
+    let (cw, ch) = display_size(cw, ch, 96, 256);
+    const CELL_GAP: u32 = 4;
+    let mut label_w = 0;
+    for l in row_labels {
+        label_w = label_w.max(text_width(l, 13)? + 12);
+    }
+    let cols = col_labels
+        .len()
+        .max(cells.iter().map(Vec::len).max().unwrap_or(0)) as u32;
+    let rows = cells.len() as u32;
+    let top = MARGIN + TITLE_H + 20;
+    let width = (MARGIN + label_w + cols * (cw + CELL_GAP) + MARGIN)
+        .max(2 * MARGIN + text_width(title, 15)?);
+    let height = top + rows * (ch + CELL_GAP) + MARGIN;
+    write_bitmap(path, (width, height), |root| {
+        draw_text(root, title, 15, (MARGIN as i32, MARGIN as i32))?;
+        let x_of = |c: u32| (MARGIN + label_w + c * (cw + CELL_GAP)) as i32;
+        let y_of = |r: u32| (top + r * (ch + CELL_GAP)) as i32;
+        for (c, l) in col_labels.iter().enumerate() {
+            draw_text(root, l, 13, (x_of(c as u32), (top - 18) as i32))?;
+        }
+        for (r, row) in cells.iter().enumerate() {
+            if let Some(l) = row_labels.get(r) {
+                draw_text(
+                    root,
+                    l,
+                    13,
+                    (MARGIN as i32, y_of(r as u32) + ch as i32 / 2 - 7),
+                )?;
+            }
+            for (c, cell) in row.iter().enumerate() {
+                if let Some(p) = cell {
+                    blit(root, (x_of(c as u32), y_of(r as u32)), &p.resized(cw, ch))?;
+                }
+            }
+        }
+        Ok(())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reference_lines_are_clipped_to_the_axes() {
+        // 1/N from (1, 1) to (1000, 1e-3), clipped to y ≥ 1e-2 in log-log: ends at x = 100.
+        let c = clip_polyline(
+            &[(1.0, 1.0), (1000.0, 1e-3)],
+            (1.0, 1000.0),
+            (1e-2, 10.0),
+            true,
+            true,
+        );
+        assert_eq!(c.len(), 2);
+        assert!((c[0].0 - 1.0).abs() < 1e-9 && (c[0].1 - 1.0).abs() < 1e-9);
+        assert!((c[1].0 - 100.0).abs() < 1e-6 && (c[1].1 - 1e-2).abs() < 1e-9);
+        // Entirely outside: nothing is drawn.
+        assert!(clip_polyline(
+            &[(1.0, 100.0), (10.0, 50.0)],
+            (1.0, 10.0),
+            (0.1, 1.0),
+            true,
+            true
+        )
+        .is_empty());
+    }
+
+    #[test]
+    fn log_ticks_cover_partial_decades() {
+        let (bold, light) = log_ticks((0.015, 0.3));
+        assert_eq!(bold, [0.02, 0.05, 0.1, 0.2]);
+        assert_eq!(light.len(), 8 + 3);
+        let (bold, _) = log_ticks((1e-7, 1.0));
+        assert_eq!(bold.len(), 8);
+    }
+
+    #[test]
+    fn tick_labels_are_short() {
+        assert_eq!(tick_label(0.30000000000000004, false), "0.3");
+        assert_eq!(tick_label(0.3, true), "");
+        assert_eq!(tick_label(0.5, true), "0.5");
+        assert_eq!(tick_label(20.0, true), "20");
+        assert_eq!(tick_label(2.5e-4, false), "2.5e-4");
+        assert_eq!(tick_label(1e-6, true), "1e-6");
+        assert_eq!(tick_label(1234.0, false), "1234");
+        assert_eq!(tick_label(0.001234, false), "0.001234");
+        assert_eq!(tick_label(0.0, false), "0");
+    }
+
+    #[test]
+    fn log_scale_and_colours() {
+        let s = LogScale { lo: 1e-3, hi: 1e-1 };
+        assert_eq!(s.position(1e-2), 0.5);
+        assert_eq!(s.position(0.0), 0.0);
+        assert_eq!(s.position(5.0), 1.0);
+        assert_eq!(heat_color(0.0), [0, 0, 4]);
+        assert_eq!(heat_color(1.0), [252, 255, 164]);
+        // Brightness rises along the map, so a larger error always looks brighter.
+        let lum = |c: [u8; 3]| 0.2126 * c[0] as f64 + 0.7152 * c[1] as f64 + 0.0722 * c[2] as f64;
+        for i in 0..100 {
+            assert!(lum(heat_color((i + 1) as f64 / 100.0)) > lum(heat_color(i as f64 / 100.0)));
+        }
+        let flat = LogScale::fit(&[0.5; 10]);
+        assert!((flat.hi / flat.lo - 10.0).abs() < 1e-9);
+        assert_eq!(
+            LogScale::fit(&[0.0, f32::NAN]),
+            LogScale { lo: 1e-3, hi: 1.0 }
+        );
+        assert_eq!(srgb8(1.0, 1.0), 255);
+        assert_eq!(srgb8(f32::NAN, 1.0), 0);
+        assert_eq!(srgb8(0.5, 2.0), 255);
+    }
 }

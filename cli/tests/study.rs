@@ -1,0 +1,587 @@
+//! `tress study` and `tress diff` end to end: outputs, resumption, determinism, convergence,
+//! hand-computed metrics and clear errors for bad input.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use tress_core::image_io;
+use tress_core::Image;
+
+fn tress(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tress"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run tress")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// A small inline scene: a ball of hair under the built-in sky.
+const SCENE: &str = r#"(
+    camera: (look_from: (0, 0, 4), look_at: (0, 0, 0), fov: 35),
+    film: (width: 20, height: 20),
+    materials: {
+        "hair": Hair(Chiang(beta_m: 0.3, beta_n: 0.3, pigment: Melanin(eumelanin: 0.2))),
+    },
+    objects: [Hair(source: Procedural(style: Ball, strands: 200, radius: 0.012), material: "hair")],
+    lights: [Sky()],
+)"#;
+
+/// A path-tracer-only study with a truncated (biased: light hair scatters many times) path
+/// tracer beside the full one.
+fn study_text(extra: &str) -> String {
+    format!(
+        r#"(
+    name: "test study",
+    scenes: [Inline(name: "ball", scene: {SCENE})],
+    integrators: [Path(max_depth: 20), Path(max_depth: 1)],
+    spp: [1, 4, 16, 64],
+    repetitions: 3,
+    seed: 5,
+    reference: Render(integrator: Path(max_depth: 20), spp: 512),
+    references: PerIntegrator(spp: 512),
+    regions: [(name: "centre", x: 6, y: 6, w: 8, h: 8)],
+    {extra}
+)"#
+    )
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// results.csv as (header, rows of fields).
+fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<String> = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(str::to_owned)
+        .collect();
+    let rows = lines
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect();
+    (header, rows)
+}
+
+fn column(header: &[String], name: &str) -> usize {
+    header
+        .iter()
+        .position(|h| h == name)
+        .unwrap_or_else(|| panic!("no column {name} in {header:?}"))
+}
+
+/// `rendered N, reused M` from the summary line.
+fn counts(o: &Output) -> (usize, usize) {
+    let e = stderr(o);
+    let num = |key: &str| -> usize {
+        let i = e.find(key).unwrap_or_else(|| panic!("no '{key}' in {e}")) + key.len();
+        e[i..]
+            .chars()
+            .take_while(char::is_ascii_digit)
+            .collect::<String>()
+            .parse()
+            .unwrap()
+    };
+    (num("rendered "), num("reused "))
+}
+
+fn modified_times(dir: &Path) -> BTreeMap<PathBuf, std::time::SystemTime> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let p = e.unwrap().path();
+            let t = std::fs::metadata(&p).unwrap().modified().unwrap();
+            (p, t)
+        })
+        .collect()
+}
+
+#[test]
+fn study_end_to_end_resumable_and_deterministic() {
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), "s.ron", &study_text(""));
+    let o = tress(&["study", "s.ron", "--out", "a"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    // 2 integrators × 4 spp × 3 repetitions, plus the common reference and two own references
+    // (the full path tracer's own reference is the common one).
+    assert_eq!(counts(&o), (2 + 24, 1));
+    let out = dir.path().join("a");
+
+    // One row per render and reference kind, with the region's columns.
+    let (header, rows) = read_csv(&out.join("results.csv"));
+    for c in [
+        "scene",
+        "integrator",
+        "spp",
+        "rep",
+        "seed",
+        "time_s",
+        "rays",
+        "reference",
+    ] {
+        column(&header, c);
+    }
+    for c in [
+        "mse",
+        "relmse",
+        "mean",
+        "centre_mse",
+        "centre_relmse",
+        "centre_mean",
+    ] {
+        column(&header, c);
+    }
+    assert_eq!(rows.len(), 2 * 4 * 3 * 2);
+    assert!(rows.iter().all(|r| r.len() == header.len()));
+    let (ci, cs, cr, ck) = (
+        column(&header, "integrator"),
+        column(&header, "spp"),
+        column(&header, "rep"),
+        column(&header, "reference"),
+    );
+    let mut combos: Vec<String> = rows
+        .iter()
+        .map(|r| format!("{} {} {} {}", r[ci], r[cs], r[cr], r[ck]))
+        .collect();
+    combos.sort();
+    combos.dedup();
+    assert_eq!(combos.len(), rows.len(), "duplicate rows");
+    assert!(rows
+        .iter()
+        .all(|r| ["path-1", "path-2"].contains(&r[ci].as_str())));
+    // Independent seeds for every render.
+    let cseed = column(&header, "seed");
+    let mut seeds: Vec<&str> = rows
+        .iter()
+        .filter(|r| r[ck] == "common")
+        .map(|r| r[cseed].as_str())
+        .collect();
+    seeds.sort();
+    seeds.dedup();
+    assert_eq!(seeds.len(), 24);
+
+    // The path tracer's MSE (mean over repetitions) falls with spp, about as 1/N.
+    let cmse = column(&header, "mse");
+    let mean_mse = |integrator: &str, spp: &str| -> f64 {
+        let v: Vec<f64> = rows
+            .iter()
+            .filter(|r| r[ci] == integrator && r[cs] == spp && r[ck] == "common")
+            .map(|r| r[cmse].parse().unwrap())
+            .collect();
+        assert_eq!(v.len(), 3);
+        v.iter().sum::<f64>() / 3.0
+    };
+    let m: Vec<f64> = ["1", "4", "16", "64"]
+        .iter()
+        .map(|s| mean_mse("path-1", s))
+        .collect();
+    assert!(m.windows(2).all(|w| w[0] > w[1]), "MSE by spp: {m:?}");
+    assert!(
+        m[0] / m[3] > 16.0,
+        "64× the samples should cut the MSE well below a 16th: {m:?}"
+    );
+
+    // Report, summary, plots, heat map and crop sheets.
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    for needle in [
+        "## Scene `ball`",
+        "MSE ratio at equal spp",
+        "MSE ratio at equal time",
+        "efficiency",
+        "Convergence verdicts",
+        "`path-1` vs common reference: flat",
+        "relMSE = mean (I − R)² / (R² + ε) with ε = 0.01",
+    ] {
+        assert!(
+            report.contains(needle),
+            "report lacks '{needle}':\n{report}"
+        );
+    }
+    // Single scattering misses the light hair's multiple scattering: flagged as bias.
+    assert!(
+        report.contains("`path-2` vs common reference: **bias**"),
+        "{report}"
+    );
+    assert!(out.join("summary.csv").exists());
+    for f in [
+        "plots/ball_convergence",
+        "plots/ball_convergence_own",
+        "plots/ball_centre_convergence",
+    ] {
+        for ext in ["png", "svg"] {
+            let p = out.join(format!("{f}.{ext}"));
+            assert!(p.exists(), "{} missing", p.display());
+        }
+    }
+    for f in ["plots/ball_heatmap_16spp.png", "sheets/ball_centre.png"] {
+        let bytes = std::fs::read(out.join(f)).unwrap();
+        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{f} is not a PNG");
+    }
+
+    // The renders carry their cost, and a rerun reads every one back without rendering.
+    let renders = out.join("renders/ball");
+    let (_, attrs) = image_io::read_exr(renders.join("path-1_00004spp_rep02.exr")).unwrap();
+    assert!(attrs.iter().any(|(k, _)| k == "tress:render_time_s"));
+    assert!(attrs.iter().any(|(k, _)| k == "tress:rays"));
+    let before = modified_times(&renders);
+    let o = tress(&["study", "s.ron", "--out", "a"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(counts(&o), (0, 27));
+    assert_eq!(before, modified_times(&renders));
+    let (_, rows_again) = read_csv(&out.join("results.csv"));
+    assert_eq!(
+        rows, rows_again,
+        "reused renders must give the same results"
+    );
+
+    // A missing render is redone, alone.
+    std::fs::remove_file(renders.join("path-2_00016spp_rep01.exr")).unwrap();
+    let o = tress(&["study", "s.ron", "--out", "a", "--quiet"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(renders.join("path-2_00016spp_rep01.exr").exists());
+    let (_, rows_again) = read_csv(&out.join("results.csv"));
+    let ct = column(&header, "time_s");
+    let strip = |rows: &[Vec<String>]| -> Vec<Vec<String>> {
+        rows.iter()
+            .map(|r| {
+                let mut r = r.clone();
+                r[ct].clear();
+                r
+            })
+            .collect()
+    };
+    assert_eq!(strip(&rows), strip(&rows_again), "re-render differs");
+
+    // A fresh run elsewhere gives identical errors (only the timings differ).
+    let o = tress(&["study", "s.ron", "--out", "b", "--quiet"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (_, fresh) = read_csv(&dir.path().join("b/results.csv"));
+    assert_eq!(strip(&rows), strip(&fresh), "fresh run differs");
+
+    // Changed settings invalidate exactly the affected renders: one more repetition…
+    let more = study_text("").replace("repetitions: 3", "repetitions: 4");
+    write(dir.path(), "s.ron", &more);
+    let o = tress(&["study", "s.ron", "--out", "a"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(counts(&o), (2 * 4, 27));
+    // …or other settings for the second integrator: its renders and its own reference.
+    write(
+        dir.path(),
+        "s.ron",
+        &more.replace("Path(max_depth: 1)", "Path(max_depth: 2)"),
+    );
+    let o = tress(&["study", "s.ron", "--out", "a"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(counts(&o), (4 * 4 + 1, 4 * 4 + 2));
+    assert!(
+        stderr(&o).contains("made with other settings"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+/// Ignored by default: building the two dual-scattering integrators' tables takes seconds.
+#[test]
+#[ignore]
+fn shipped_quick_study_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let study = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/studies/quick.ron");
+    let o = tress(
+        &["study", study.to_str().unwrap(), "--out", "q", "--quick"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = dir.path().join("q");
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(report.contains("## Scene `ball`"), "{report}");
+    let (header, rows) = read_csv(&out.join("results.csv"));
+    // --quick keeps at most 3 of the 4 repetitions.
+    let cr = column(&header, "rep");
+    assert!(rows.iter().all(|r| r[cr].parse::<u32>().unwrap() < 3));
+    assert!(out.join("plots/ball_heatmap_4spp.png").exists());
+}
+
+#[test]
+fn quick_flag_scales_the_study_down() {
+    let dir = tempfile::tempdir().unwrap();
+    // Single scattering only, to keep it fast.
+    let text = study_text("film: (width: 96, height: 72),")
+        .replace("spp: [1, 4, 16, 64]", "spp: [1, 4, 16, 64, 256]")
+        .replace("repetitions: 3", "repetitions: 8")
+        .replace("spp: 512)", "spp: 4096)")
+        .replace("Path(max_depth: 20)", "Path(max_depth: 1)")
+        .replace(
+            "integrators: [Path(max_depth: 1), Path(max_depth: 1)]",
+            "integrators: [Path(max_depth: 1)]",
+        )
+        .replace("x: 6, y: 6, w: 8, h: 8", "x: 48, y: 36, w: 30, h: 18");
+    write(dir.path(), "big.ron", &text);
+    let o = tress(&["study", "big.ron", "--quick", "--quiet"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Default output folder, marked as quick.
+    let out = dir.path().join("big_study_quick");
+    let (header, rows) = read_csv(&out.join("results.csv"));
+    let (cs, cr) = (column(&header, "spp"), column(&header, "rep"));
+    let mut spp: Vec<u32> = rows.iter().map(|r| r[cs].parse().unwrap()).collect();
+    spp.dedup();
+    assert_eq!(spp, [1, 4, 16]);
+    assert!(rows.iter().all(|r| r[cr].parse::<u32>().unwrap() < 3));
+    // Films shrink to 64 pixels a side, and the region with them.
+    let (img, attrs) =
+        image_io::read_exr(out.join("renders/ball/path_00001spp_rep00.exr")).unwrap();
+    assert_eq!((img.width, img.height), (64, 48));
+    let refs: Vec<PathBuf> = std::fs::read_dir(out.join("references/ball"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "exr"))
+        .collect();
+    // The common reference is also the integrator's own.
+    assert_eq!(refs.len(), 1, "{refs:?}");
+    for r in &refs {
+        let (_, attrs) = image_io::read_exr(r).unwrap();
+        let spp = attrs.iter().find(|(k, _)| k == "tress:spp").unwrap();
+        assert_eq!(spp.1, "256", "quick reference spp: min(4096, 16 × 16)");
+    }
+    assert!(attrs.iter().any(|(k, v)| k == "tress:spp" && v == "1"));
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(report.contains("centre (20x12 at (32, 24))"), "{report}");
+}
+
+#[test]
+fn exr_reference_and_mismatches() {
+    let dir = tempfile::tempdir().unwrap();
+    // A reference rendered by `tress render` for the scene "ball".
+    let scene = SCENE.replace(
+        "film: (width: 20, height: 20)",
+        "film: (width: 20, height: 20, spp: 64, seed: 99)",
+    );
+    write(dir.path(), "ball.ron", &scene);
+    let o = tress(
+        &["render", "ball.ron", "--out", "refs/ball.exr", "--quiet"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = format!(
+        r#"(
+    scenes: [File("ball.ron")],
+    integrators: [Path()],
+    spp: [1, 2],
+    repetitions: 2,
+    reference: Exr("refs/{{scene}}.exr"),
+)"#
+    );
+    write(dir.path(), "exr.ron", &text);
+    let o = tress(&["study", "exr.ron", "--out", "o", "--quiet"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (_, rows) = read_csv(&dir.path().join("o/results.csv"));
+    assert_eq!(rows.len(), 4);
+
+    // A film override that no longer matches the reference: both files are named.
+    write(
+        dir.path(),
+        "exr.ron",
+        &text.replace(
+            "repetitions: 2,",
+            "repetitions: 2, film: (width: 16, height: 20),",
+        ),
+    );
+    let o = tress(&["study", "exr.ron", "--out", "o"], dir.path());
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("refs/ball.exr") && e.contains("ball.ron") && e.contains("16x20"),
+        "{e}"
+    );
+}
+
+fn constant_image(w: u32, h: u32, c: [f32; 3]) -> Image {
+    let mut img = Image::new(w, h);
+    for p in &mut img.pixels {
+        *p = glam::Vec3::from(c);
+    }
+    img
+}
+
+/// The numbers of the `all` row of `tress diff`: MSE, relMSE, PSNR, mean(A−B), mean(A), mean(B).
+fn diff_all(o: &Output) -> Vec<f64> {
+    let out = stdout(o);
+    let line = out
+        .lines()
+        .find(|l| l.starts_with("all"))
+        .unwrap_or_else(|| panic!("no 'all' row in:\n{out}"));
+    line.split_whitespace()
+        .skip(1)
+        .map(|v| v.parse().unwrap())
+        .collect()
+}
+
+#[test]
+fn diff_metrics() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n);
+    // B: 1 everywhere; A: B + 0.5 in the red channel of the left column only.
+    let b = constant_image(2, 2, [1.0, 1.0, 1.0]);
+    let mut a = b.clone();
+    a.set(0, 0, glam::Vec3::new(1.5, 1.0, 1.0));
+    a.set(0, 1, glam::Vec3::new(1.5, 1.0, 1.0));
+    image_io::write_exr(p("a.exr"), &a, &[]).unwrap();
+    image_io::write_exr(p("b.exr"), &b, &[]).unwrap();
+
+    let o = tress(&["diff", "b.exr", "b.exr"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let all = diff_all(&o);
+    assert_eq!((all[0], all[1], all[3]), (0.0, 0.0, 0.0));
+    assert!(all[2].is_infinite(), "PSNR of identical images: {all:?}");
+
+    let o = tress(
+        &[
+            "diff",
+            "a.exr",
+            "b.exr",
+            "--map",
+            "map.png",
+            "--map-kind",
+            "rel",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let all = diff_all(&o);
+    // Two of the 12 pixel-channels are off by 0.5: MSE = 2 · 0.25 / 12.
+    let mse = 2.0 * 0.25 / 12.0;
+    let close = |x: f64, y: f64| (x - y).abs() <= 1e-6 * y.abs().max(1e-12);
+    assert!(close(all[0], mse), "{all:?}");
+    assert!(close(all[1], mse / 1.01), "{all:?}");
+    // PSNR is printed to 1e-3 dB.
+    assert!(
+        (all[2] - 10.0 * (1.0 / mse).log10()).abs() < 1e-3,
+        "{all:?}"
+    );
+    assert!(close(all[3], 2.0 * 0.5 / 12.0), "{all:?}");
+    let red = stdout(&o)
+        .lines()
+        .find(|l| l.starts_with('R'))
+        .map(|l| l.split_whitespace().nth(1).unwrap().parse::<f64>().unwrap())
+        .unwrap();
+    assert!(close(red, 0.125), "red MSE {red}");
+    let png = std::fs::read(p("map.png")).unwrap();
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+
+    // The right column only: no difference.
+    let o = tress(
+        &["diff", "a.exr", "b.exr", "--region", "1,0,1,2"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(diff_all(&o)[0], 0.0);
+
+    // Mismatches name both files.
+    image_io::write_exr(p("c.exr"), &constant_image(3, 2, [1.0; 3]), &[]).unwrap();
+    let o = tress(&["diff", "a.exr", "c.exr"], dir.path());
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("a.exr") && e.contains("c.exr") && e.contains("3x2"),
+        "{e}"
+    );
+    let o = tress(
+        &["diff", "a.exr", "b.exr", "--region", "1,1,2,2"],
+        dir.path(),
+    );
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("region 2x2 at (1, 1)"),
+        "{}",
+        stderr(&o)
+    );
+    let o = tress(&["diff", "a.exr", "missing.exr"], dir.path());
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("missing.exr"), "{}", stderr(&o));
+}
+
+#[test]
+fn bad_study_files_are_reported_with_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = study_text("");
+    let cases: Vec<(String, &str)> = vec![
+        (good.replace("seed: 5,", "seed: 5, colour: 3,"), "colour"),
+        (good.replace("Path(max_depth: 1)", "Bogus()"), "Bogus"),
+        (
+            good.replace("spp: [1, 4, 16, 64]", "spp: []"),
+            "spp: the list is empty",
+        ),
+        (
+            good.replace("spp: [1, 4, 16, 64]", "spp: [4, 1]"),
+            "strictly increasing",
+        ),
+        (
+            good.replace("spp: [1, 4, 16, 64]", "spp: [0, 1]"),
+            "strictly increasing",
+        ),
+        (
+            good.replace("repetitions: 3", "repetitions: 0"),
+            "repetitions",
+        ),
+        (
+            good.replace("x: 6, y: 6, w: 8, h: 8", "x: 16, y: 6, w: 8, h: 8"),
+            "'centre'",
+        ),
+        (
+            good.replace(
+                "regions: [",
+                r#"regions: [(name: "centre", x: 0, y: 0, w: 1, h: 1), "#,
+            ),
+            "defined twice",
+        ),
+        (
+            good.replace("name: \"centre\"", "name: \"a b\""),
+            "letters, digits",
+        ),
+        (
+            good.replace("seed: 5,", "seed: 5, heatmap_spp: 8,"),
+            "heatmap_spp = 8",
+        ),
+        (
+            good.replace(
+                r#"Inline(name: "ball", scene: "#,
+                r#"File("nope.ron"), Inline(name: "ball", scene: "#,
+            ),
+            "nope.ron",
+        ),
+        (
+            good.replace("Path(max_depth: 1)", "Path(max_depth: 20)"),
+            "listed twice",
+        ),
+        (
+            good.replace("spp: 512)", "spp: 0)"),
+            "spp must be at least 1",
+        ),
+    ];
+    for (i, (text, needle)) in cases.iter().enumerate() {
+        let name = format!("bad{i}.ron");
+        write(dir.path(), &name, text);
+        let o = tress(&["study", &name, "--out", "o"], dir.path());
+        assert!(!o.status.success(), "case {i} ({needle}) was accepted");
+        let e = stderr(&o);
+        assert!(
+            e.contains(&name) && e.contains(needle),
+            "case {i}: expected the file name and '{needle}' in: {e}"
+        );
+        assert!(!e.contains("panicked"), "case {i}: {e}");
+    }
+    let o = tress(&["study", "absent.ron"], dir.path());
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("absent.ron"));
+}
