@@ -87,6 +87,7 @@ pub use error::{Error, Result};
 pub use geometry::{HairAttribute, HairGeometry, Rotation, Transform};
 pub use mesh::TriangleMesh;
 pub use procedural::{HairStyle, ProceduralHair};
+pub use scene::raw;
 pub use scene::{AccelInfo, EmbreeAccel, ObjectInfo, ObjectKind, SceneBuilder};
 pub use source::{HairOptions, HairSource};
 pub use tfx::TfxFile;

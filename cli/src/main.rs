@@ -1,6 +1,7 @@
 //! `tress`: the command-line renderer.
 
 mod bcsdf_cmd;
+mod bench;
 mod diff;
 mod geometry;
 mod integrators;
@@ -37,6 +38,8 @@ enum Command {
     Study(study::StudyArgs),
     /// Error metrics of an EXR against a reference EXR, and an error heat map.
     Diff(diff::DiffArgs),
+    /// Performance against raw Embree in the same run: builds, memory, rays/s, scaling.
+    Bench(bench::BenchArgs),
 }
 
 fn main() {
@@ -60,6 +63,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bcsdf(cmd) => bcsdf_cmd::run(cmd),
         Command::Study(args) => study::run(args),
         Command::Diff(args) => diff::run(args),
+        Command::Bench(args) => bench::run(args),
     }
 }
 

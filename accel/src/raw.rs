@@ -1,0 +1,264 @@
+//! Raw Embree queries over an [`EmbreeAccel`]'s scene, for `tress bench`: the same BVH and
+//! filter functions as [`Accel`](tress_core::Accel) queries, but no hit construction (no
+//! tangent, `h`, `v` or material), so their throughput is the baseline the renderer is
+//! measured against.
+//!
+//! Single rays run either with tress's self-intersection rule ([`Exclusion::Tress`], what
+//! [`Accel::intersect`](tress_core::Accel::intersect) pays for) or without it
+//! ([`Exclusion::Off`]: the filter functions return at once, so a ray leaving a fiber may hit
+//! it or its neighbours from inside). 8-wide packets always run without it: the excluded
+//! primitive travels in the intersection context, which a packet's lanes share.
+//!
+//! This module is a child of `scene` (see the `#[path]` there) because it builds the private
+//! intersection context the filter functions read.
+
+use super::{EmbreeAccel, Exclude, NO_ID};
+use embree3::{Hit8, IntersectContextExt, Ray8, RayHit, RayHit8, ValidMask, ValidMaskN};
+use tress_core::accel::PrimId;
+use tress_core::math::Ray;
+
+/// A ray for the raw queries: tress's ray and the distance the query starts at.
+#[derive(Clone, Copy, Debug)]
+pub struct RawRay {
+    pub ray: Ray,
+    /// Start of the query interval `(t_near, ray.t_max)`.
+    pub t_near: f32,
+}
+
+/// Whether a raw query applies tress's self-intersection rule to `ray.exclude`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Exclusion {
+    /// The capsule rule of the filter functions, exactly as in `Accel` queries.
+    Tress,
+    /// None: the filter functions return at once; `ray.exclude` is ignored.
+    Off,
+}
+
+/// Lanes in a packet.
+pub const PACKET: usize = 8;
+
+/// Embree reads the 8-lane validity mask with 32-byte aligned loads, but `ValidMaskN` is only
+/// 16-byte aligned: over-align it (the mask is the first and only field).
+#[repr(C, align(32))]
+struct Valid8(ValidMaskN<PACKET>);
+
+fn context(ray: &Ray, exclusion: Exclusion) -> IntersectContextExt<Exclude> {
+    match exclusion {
+        Exclusion::Tress => EmbreeAccel::context(ray),
+        Exclusion::Off => unfiltered(),
+    }
+}
+
+/// A context the filter functions return from at once.
+fn unfiltered() -> IntersectContextExt<Exclude> {
+    IntersectContextExt::incoherent(Exclude {
+        geom: NO_ID,
+        prim: NO_ID,
+        hits: std::ptr::null_mut(),
+        skip_hair: false,
+    })
+}
+
+fn embree_ray(r: &RawRay) -> embree3::Ray {
+    embree3::Ray::new(
+        r.ray.origin.to_array(),
+        r.ray.dir.to_array(),
+        r.t_near,
+        r.ray.t_max,
+        0.0,
+        u32::MAX,
+        0,
+    )
+}
+
+/// The SoA packet of up to [`PACKET`] rays and its validity mask (lanes past the slice are
+/// inactive).
+fn packet(rays: &[RawRay]) -> (Ray8, Valid8) {
+    assert!(rays.len() <= PACKET, "a packet holds at most {PACKET} rays");
+    let mut p = Ray8::empty();
+    let mut lanes = [ValidMask::Invalid; PACKET];
+    for (i, r) in rays.iter().enumerate() {
+        let (o, d) = (r.ray.origin, r.ray.dir);
+        [p.org_x[i], p.org_y[i], p.org_z[i]] = [o.x, o.y, o.z];
+        [p.dir_x[i], p.dir_y[i], p.dir_z[i]] = [d.x, d.y, d.z];
+        p.tnear[i] = r.t_near;
+        p.tfar[i] = r.ray.t_max;
+        lanes[i] = ValidMask::Valid;
+    }
+    (p, Valid8(ValidMaskN::new(lanes)))
+}
+
+impl EmbreeAccel {
+    /// One `rtcIntersect1`: the primitive hit and its distance.
+    pub fn raw_intersect(&self, r: &RawRay, exclusion: Exclusion) -> Option<(PrimId, f32)> {
+        let mut ctx = context(&r.ray, exclusion);
+        let mut rh = RayHit::from(embree_ray(r));
+        self.scene.intersect(&mut ctx, &mut rh);
+        rh.hit.is_valid().then_some((
+            PrimId {
+                geom: rh.hit.geomID,
+                prim: rh.hit.primID,
+            },
+            rh.ray.tfar,
+        ))
+    }
+
+    /// One `rtcOccluded1`.
+    pub fn raw_occluded(&self, r: &RawRay, exclusion: Exclusion) -> bool {
+        let mut ctx = context(&r.ray, exclusion);
+        self.scene.occluded(&mut ctx, &mut embree_ray(r))
+    }
+
+    /// One `rtcIntersect8` over up to [`PACKET`] rays, without exclusion: per lane, the hit
+    /// distance.
+    ///
+    /// # Panics
+    /// If `rays` holds more than [`PACKET`] rays.
+    pub fn raw_intersect8(&self, rays: &[RawRay]) -> [Option<f32>; PACKET] {
+        let (ray, valid) = packet(rays);
+        let mut rh = RayHit8 {
+            ray,
+            hit: Hit8::new(),
+        };
+        let mut ctx = unfiltered();
+        self.scene.intersect8(&mut ctx, &mut rh, &valid.0);
+        std::array::from_fn(|i| {
+            (i < rays.len() && rh.hit.geomID[i] != u32::MAX).then_some(rh.ray.tfar[i])
+        })
+    }
+
+    /// One `rtcOccluded8` over up to [`PACKET`] rays, without exclusion: per lane, whether the
+    /// ray is blocked.
+    ///
+    /// # Panics
+    /// If `rays` holds more than [`PACKET`] rays.
+    pub fn raw_occluded8(&self, rays: &[RawRay]) -> [bool; PACKET] {
+        let (mut ray, valid) = packet(rays);
+        let mut ctx = unfiltered();
+        self.scene.occluded8(&mut ctx, &mut ray, &valid.0);
+        // Embree marks a blocked lane by setting its tfar to -inf.
+        std::array::from_fn(|i| i < rays.len() && ray.tfar[i] == f32::NEG_INFINITY)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{HairOptions, ProceduralHair, SceneBuilder};
+    use tress_core::math::{Vec2, Vec3};
+    use tress_core::rng::Pcg32;
+    use tress_core::sampling::sample_uniform_sphere;
+    use tress_core::{Accel, HitKind};
+
+    fn ball() -> EmbreeAccel {
+        let hair = ProceduralHair {
+            style: crate::HairStyle::Ball,
+            strands: 300,
+            points_per_strand: 9,
+            radius: 0.01,
+            ..Default::default()
+        }
+        .generate()
+        .unwrap();
+        SceneBuilder::new()
+            .unwrap()
+            .add_hair(&hair, &HairOptions::default(), 0)
+            .unwrap()
+            .build()
+            .unwrap()
+    }
+
+    fn dir(rng: &mut Pcg32) -> Vec3 {
+        sample_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()))
+    }
+
+    /// Rays from outside toward the ball, and rays leaving the fibers they hit.
+    fn rays(accel: &EmbreeAccel) -> Vec<RawRay> {
+        let mut rng = Pcg32::new(3, 0);
+        let mut out = Vec::new();
+        for _ in 0..400 {
+            let o = 3.0 * dir(&mut rng);
+            let target = 0.8 * dir(&mut rng);
+            let ray = Ray::new(o, (target - o).normalize());
+            out.push(RawRay { ray, t_near: 0.0 });
+            if let Some(hit) = accel.intersect(&ray) {
+                assert!(matches!(hit.kind, HitKind::Fiber { .. }));
+                out.push(RawRay {
+                    ray: Ray::leaving(hit.p, dir(&mut rng), hit.prim),
+                    t_near: 0.0,
+                });
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn tress_exclusion_matches_accel_queries() {
+        let accel = ball();
+        let rays = rays(&accel);
+        let (mut leaving, mut hits) = (0, 0);
+        for q in &rays {
+            let expect = accel.intersect(&q.ray).map(|h| (h.prim, h.t));
+            assert_eq!(accel.raw_intersect(q, Exclusion::Tress), expect);
+            assert_eq!(
+                accel.raw_occluded(q, Exclusion::Tress),
+                accel.occluded(&q.ray)
+            );
+            leaving += usize::from(q.ray.exclude.is_some());
+            hits += usize::from(expect.is_some());
+        }
+        // The set exercises both kinds of ray and both outcomes.
+        assert!(
+            leaving > 100 && hits > 100 && hits < rays.len(),
+            "{leaving} {hits}"
+        );
+    }
+
+    #[test]
+    fn without_exclusion_the_excluded_primitive_is_ignored() {
+        let accel = ball();
+        let (mut differ, mut leaving) = (0, 0);
+        for r in rays(&accel) {
+            let free = RawRay {
+                ray: Ray {
+                    exclude: None,
+                    ..r.ray
+                },
+                ..r
+            };
+            let off = accel.raw_intersect(&r, Exclusion::Off);
+            assert_eq!(off, accel.raw_intersect(&free, Exclusion::Off));
+            assert_eq!(off, accel.raw_intersect(&free, Exclusion::Tress));
+            assert_eq!(
+                accel.raw_occluded(&r, Exclusion::Off),
+                accel.raw_occluded(&free, Exclusion::Tress)
+            );
+            leaving += usize::from(r.ray.exclude.is_some());
+            differ += usize::from(off != accel.raw_intersect(&r, Exclusion::Tress));
+        }
+        // Some rays leaving a fiber hit it (or its neighbours from inside) without the rule.
+        assert!(differ > 0 && differ < leaving, "{differ} of {leaving}");
+    }
+
+    #[test]
+    fn packets_match_single_rays() {
+        let accel = ball();
+        let rays = rays(&accel);
+        for chunk in rays.chunks(5).chain(rays.chunks(PACKET)) {
+            let hits = accel.raw_intersect8(chunk);
+            let blocked = accel.raw_occluded8(chunk);
+            for (i, r) in chunk.iter().enumerate() {
+                let single = accel.raw_intersect(r, Exclusion::Off).map(|(_, t)| t);
+                // The packet and single-ray kernels round differently.
+                let close = match (hits[i], single) {
+                    (Some(a), Some(b)) => (a - b).abs() <= 1e-5 * b,
+                    (a, b) => a == b,
+                };
+                assert!(close, "lane {i} of {r:?}: {:?} vs {single:?}", hits[i]);
+                assert_eq!(blocked[i], accel.raw_occluded(r, Exclusion::Off));
+            }
+            assert!(hits[chunk.len()..].iter().all(Option::is_none));
+            assert!(!blocked[chunk.len()..].iter().any(|&b| b));
+        }
+    }
+}
