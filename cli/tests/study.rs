@@ -373,15 +373,14 @@ fn exr_reference_and_mismatches() {
         dir.path(),
     );
     assert!(o.status.success(), "{}", stderr(&o));
-    let text = format!(
-        r#"(
+    let text = r#"(
     scenes: [File("ball.ron")],
     integrators: [Path()],
     spp: [1, 2],
     repetitions: 2,
-    reference: Exr("refs/{{scene}}.exr"),
+    reference: Exr("refs/{scene}.exr"),
 )"#
-    );
+    .to_string();
     write(dir.path(), "exr.ron", &text);
     let o = tress(&["study", "exr.ron", "--out", "o", "--quiet"], dir.path());
     assert!(o.status.success(), "{}", stderr(&o));
