@@ -622,7 +622,10 @@ fn concurrent_queries_match_serial_ones() {
 /// `occluded_by_surfaces` sees spheres and meshes through hair, and never hair itself.
 #[test]
 fn surface_occlusion_ignores_fibers() {
-    let fiber = hair(&[line(Vec3::new(-1.0, 0.0, 2.0), Vec3::new(1.0, 0.0, 2.0), 4)], 0.05);
+    let fiber = hair(
+        &[line(Vec3::new(-1.0, 0.0, 2.0), Vec3::new(1.0, 0.0, 2.0), 4)],
+        0.05,
+    );
     let accel = SceneBuilder::new()
         .unwrap()
         .add_hair(&fiber, &HairOptions::default(), 0)
@@ -642,6 +645,11 @@ fn surface_occlusion_ignores_fibers() {
     let miss = Ray::new(Vec3::new(0.0, 5.0, 5.0), -Vec3::Z);
     assert!(!accel.occluded(&miss) && !accel.occluded_by_surfaces(&miss));
     // Hair-only scenes answer without tracing.
-    let hair_only = SceneBuilder::new().unwrap().add_hair(&fiber, &HairOptions::default(), 0).unwrap().build().unwrap();
+    let hair_only = SceneBuilder::new()
+        .unwrap()
+        .add_hair(&fiber, &HairOptions::default(), 0)
+        .unwrap()
+        .build()
+        .unwrap();
     assert!(!hair_only.occluded_by_surfaces(&to_sphere));
 }

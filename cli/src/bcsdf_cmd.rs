@@ -250,12 +250,7 @@ type Profile = Vec<(f64, f64)>;
 
 /// Marginal profiles of `eval_lobe` (luminance): over θ_i (integrated over φ) and over φ
 /// (integrated over θ_i), each integrating to the lobe's albedo.
-fn lobe_profiles(
-    bcsdf: &dyn Bcsdf,
-    theta_o: f32,
-    hs: &[f32],
-    lobe: usize,
-) -> (Profile, Profile) {
+fn lobe_profiles(bcsdf: &dyn Bcsdf, theta_o: f32, hs: &[f32], lobe: usize) -> (Profile, Profile) {
     use std::f64::consts::PI;
     const N_THETA: usize = 180;
     const N_PHI: usize = 360;

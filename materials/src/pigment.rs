@@ -35,7 +35,10 @@ pub enum Pigment {
 impl Default for Pigment {
     /// pbrt's default: eumelanin 1.3 (brown).
     fn default() -> Self {
-        Pigment::Melanin { eumelanin: 1.3, pheomelanin: 0.0 }
+        Pigment::Melanin {
+            eumelanin: 1.3,
+            pheomelanin: 0.0,
+        }
     }
 }
 
@@ -46,12 +49,19 @@ impl Pigment {
             Pigment::SigmaA((r, g, b)) => {
                 for v in [r, g, b] {
                     if !(v.is_finite() && v >= 0.0) {
-                        return Err(ParamError::new("sigma_a", v, "must be finite and non-negative"));
+                        return Err(ParamError::new(
+                            "sigma_a",
+                            v,
+                            "must be finite and non-negative",
+                        ));
                     }
                 }
                 Ok(Rgb::new(r, g, b))
             }
-            Pigment::Melanin { eumelanin, pheomelanin } => {
+            Pigment::Melanin {
+                eumelanin,
+                pheomelanin,
+            } => {
                 for (field, v) in [("eumelanin", eumelanin), ("pheomelanin", pheomelanin)] {
                     if !(v.is_finite() && v >= 0.0) {
                         return Err(ParamError::new(field, v, "must be finite and non-negative"));
@@ -65,7 +75,11 @@ impl Pigment {
                 let mut out = [0.0; 3];
                 for (o, c) in out.iter_mut().zip([r, g, b]) {
                     if !(c.is_finite() && c > 0.0 && c <= 1.0) {
-                        return Err(ParamError::new("color", c, "each channel must lie in (0, 1]"));
+                        return Err(ParamError::new(
+                            "color",
+                            c,
+                            "each channel must lie in (0, 1]",
+                        ));
                     }
                     *o = sigma_a_from_reflectance(c, beta_n);
                 }
@@ -78,7 +92,9 @@ impl Pigment {
 /// Chiang et al. 2016 eq. 9: σ_a giving multiple-scattering colour `c` at azimuthal roughness β_n.
 pub fn sigma_a_from_reflectance(c: f32, beta_n: f32) -> f32 {
     let b = beta_n;
-    let denom = 5.969 - 0.215 * b + 2.532 * b * b - 10.73 * b.powi(3) + 5.574 * b.powi(4) + 0.245 * b.powi(5);
+    let denom = 5.969 - 0.215 * b + 2.532 * b * b - 10.73 * b.powi(3)
+        + 5.574 * b.powi(4)
+        + 0.245 * b.powi(5);
     let l = c.max(1e-4).ln() / denom;
     l * l
 }
@@ -89,8 +105,16 @@ mod tests {
 
     #[test]
     fn melanin_is_linear_in_concentrations() {
-        let s = Pigment::Melanin { eumelanin: 2.0, pheomelanin: 1.0 }.sigma_a(0.3).unwrap();
-        assert!((s - Rgb::new(2.0 * 0.419 + 0.187, 2.0 * 0.697 + 0.4, 2.0 * 1.37 + 1.05)).length() < 1e-6);
+        let s = Pigment::Melanin {
+            eumelanin: 2.0,
+            pheomelanin: 1.0,
+        }
+        .sigma_a(0.3)
+        .unwrap();
+        assert!(
+            (s - Rgb::new(2.0 * 0.419 + 0.187, 2.0 * 0.697 + 0.4, 2.0 * 1.37 + 1.05)).length()
+                < 1e-6
+        );
     }
 
     #[test]
@@ -104,7 +128,12 @@ mod tests {
     #[test]
     fn invalid_values_are_rejected() {
         assert!(Pigment::SigmaA((-1.0, 0.0, 0.0)).sigma_a(0.3).is_err());
-        assert!(Pigment::Melanin { eumelanin: f32::NAN, pheomelanin: 0.0 }.sigma_a(0.3).is_err());
+        assert!(Pigment::Melanin {
+            eumelanin: f32::NAN,
+            pheomelanin: 0.0
+        }
+        .sigma_a(0.3)
+        .is_err());
         assert!(Pigment::Color((0.0, 0.5, 0.5)).sigma_a(0.3).is_err());
     }
 }
