@@ -3,12 +3,14 @@
 mod bcsdf_cmd;
 mod bench;
 mod diff;
-mod geometry;
-mod integrators;
+mod farm;
+mod merge;
 mod plot;
 mod render_cmd;
 mod study;
-mod scene_desc;
+
+// The scene layer lives in the library target so that fuzz targets reach it too.
+use tress_cli::{integrators, ron_options, scene_desc};
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -40,6 +42,10 @@ enum Command {
     Diff(diff::DiffArgs),
     /// Performance against raw Embree in the same run: builds, memory, rays/s, scaling.
     Bench(bench::BenchArgs),
+    /// Assemble tiles and sample-range passes of one render into the full image, bit for bit.
+    Merge(merge::MergeArgs),
+    /// Print a render split into tiles x passes as shell commands for a render farm.
+    Farm(farm::FarmArgs),
 }
 
 fn main() {
@@ -64,14 +70,9 @@ fn run(cli: Cli) -> Result<()> {
         Command::Study(args) => study::run(args),
         Command::Diff(args) => diff::run(args),
         Command::Bench(args) => bench::run(args),
+        Command::Merge(args) => merge::run(args),
+        Command::Farm(args) => farm::run(args),
     }
-}
-
-/// RON options for everything tress parses: newtype variants may omit their inner parentheses,
-/// so `Chiang(beta_m: 0.3)` and `Path(max_depth: 8)` read naturally.
-pub fn ron_options() -> ron::Options {
-    ron::Options::default()
-        .with_default_extension(ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES)
 }
 
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so readers

@@ -1,13 +1,26 @@
 //! `tress render` and `tress info`.
+//!
+//! A render runs in waves of samples — cumulative 1, 2, 4, 8, … up to the requested spp — whose
+//! exact sums are appended (see `tress_core::render`), so the image does not depend on the waves.
+//! Between waves the render can stop at a time limit, write a partial image, or, after Ctrl-C,
+//! stop and write the samples finished so far.
 
 use crate::integrators::IntegratorDesc;
+use crate::merge::{self, Identity};
 use crate::scene_desc::{self, SceneDesc};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 use tress_core::image_io;
+use tress_core::render::{self, RenderStats, SampleSums};
+
+/// Exit status after Ctrl-C, as shells report a command ended by SIGINT.
+const INTERRUPTED_EXIT: i32 = 130;
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
@@ -19,6 +32,10 @@ pub struct RenderArgs {
     /// Samples per pixel; overrides the scene's film.spp.
     #[arg(long)]
     pub spp: Option<u32>,
+    /// Render sample indices N..N+spp of every pixel instead of 0..spp (same seed stream), so
+    /// that `tress merge` can add them to a render of 0..N exactly.
+    #[arg(long, default_value_t = 0)]
+    pub spp_offset: u64,
     /// Random seed; overrides the scene's film.seed.
     #[arg(long)]
     pub seed: Option<u64>,
@@ -33,15 +50,26 @@ pub struct RenderArgs {
     /// current directory.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Stop after the sample wave (1, 2, 4, … spp) that ends past this many seconds of
+    /// rendering; the outputs record the spp reached.
+    #[arg(long, value_parser = parse_seconds, allow_hyphen_values = true)]
+    pub time_limit: Option<f64>,
+    /// Also write the EXR and PNG after every wave, so the output always holds the samples
+    /// finished so far.
+    #[arg(long)]
+    pub partial: bool,
     /// Exposure of the PNG preview, in stops.
     #[arg(long, default_value_t = 0.0)]
     pub exposure: f32,
+    /// Do not write the PNG preview.
+    #[arg(long)]
+    pub no_preview: bool,
     /// No progress bar and no summary.
     #[arg(long)]
     pub quiet: bool,
 }
 
-fn parse_crop(s: &str) -> Result<[u32; 4], String> {
+pub fn parse_crop(s: &str) -> Result<[u32; 4], String> {
     let parts: Vec<&str> = s.split(',').collect();
     if parts.len() != 4 {
         return Err(format!("expected x0,y0,x1,y1, got '{s}'"));
@@ -54,6 +82,13 @@ fn parse_crop(s: &str) -> Result<[u32; 4], String> {
             .map_err(|_| format!("'{p}' is not a non-negative integer"))?;
     }
     Ok(out)
+}
+
+fn parse_seconds(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.0..1e9).contains(&v) => Ok(v),
+        _ => Err(format!("'{s}' is not a number of seconds >= 0")),
+    }
 }
 
 /// The scene file with command-line overrides applied.
@@ -74,7 +109,83 @@ fn load_with_overrides(args: &RenderArgs) -> Result<SceneDesc> {
     desc.film
         .validate()
         .map_err(|e| anyhow::anyhow!("{}: film: {e}", args.scene.display()))?;
+    if args.spp_offset.checked_add(desc.film.spp as u64).is_none() {
+        bail!(
+            "--spp-offset {} + {} spp exceeds the largest sample index",
+            args.spp_offset,
+            desc.film.spp
+        );
+    }
     Ok(desc)
+}
+
+/// Identifies the image a scene description renders, whatever its spp and crop: pieces with the
+/// same hash and seed can be merged. FNV-1a of the description's RON text, so the value is the
+/// same on every machine and build.
+fn scene_hash(desc: &SceneDesc) -> Result<String> {
+    let mut d = desc.clone();
+    d.film.spp = 1;
+    d.film.crop = None;
+    let text = ron::to_string(&d).context("describing the scene for its hash")?;
+    let hash = text.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    });
+    Ok(format!("{hash:016x}"))
+}
+
+/// Why the wave loop ended.
+#[derive(Clone, Copy, PartialEq, Debug)]
+enum Status {
+    Complete,
+    Partial,
+    TimeLimit,
+    Interrupted,
+}
+
+impl Status {
+    fn label(self) -> &'static str {
+        match self {
+            Status::Complete => "complete",
+            Status::Partial => "partial",
+            Status::TimeLimit => "time-limit",
+            Status::Interrupted => "interrupted",
+        }
+    }
+}
+
+/// What the outputs need besides the sums.
+struct Outputs<'a> {
+    args: &'a RenderArgs,
+    desc: &'a SceneDesc,
+    out: PathBuf,
+    identity: Identity,
+}
+
+impl Outputs<'_> {
+    fn write(&self, sums: &SampleSums, stats: &RenderStats, status: Status) -> Result<()> {
+        let integrator_ron = ron::to_string(&self.desc.integrator)
+            .unwrap_or_else(|_| self.desc.integrator.name().to_string());
+        let attributes = [
+            ("tress:scene", self.args.scene.display().to_string()),
+            ("tress:integrator", integrator_ron),
+            ("tress:spp_requested", self.desc.film.spp.to_string()),
+            ("tress:status", status.label().to_string()),
+            (
+                "tress:render_time_s",
+                format!("{:.3}", stats.wall.as_secs_f64()),
+            ),
+            ("tress:rays", stats.rays.to_string()),
+        ];
+        merge::write_render(&self.out, sums, &self.identity, &attributes)?;
+        if !self.args.no_preview {
+            image_io::write_png(
+                self.out.with_extension("png"),
+                &sums.image(),
+                self.args.exposure,
+            )?;
+        }
+        Ok(())
+    }
 }
 
 pub fn render(args: RenderArgs) -> Result<()> {
@@ -100,7 +211,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
     if verbose {
         eprintln!("{}", built.summary);
     }
-    let t_integrator = std::time::Instant::now();
+    let t_integrator = Instant::now();
     let integrator = desc.integrator.build(&built.scene).map_err(|e| {
         anyhow::anyhow!(
             "{}: integrator {}: {e:#}",
@@ -115,54 +226,124 @@ pub fn render(args: RenderArgs) -> Result<()> {
             t_integrator.elapsed().as_secs_f64()
         );
     }
-    let [x0, y0, x1, y1] = desc.film.window();
-    let total = (x1 - x0) as u64 * (y1 - y0) as u64 * desc.film.spp as u64;
-    let bar = progress_bar(total, verbose);
-    let progress = |n: u64| bar.inc(n);
-    let output = pool.install(|| {
-        tress_core::render::render(&built.scene, integrator.as_ref(), &desc.film, &progress)
-    });
-    bar.finish_and_clear();
-
-    let stats = &output.stats;
-    let integrator_ron =
-        ron::to_string(&desc.integrator).unwrap_or_else(|_| desc.integrator.name().to_string());
-    let attributes = [
-        ("tress:scene", args.scene.display().to_string()),
-        ("tress:integrator", integrator_ron),
-        ("tress:spp", desc.film.spp.to_string()),
-        ("tress:seed", desc.film.seed.to_string()),
-        (
-            "tress:render_time_s",
-            format!("{:.3}", stats.wall.as_secs_f64()),
-        ),
-        ("tress:rays", stats.rays.to_string()),
-    ];
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("creating output folder {}", dir.display()))?;
     }
-    image_io::write_exr(&out, &output.image, &attributes)?;
-    let png = out.with_extension("png");
-    image_io::write_png(&png, &output.image, args.exposure)?;
-    if verbose {
+    let outputs = Outputs {
+        args: &args,
+        desc: &desc,
+        out: out.clone(),
+        identity: Identity {
+            seed: desc.film.seed,
+            scene_hash: scene_hash(&desc)?,
+        },
+    };
+
+    // Ctrl-C: the first stops the render at the next pixel and writes what is finished; a second
+    // one quits at once.
+    let cancel = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&cancel);
+    ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            eprintln!("interrupted again: quitting without writing");
+            std::process::exit(INTERRUPTED_EXIT);
+        }
         eprintln!(
-            "rendered {}x{} at {} spp with {} in {:.2} s: {:.3} Msamples/s, {:.3} Mrays/s",
+            "interrupt: stopping and writing the samples finished so far (Ctrl-C again to quit \
+             at once)"
+        );
+    })
+    .context("installing the Ctrl-C handler")?;
+
+    let [x0, y0, x1, y1] = desc.film.window();
+    let target = desc.film.spp as u64;
+    let first = args.spp_offset;
+    let bar = progress_bar((x1 - x0) as u64 * (y1 - y0) as u64 * target, verbose);
+    let progress = |n: u64| bar.inc(n);
+    let limit = args.time_limit.map(Duration::from_secs_f64);
+    let start = Instant::now();
+    let mut done = SampleSums::empty(desc.film.window(), desc.film.width, desc.film.height, first);
+    let mut stats = RenderStats::default();
+    let mut reached = 0u64;
+    let mut status = Status::Complete;
+    while reached < target {
+        let next = (2 * reached).clamp(1, target);
+        let wave = pool.install(|| {
+            render::render_samples(
+                &built.scene,
+                integrator.as_ref(),
+                &desc.film,
+                first + reached..first + next,
+                &cancel,
+                &progress,
+            )
+        });
+        let Some(wave) = wave else {
+            status = Status::Interrupted;
+            break;
+        };
+        done.append(&wave.sums).map_err(anyhow::Error::msg)?;
+        stats.add(&wave.stats);
+        reached = next;
+        if reached < target {
+            if limit.is_some_and(|l| start.elapsed() >= l) {
+                status = Status::TimeLimit;
+                break;
+            }
+            if args.partial {
+                outputs.write(&done, &stats, Status::Partial)?;
+            }
+        }
+    }
+    bar.finish_and_clear();
+
+    if reached == 0 {
+        eprintln!(
+            "interrupted before the first sample of every pixel was finished: nothing written"
+        );
+        std::process::exit(INTERRUPTED_EXIT);
+    }
+    outputs.write(&done, &stats, status)?;
+    let png = out.with_extension("png");
+    let wrote = if args.no_preview {
+        out.display().to_string()
+    } else {
+        format!("{} and {}", out.display(), png.display())
+    };
+    let spp_text = match status {
+        Status::Complete => format!("{reached} spp"),
+        Status::TimeLimit => format!(
+            "{reached} of {target} spp (time limit of {} s reached)",
+            args.time_limit.unwrap_or_default()
+        ),
+        _ => format!("{reached} of {target} spp (interrupted)"),
+    };
+    if verbose || status == Status::Interrupted {
+        let range = if first > 0 {
+            format!(" (samples {first}..{})", first + reached)
+        } else {
+            String::new()
+        };
+        eprintln!(
+            "rendered {}x{} at {spp_text}{range} with {} in {:.2} s: {:.3} Msamples/s, {:.3} Mrays/s",
             x1 - x0,
             y1 - y0,
-            desc.film.spp,
             desc.integrator.name(),
             stats.wall.as_secs_f64(),
             stats.samples_per_second() / 1e6,
             stats.rays_per_second() / 1e6
         );
-        eprintln!("wrote {} and {}", out.display(), png.display());
+        eprintln!("wrote {wrote}");
     }
     if stats.nonfinite_samples > 0 {
         eprintln!(
             "warning: {} samples were NaN or infinite and were dropped",
             stats.nonfinite_samples
         );
+    }
+    if status == Status::Interrupted {
+        std::process::exit(INTERRUPTED_EXIT);
     }
     Ok(())
 }

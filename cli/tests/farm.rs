@@ -1,0 +1,296 @@
+//! Farm rendering: the job lines of `tress farm`, run as separate processes, merge into the
+//! single full render bit for bit; `tress merge` refuses pieces that do not belong together.
+
+mod common;
+
+use common::*;
+use std::path::Path;
+use std::process::Command;
+
+/// Runs every line of `jobs` as its own shell process, all at once, and waits for them.
+fn run_lines(jobs: &str, cwd: &Path) {
+    let children: Vec<_> = jobs
+        .lines()
+        .map(|line| {
+            Command::new("sh")
+                .args(["-c", line])
+                .current_dir(cwd)
+                .spawn()
+                .unwrap()
+        })
+        .collect();
+    for mut c in children {
+        assert!(c.wait().unwrap().success());
+    }
+}
+
+fn farm(args: &[&str], cwd: &Path) -> String {
+    let mut a = vec!["farm", "scene.ron"];
+    a.extend_from_slice(args);
+    let o = tress(&a, cwd);
+    assert!(o.status.success(), "{}", stderr(&o));
+    String::from_utf8(o.stdout).unwrap()
+}
+
+#[test]
+fn tiles_times_passes_merge_into_the_full_render() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    let o = tress(&["render", "scene.ron", "--out", "full.exr", "--quiet"], d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let full = pixels(&d.join("full.exr"));
+    for (tiles, passes) in [(3, 2), (1, 4), (5, 1), (2, 6)] {
+        let (t, p) = (tiles.to_string(), passes.to_string());
+        let out = format!("farm{tiles}x{passes}");
+        let args = ["--tiles", t.as_str(), "--passes", p.as_str(), "--out", &out];
+        let jobs = farm(&args, d);
+        assert_eq!(jobs.lines().count(), tiles * passes, "{jobs}");
+        run_lines(&jobs, d);
+        let mut merge_args = args.to_vec();
+        merge_args.push("--merge");
+        let merge = farm(&merge_args, d);
+        assert_eq!(merge.lines().count(), 1, "{merge}");
+        run_lines(&merge, d);
+        let merged = d.join(&out).join("scene.exr");
+        assert_eq!(pixels(&merged), full, "{tiles} tiles x {passes} passes");
+        assert_eq!(
+            attribute(&merged, "tress:merged_from"),
+            Some((tiles * passes).to_string())
+        );
+        assert_eq!(
+            files_in(&d.join(&out)).len(),
+            tiles * passes + 2,
+            "pieces + merged EXR and PNG, no temporary files"
+        );
+    }
+    // A scene with a crop window: the tiles split the window, the merge covers just that.
+    std::fs::write(
+        d.join("scene.ron"),
+        SCENE.replace("seed: 3)", "seed: 3, crop: Some(2, 3, 20, 17))"),
+    )
+    .unwrap();
+    let o = tress(&["render", "scene.ron", "--out", "crop.exr", "--quiet"], d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let args = ["--tiles", "4", "--passes", "3", "--out", "cropfarm"];
+    run_lines(&farm(&args, d), d);
+    run_lines(&farm(&[&args[..], &["--merge"]].concat(), d), d);
+    let merged = pixels(&d.join("cropfarm/scene.exr"));
+    assert_eq!(merged.data_window, ([2, 3], [18, 14]));
+    assert_eq!(merged, pixels(&d.join("crop.exr")));
+    // Overrides reach every job; the default folder is named after the scene.
+    let jobs = farm(
+        &[
+            "--tiles",
+            "2",
+            "--spp",
+            "4",
+            "--seed",
+            "11",
+            "--integrator",
+            "Path(max_depth: 3)",
+        ],
+        d,
+    );
+    assert!(jobs.lines().all(|l| l.contains("--seed 11")
+        && l.contains("--integrator 'Path(max_depth: 3)'")
+        && l.contains("--spp 4")
+        && l.contains("scene-farm/")));
+}
+
+#[test]
+fn bad_farm_requests_are_refused() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    for (args, expect) in [
+        (vec!["--tiles", "0"], "--tiles 0"),
+        (vec!["--tiles", "21"], "--tiles 21"),
+        (vec!["--passes", "7"], "--passes 7"),
+        (vec!["--passes", "0"], "--passes 0"),
+        (vec!["--spp", "0"], "spp must be at least 1"),
+        (vec!["--integrator", "bogus"], "bogus"),
+    ] {
+        let mut a = vec!["farm", "scene.ron"];
+        a.extend_from_slice(&args);
+        let o = tress(&a, d);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(stderr(&o).contains(expect), "{args:?}: {}", stderr(&o));
+        assert!(o.stdout.is_empty(), "{args:?}: printed jobs");
+    }
+    let o = tress(&["farm", "nowhere.ron"], d);
+    assert!(!o.status.success() && stderr(&o).contains("nowhere.ron"));
+}
+
+/// Renders `scene.ron` in `d` with extra arguments to `out`.
+fn render(d: &Path, out: &str, extra: &[&str]) {
+    let mut a = vec![
+        "render",
+        "scene.ron",
+        "--out",
+        out,
+        "--no-preview",
+        "--quiet",
+    ];
+    a.extend_from_slice(extra);
+    let o = tress(&a, d);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
+fn incompatible_pieces_are_refused_with_clear_errors() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    render(d, "top.exr", &["--crop", "0,0,24,10", "--spp", "4"]);
+    render(d, "bottom.exr", &["--crop", "0,10,24,20", "--spp", "4"]);
+    render(
+        d,
+        "more_top.exr",
+        &["--crop", "0,0,24,10", "--spp-offset", "4", "--spp", "4"],
+    );
+    render(
+        d,
+        "late_bottom.exr",
+        &["--crop", "0,10,24,20", "--spp-offset", "6", "--spp", "2"],
+    );
+    render(d, "middle.exr", &["--crop", "0,5,24,15", "--spp", "4"]);
+    render(
+        d,
+        "top_seed.exr",
+        &["--crop", "0,0,24,10", "--spp", "4", "--seed", "4"],
+    );
+    render(
+        d,
+        "top_overlap.exr",
+        &["--crop", "0,0,24,10", "--spp-offset", "2", "--spp", "4"],
+    );
+    render(
+        d,
+        "top_other.exr",
+        &[
+            "--crop",
+            "0,0,24,10",
+            "--spp",
+            "4",
+            "--integrator",
+            "Path(max_depth: 2)",
+        ],
+    );
+    std::fs::write(
+        d.join("big.ron"),
+        SCENE.replace("width: 24, height: 20", "width: 24, height: 30"),
+    )
+    .unwrap();
+    let o = tress(
+        &[
+            "render",
+            "big.ron",
+            "--crop",
+            "0,10,24,20",
+            "--spp",
+            "4",
+            "--out",
+            "big.exr",
+            "--quiet",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut plain = tress_core::Image::new(24, 20);
+    plain
+        .pixels
+        .iter_mut()
+        .for_each(|p| *p = tress_core::Rgb::ONE);
+    tress_core::image_io::write_exr(d.join("plain.exr"), &plain, &[]).unwrap();
+    std::fs::write(d.join("junk.exr"), b"not an exr").unwrap();
+    // A piece whose pixel values were changed after rendering.
+    {
+        use exr::prelude::*;
+        let mut img = read_first_flat_layer_from_file(d.join("top.exr")).unwrap();
+        for c in img.layer_data.channel_data.list.iter_mut() {
+            if c.name.to_string() == "G" {
+                if let FlatSamples::F32(v) = &mut c.sample_data {
+                    v[7] += 1.0;
+                }
+            }
+        }
+        img.write().to_file(d.join("edited.exr")).unwrap();
+    }
+
+    let refuse = |pieces: &[&str], extra: &[&str], expect: &[&str]| {
+        let mut a = vec!["merge", "out.exr"];
+        a.extend_from_slice(pieces);
+        a.extend_from_slice(extra);
+        let o = tress(&a, d);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{pieces:?}: {err}");
+        for e in expect {
+            assert!(err.contains(e), "{pieces:?}: message lacks '{e}': {err}");
+        }
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(!d.join("out.exr").exists() && !d.join("out.png").exists());
+    };
+    refuse(
+        &["top.exr", "top_seed.exr"],
+        &[],
+        &["top_seed.exr", "seed differs (3 vs 4)"],
+    );
+    refuse(
+        &["top.exr", "top_other.exr"],
+        &[],
+        &["top_other.exr", "scene"],
+    );
+    refuse(
+        &["top.exr", "big.exr"],
+        &[],
+        &["big.exr", "film size differs (24x20 vs 24x30)"],
+    );
+    refuse(
+        &["top.exr", "bottom.exr", "top_overlap.exr"],
+        &[],
+        &["top_overlap.exr", "overlap"],
+    );
+    refuse(
+        &["top.exr", "middle.exr", "bottom.exr"],
+        &[],
+        &["middle.exr", "tiles overlap"],
+    );
+    refuse(
+        &["top.exr", "more_top.exr"],
+        &["--crop", "0,0,24,20"],
+        &["no piece covers pixel (0, 10)", "a tile is missing"],
+    );
+    refuse(
+        &["top.exr", "bottom.exr", "more_top.exr"],
+        &[],
+        &["pixel (0, 10) with samples [4, 8)", "a tile is missing"],
+    );
+    refuse(
+        &["top.exr", "bottom.exr", "late_bottom.exr"],
+        &[],
+        &["samples [4, 6) are missing"],
+    );
+    refuse(
+        &["top.exr", "bottom.exr"],
+        &["--expect-spp", "8"],
+        &["4 per pixel, but 8 were expected"],
+    );
+    refuse(
+        &["top.exr", "plain.exr"],
+        &[],
+        &["plain.exr", "no sample sums"],
+    );
+    refuse(&["top.exr", "junk.exr"], &[], &["junk.exr", "OpenEXR"]);
+    refuse(
+        &["top.exr", "absent.exr"],
+        &[],
+        &["absent.exr", "not found"],
+    );
+    refuse(
+        &["edited.exr", "bottom.exr"],
+        &[],
+        &["edited.exr", "pixel (7, 0)", "modified"],
+    );
+    let o = tress(&["merge", "out.png", "top.exr"], d);
+    assert!(!o.status.success() && stderr(&o).contains("out.png"));
+    let o = tress(&["merge", "out.exr"], d);
+    assert!(!o.status.success(), "merging nothing must fail");
+}

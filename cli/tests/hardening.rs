@@ -1,0 +1,754 @@
+//! Hardening of the `tress` binary: every bad input fails with a message that names the file and
+//! the problem and leaves no output behind; long renders stop at a time limit or on Ctrl-C with
+//! a valid image of the samples finished; waves, partial images and sample-range passes do not
+//! change the image by a single bit.
+
+mod common;
+
+use common::*;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// Runs `tress args` in `dir` and checks that it fails cleanly: exit status 1, the message holds
+/// every string of `expect`, no panic, and no file was added to `dir`.
+fn assert_fails_in(dir: &Path, args: &[&str], expect: &[&str]) {
+    let before = files_in(dir);
+    let o = tress(args, dir);
+    let err = stderr(&o);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{args:?}: expected failure: {err}"
+    );
+    for e in expect {
+        assert!(err.contains(e), "{args:?}: message lacks '{e}': {err}");
+    }
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(files_in(dir), before, "{args:?}: output left behind");
+}
+
+/// A scene whose only hair object is `source`, rendered and inspected: both must fail.
+fn assert_bad_hair(dir: &Path, source: &str, expect: &[&str]) {
+    let text = SCENE.replace(
+        "Procedural(style: Ball, strands: 300, radius: 0.01)",
+        source,
+    );
+    std::fs::write(dir.join("scene.ron"), text).unwrap();
+    let mut e = expect.to_vec();
+    e.push("scene.ron");
+    assert_fails_in(
+        dir,
+        &["render", "scene.ron", "--out", "o.exr", "--quiet"],
+        &e,
+    );
+    assert_fails_in(dir, &["info", "scene.ron"], &e);
+}
+
+fn write_hair(
+    magic: &[u8; 4],
+    strands: u32,
+    points: &[[f32; 3]],
+    segments: Option<&[u16]>,
+    thickness: Option<&[f32]>,
+    default_thickness: f32,
+) -> Vec<u8> {
+    let flags = 2 | u32::from(segments.is_some()) | if thickness.is_some() { 4 } else { 0 };
+    let mut b = magic.to_vec();
+    for v in [strands, points.len() as u32, flags, 2] {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    for v in [default_thickness, 0.5, 0.1, 0.2, 0.3] {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    b.resize(128, 0);
+    for s in segments.unwrap_or(&[]) {
+        b.extend_from_slice(&s.to_le_bytes());
+    }
+    for v in points.iter().flatten().chain(thickness.unwrap_or(&[])) {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    b
+}
+
+fn nine_points() -> Vec<[f32; 3]> {
+    (0..9)
+        .map(|i| [0.1 * i as f32, 0.05 * i as f32, 0.02])
+        .collect()
+}
+
+#[test]
+fn bad_hair_files_give_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let segs: &[u16] = &[1, 3, 2];
+    let good = write_hair(
+        b"HAIR",
+        3,
+        &nine_points(),
+        Some(segs),
+        Some(&[0.01; 9]),
+        0.01,
+    );
+    let cases: Vec<(&str, Vec<u8>, &[&str])> = vec![
+        ("header.hair", good[..50].to_vec(), &["truncated header"]),
+        (
+            "arrays.hair",
+            good[..good.len() - 20].to_vec(),
+            &["truncated"],
+        ),
+        ("empty.hair", Vec::new(), &["truncated header"]),
+        (
+            "magic.hair",
+            write_hair(b"RIAH", 3, &nine_points(), Some(segs), None, 0.01),
+            &["not a HAIR file"],
+        ),
+        (
+            "nostrands.hair",
+            write_hair(b"HAIR", 0, &[], None, None, 0.01),
+            &["no strands"],
+        ),
+        (
+            "nan.hair",
+            {
+                let mut p = nine_points();
+                p[4][1] = f32::NAN;
+                write_hair(b"HAIR", 3, &p, Some(segs), None, 0.01)
+            },
+            &["non-finite"],
+        ),
+        (
+            "inf.hair",
+            {
+                let mut p = nine_points();
+                p[8][2] = f32::NEG_INFINITY;
+                write_hair(b"HAIR", 3, &p, Some(segs), None, 0.01)
+            },
+            &["non-finite"],
+        ),
+        (
+            "negative.hair",
+            {
+                let mut t = [0.01f32; 9];
+                t[5] = -0.01;
+                write_hair(b"HAIR", 3, &nine_points(), Some(segs), Some(&t), 0.01)
+            },
+            &["radius", "positive"],
+        ),
+        (
+            "zero.hair",
+            write_hair(b"HAIR", 3, &nine_points(), Some(segs), None, 0.0),
+            &["radius 0"],
+        ),
+        (
+            "nan_radius.hair",
+            write_hair(b"HAIR", 3, &nine_points(), Some(segs), None, f32::NAN),
+            &["radius NaN"],
+        ),
+    ];
+    for (name, bytes, expect) in cases {
+        std::fs::write(d.join(name), bytes).unwrap();
+        let mut e = expect.to_vec();
+        e.push(name);
+        assert_bad_hair(d, &format!("File(\"{name}\")"), &e);
+        std::fs::remove_file(d.join(name)).unwrap();
+    }
+    // Header counts far beyond the file: refused from the header, before allocating.
+    for (at, expect) in [(4, "strands but only"), (8, "truncated")] {
+        let mut huge = good.clone();
+        huge[at..at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+        std::fs::write(d.join("huge.hair"), huge).unwrap();
+        assert_bad_hair(d, "File(\"huge.hair\")", &["huge.hair", expect]);
+    }
+    // Segment counts that disagree with the points.
+    let bad_segments = write_hair(b"HAIR", 3, &nine_points(), Some(&[1, 3, 9]), None, 0.01);
+    std::fs::write(d.join("segs.hair"), bad_segments).unwrap();
+    assert_bad_hair(d, "File(\"segs.hair\")", &["segs.hair", "header says 9"]);
+    std::fs::remove_file(d.join("segs.hair")).unwrap();
+    // A missing file and a folder in place of a file.
+    assert_bad_hair(d, "File(\"absent.hair\")", &["absent.hair"]);
+    std::fs::create_dir(d.join("folder.hair")).unwrap();
+    assert_bad_hair(d, "File(\"folder.hair\")", &["folder.hair"]);
+    std::fs::write(d.join("model.obj"), "").unwrap();
+    assert_bad_hair(d, "File(\"model.obj\")", &["model.obj", "extension"]);
+}
+
+fn write_tfx(version: f32, strands: u32, per: u32, thickness: Option<&[f32]>) -> Vec<u8> {
+    let mut b = vec![0u8; 160];
+    b[0..4].copy_from_slice(&version.to_le_bytes());
+    b[4..8].copy_from_slice(&strands.to_le_bytes());
+    b[8..12].copy_from_slice(&per.to_le_bytes());
+    b[12..16].copy_from_slice(&160u32.to_le_bytes());
+    for i in 0..strands * per {
+        for v in [0.1 * i as f32, 0.05 * (i % per) as f32, 0.0, 1.0] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    if let Some(t) = thickness {
+        let at = b.len() as u32;
+        b[24..28].copy_from_slice(&at.to_le_bytes());
+        t.iter().for_each(|v| b.extend_from_slice(&v.to_le_bytes()));
+    }
+    b
+}
+
+#[test]
+fn bad_tressfx_files_give_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let good = write_tfx(4.0, 2, 4, Some(&[1.0, 0.5]));
+    let set = |b: &[u8], at: usize, v: [u8; 4]| {
+        let mut b = b.to_vec();
+        b[at..at + 4].copy_from_slice(&v);
+        b
+    };
+    let cases: Vec<(&str, Vec<u8>, &[&str])> = vec![
+        ("header.tfx", good[..100].to_vec(), &["truncated header"]),
+        (
+            "positions.tfx",
+            write_tfx(4.0, 2, 4, None)[..200].to_vec(),
+            &["truncated", "vertex positions"],
+        ),
+        (
+            "version.tfx",
+            set(&good, 0, f32::NAN.to_le_bytes()),
+            &["not a TressFX file"],
+        ),
+        (
+            "negative_version.tfx",
+            set(&good, 0, (-3.0f32).to_le_bytes()),
+            &["not a TressFX file"],
+        ),
+        (
+            "strands.tfx",
+            set(&good, 4, u32::MAX.to_le_bytes()),
+            &["vertices"],
+        ),
+        (
+            "per_strand.tfx",
+            set(&good, 8, u32::MAX.to_le_bytes()),
+            &["vertices"],
+        ),
+        (
+            "offset.tfx",
+            set(&good, 12, u32::MAX.to_le_bytes()),
+            &["do not fit"],
+        ),
+        (
+            "no_positions.tfx",
+            set(&good, 12, [0; 4]),
+            &["no vertex positions"],
+        ),
+        ("nostrands.tfx", write_tfx(4.0, 0, 4, None), &["no strands"]),
+        (
+            "nan.tfx",
+            set(&good, 160 + 16 * 3 + 4, f32::NAN.to_le_bytes()),
+            &["non-finite"],
+        ),
+        (
+            "inf.tfx",
+            set(&good, 160 + 16 * 6, f32::INFINITY.to_le_bytes()),
+            &["non-finite"],
+        ),
+        (
+            "zero_thickness.tfx",
+            write_tfx(4.0, 2, 4, Some(&[1.0, 0.0])),
+            &["radius 0"],
+        ),
+        (
+            "negative_thickness.tfx",
+            write_tfx(4.0, 2, 4, Some(&[-1.0, 1.0])),
+            &["radius", "positive"],
+        ),
+    ];
+    for (name, bytes, expect) in cases {
+        std::fs::write(d.join(name), bytes).unwrap();
+        let mut e = expect.to_vec();
+        e.push(name);
+        assert_bad_hair(d, &format!("File(\"{name}\")"), &e);
+        std::fs::remove_file(d.join(name)).unwrap();
+    }
+    std::fs::write(d.join("good.tfx"), &good).unwrap();
+    assert_bad_hair(
+        d,
+        "Tfx(path: \"good.tfx\", radius: -0.01)",
+        &["good.tfx", "radius"],
+    );
+    assert_bad_hair(
+        d,
+        "Tfx(path: \"good.tfx\", radius: 0)",
+        &["good.tfx", "radius"],
+    );
+}
+
+/// A scene edit that must fail with a message holding `expect`.
+fn assert_bad_scene(text: &str, expect: &[&str]) {
+    let (dir, _) = scene_dir(text);
+    let mut e = expect.to_vec();
+    e.push("scene.ron");
+    assert_fails_in(
+        dir.path(),
+        &["render", "scene.ron", "--out", "o.exr", "--quiet"],
+        &e,
+    );
+}
+
+#[test]
+fn bad_scenes_give_clear_errors() {
+    let edit = |from: &str, to: &str| {
+        assert!(SCENE.contains(from), "{from}");
+        SCENE.replace(from, to)
+    };
+    // Syntax and types (beyond cli.rs): unknown variants, unterminated text, a bad crop shape.
+    assert_bad_scene(&edit("Path(max_depth: 20)", "Bogus()"), &["Bogus"]);
+    assert_bad_scene(&edit("Sky()", "Moon()"), &["Moon"]);
+    assert_bad_scene(&SCENE[..SCENE.len() / 2], &["scene.ron:"]);
+    assert_bad_scene("", &["scene.ron:1:"]);
+    assert_bad_scene(&edit("seed: 3", "seed: 3, crop: Some(1, 2)"), &["crop"]);
+    assert_bad_scene(&edit("spp: 6", "spp: 4.5"), &["spp"]);
+    assert_bad_scene(&edit("width: 24", "width: 99999999999"), &["width"]);
+    // Out-of-range values.
+    assert_bad_scene(&edit("height: 20", "height: 0"), &["film", "empty"]);
+    assert_bad_scene(&edit("width: 24", "width: 70000"), &["film", "exceeds"]);
+    assert_bad_scene(&edit("spp: 6", "spp: 0"), &["spp must be at least 1"]);
+    assert_bad_scene(
+        &edit("seed: 3", "seed: 3, crop: Some(0, 0, 30, 10)"),
+        &["crop window"],
+    );
+    assert_bad_scene(&edit("fov: 35", "fov: 0"), &["fov"]);
+    assert_bad_scene(&edit("fov: 35", "fov: -20"), &["fov"]);
+    assert_bad_scene(
+        &edit("fov: 35", "fov: 35, lens_radius: -1"),
+        &["lens_radius"],
+    );
+    assert_bad_scene(
+        &edit("look_at: (0, 0, 0)", "look_at: (0, 0, 4)"),
+        &["look_at"],
+    );
+    assert_bad_scene(&edit("beta_n: 0.3", "beta_n: -0.1"), &["beta_n"]);
+    assert_bad_scene(
+        &edit(
+            "Chiang(beta_m: 0.3, beta_n: 0.3, pigment: Melanin(eumelanin: 1.0))",
+            "DEon(longitudinal_roughness: 1.5)",
+        ),
+        &["longitudinal_roughness"],
+    );
+    assert_bad_scene(
+        &edit("Melanin(eumelanin: 1.0)", "Melanin(eumelanin: -1.0)"),
+        &["eumelanin"],
+    );
+    assert_bad_scene(
+        &edit("Melanin(eumelanin: 1.0)", "SigmaA(0.2, -0.1, 0.3)"),
+        &["sigma_a"],
+    );
+    assert_bad_scene(
+        &edit("albedo: (0.5, 0.5, 0.5)", "albedo: (0.5, -0.5, 0.5)"),
+        &["albedo"],
+    );
+    assert_bad_scene(
+        &edit("albedo: (0.5, 0.5, 0.5)", "albedo: (1.5, 0.5, 0.5)"),
+        &["albedo"],
+    );
+    assert_bad_scene(&edit("radius: 1,", "radius: -1,"), &["radius"]);
+    assert_bad_scene(
+        &edit("angular_radius: 0.5", "angular_radius: 95"),
+        &["angular_radius"],
+    );
+    assert_bad_scene(
+        &edit("irradiance: (2, 2, 2)", "irradiance: (2, -2, 2)"),
+        &["irradiance"],
+    );
+    assert_bad_scene(&edit("Sky()", "Sky(scale: -1)"), &["scale"]);
+    assert_bad_scene(
+        &edit("Sky()", "Constant(radiance: (1, 1, -1))"),
+        &["radiance"],
+    );
+    assert_bad_scene(&edit("strands: 300", "strands: 0"), &["strands"]);
+    assert_bad_scene(
+        &edit(
+            "material: \"hair\")",
+            "material: \"hair\", options: (strand_fraction: 0))",
+        ),
+        &["strand_fraction"],
+    );
+    // Missing referenced files.
+    assert_bad_scene(
+        &edit(
+            "Sphere(center: (0, -2, 0), radius: 1, material: \"grey\")",
+            "Mesh(file: \"head.obj\", material: \"grey\")",
+        ),
+        &["head.obj"],
+    );
+}
+
+/// Writes an RGB EXR of `w`×`h` (ZIP compression) for the environment-map cases.
+fn write_env_exr(path: &Path, w: u32, h: u32) {
+    let mut img = tress_core::Image::new(w, h);
+    img.pixels
+        .iter_mut()
+        .for_each(|p| *p = tress_core::Rgb::splat(0.5));
+    tress_core::image_io::write_exr(path, &img, &[]).unwrap();
+}
+
+#[test]
+fn unreadable_and_unsupported_images_give_clear_errors() {
+    let env = |file: &str| SCENE.replace("Sky()", &format!("Environment(file: \"{file}\")"));
+    let (dir, _) = scene_dir(&env("map.exr"));
+    let d = dir.path();
+    let render = ["render", "scene.ron", "--out", "o.exr", "--quiet"];
+    // An EXR compression the decoder does not support (HTJ2K): named, with a remedy. A ZIP
+    // file of one 16-line block is relabelled, which keeps its chunk table valid.
+    write_env_exr(&d.join("map.exr"), 16, 16);
+    let mut bytes = std::fs::read(d.join("map.exr")).unwrap();
+    let key = b"compression\0compression\0\x01\0\0\0";
+    let at = bytes.windows(key.len()).position(|w| w == key).unwrap() + key.len();
+    assert_eq!(bytes[at], 3, "expected ZIP compression");
+    bytes[at] = 11;
+    std::fs::write(d.join("map.exr"), &bytes).unwrap();
+    assert_fails_in(d, &render, &["map.exr", "HTJ2K32", "re-save"]);
+    // Truncated and garbage images.
+    write_env_exr(&d.join("map.exr"), 64, 64);
+    let bytes = std::fs::read(d.join("map.exr")).unwrap();
+    std::fs::write(d.join("map.exr"), &bytes[..bytes.len() / 2]).unwrap();
+    assert_fails_in(d, &render, &["map.exr", "corrupt or truncated"]);
+    std::fs::write(d.join("map.exr"), b"definitely not an image").unwrap();
+    assert_fails_in(d, &render, &["map.exr", "OpenEXR"]);
+    std::fs::remove_file(d.join("map.exr")).unwrap();
+    // A folder where an image should be, an unsupported format, a truncated HDR.
+    std::fs::write(d.join("scene.ron"), env("maps")).unwrap();
+    std::fs::create_dir(d.join("maps")).unwrap();
+    assert_fails_in(d, &render, &["maps", "unsupported image format"]);
+    std::fs::write(d.join("scene.ron"), env("folder.hdr")).unwrap();
+    std::fs::create_dir(d.join("folder.hdr")).unwrap();
+    assert_fails_in(d, &render, &["folder.hdr"]);
+    std::fs::write(d.join("scene.ron"), env("sky.hdr")).unwrap();
+    std::fs::write(
+        d.join("sky.hdr"),
+        b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 64 +X 64\n\x02\x02\x00",
+    )
+    .unwrap();
+    assert_fails_in(d, &render, &["sky.hdr", "Radiance HDR"]);
+    // The scene file itself: not UTF-8, a folder.
+    std::fs::write(d.join("scene.ron"), [0xff, 0xfe, 0x00, 0x28]).unwrap();
+    assert_fails_in(d, &render, &["scene.ron"]);
+    std::fs::remove_file(d.join("scene.ron")).unwrap();
+    std::fs::create_dir(d.join("scene.ron")).unwrap();
+    assert_fails_in(d, &render, &["scene.ron"]);
+}
+
+#[test]
+fn bad_arguments_give_clear_errors() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    let run = |extra: &[&str], expect: &[&str]| {
+        let mut args = vec!["render", "scene.ron", "--out", "o.exr", "--quiet"];
+        args.extend_from_slice(extra);
+        let before = files_in(d);
+        let o = tress(&args, d);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{extra:?}: expected failure");
+        assert!(!err.contains("panicked"), "{err}");
+        for e in expect {
+            assert!(err.contains(e), "{extra:?}: message lacks '{e}': {err}");
+        }
+        assert_eq!(files_in(d), before, "{extra:?}: output left behind");
+    };
+    run(&["--spp", "0"], &["scene.ron", "spp must be at least 1"]);
+    run(&["--spp", "-3"], &["'-3'"]);
+    run(
+        &["--spp-offset", "18446744073709551615"],
+        &["--spp-offset", "exceeds"],
+    );
+    run(&["--time-limit", "-1"], &["--time-limit", "seconds"]);
+    run(&["--time-limit", "NaN"], &["--time-limit", "seconds"]);
+    run(&["--crop", "5,5,5,9"], &["scene.ron", "crop window"]);
+    run(&["--crop", "1,2,3"], &["--crop", "x0,y0,x1,y1"]);
+    run(&["--integrator", "Path(max_depth: -1)"], &["max_depth"]);
+    let o = tress(&["render", "scene.ron", "--out", "o.png", "--quiet"], d);
+    assert!(
+        !o.status.success() && stderr(&o).contains("o.png"),
+        "{}",
+        stderr(&o)
+    );
+    // An output folder that cannot be created.
+    std::fs::write(d.join("file"), "").unwrap();
+    let o = tress(
+        &["render", "scene.ron", "--out", "file/o.exr", "--quiet"],
+        d,
+    );
+    assert!(
+        !o.status.success() && stderr(&o).contains("file"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(files_in(d), ["file", "scene.ron"]);
+}
+
+#[test]
+fn time_limit_stops_after_the_wave_that_crosses_it() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    let o = tress(
+        &[
+            "render",
+            "scene.ron",
+            "--spp",
+            "64",
+            "--time-limit",
+            "0",
+            "--out",
+            "limited.exr",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(err.contains("1 of 64 spp (time limit"), "{err}");
+    let path = d.join("limited.exr");
+    assert_eq!(attribute(&path, "tress:spp").as_deref(), Some("1"));
+    assert_eq!(
+        attribute(&path, "tress:spp_requested").as_deref(),
+        Some("64")
+    );
+    assert_eq!(
+        attribute(&path, "tress:status").as_deref(),
+        Some("time-limit")
+    );
+    // The image is exactly the one-sample render.
+    let o = tress(
+        &[
+            "render",
+            "scene.ron",
+            "--spp",
+            "1",
+            "--out",
+            "one.exr",
+            "--quiet",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(pixels(&path), pixels(&d.join("one.exr")));
+    // A generous limit changes nothing.
+    let o = tress(
+        &[
+            "render",
+            "scene.ron",
+            "--time-limit",
+            "600",
+            "--out",
+            "all.exr",
+            "--quiet",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        attribute(&d.join("all.exr"), "tress:status").as_deref(),
+        Some("complete")
+    );
+    assert_eq!(
+        attribute(&d.join("all.exr"), "tress:spp").as_deref(),
+        Some("6")
+    );
+}
+
+#[test]
+fn waves_and_partial_images_do_not_change_the_image() {
+    let (dir, scene) = scene_dir(SCENE);
+    let d = dir.path();
+    for (out, extra) in [("plain.exr", None), ("partial.exr", Some("--partial"))] {
+        let mut args = vec![
+            "render",
+            "scene.ron",
+            "--spp",
+            "13",
+            "--out",
+            out,
+            "--quiet",
+        ];
+        args.extend(extra);
+        let o = tress(&args, d);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let plain = pixels(&d.join("plain.exr"));
+    assert_eq!(plain, pixels(&d.join("partial.exr")));
+    assert_eq!(
+        files_in(d),
+        [
+            "partial.exr",
+            "partial.png",
+            "plain.exr",
+            "plain.png",
+            "scene.ron"
+        ]
+    );
+    // The binary renders in waves (1, 2, 4, 8, 13 samples); the library call renders all 13 in
+    // one pass. Same bits.
+    let mut desc = tress_cli::scene_desc::load(&scene).unwrap();
+    desc.film.spp = 13;
+    let built = tress_cli::scene_desc::build(&desc, &scene).unwrap();
+    let integrator = desc.integrator.build(&built.scene).unwrap();
+    let once = tress_core::render::render(&built.scene, integrator.as_ref(), &desc.film, &|_| {});
+    let (waves, _) = tress_core::image_io::read_exr(d.join("plain.exr")).unwrap();
+    assert!(once.image.mean() > 0.0);
+    assert_eq!(waves.pixels.len(), once.image.pixels.len());
+    for (a, b) in waves.pixels.iter().zip(&once.image.pixels) {
+        assert_eq!(
+            a.to_array().map(f32::to_bits),
+            b.to_array().map(f32::to_bits)
+        );
+    }
+    // The PNG preview can be left out.
+    let o = tress(
+        &[
+            "render",
+            "scene.ron",
+            "--out",
+            "bare.exr",
+            "--no-preview",
+            "--quiet",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(d.join("bare.exr").exists() && !d.join("bare.png").exists());
+}
+
+#[test]
+fn sample_range_passes_merge_into_the_single_render() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    let render = |out: &str, offset: &str, spp: &str| {
+        let o = tress(
+            &[
+                "render",
+                "scene.ron",
+                "--spp-offset",
+                offset,
+                "--spp",
+                spp,
+                "--out",
+                out,
+                "--quiet",
+            ],
+            d,
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+    };
+    render("whole.exr", "0", "12");
+    render("a.exr", "0", "5");
+    render("b.exr", "5", "2");
+    render("c.exr", "7", "5");
+    assert_eq!(
+        attribute(&d.join("c.exr"), "tress:spp_offset").as_deref(),
+        Some("7")
+    );
+    // Any order of arguments; merging a merge works too.
+    let merge = |args: &[&str]| {
+        let mut a = vec!["merge"];
+        a.extend_from_slice(args);
+        a.push("--quiet");
+        let o = tress(&a, d);
+        assert!(o.status.success(), "{}", stderr(&o));
+    };
+    merge(&["m1.exr", "c.exr", "a.exr", "b.exr"]);
+    merge(&["ab.exr", "a.exr", "b.exr"]);
+    merge(&["m2.exr", "ab.exr", "c.exr", "--expect-spp", "12"]);
+    let whole = pixels(&d.join("whole.exr"));
+    assert_eq!(
+        whole.channels.len(),
+        3 + 6 * 2,
+        "12 samples = blocks [0, 8) and [8, 12)"
+    );
+    assert_eq!(pixels(&d.join("m1.exr")), whole);
+    assert_eq!(pixels(&d.join("m2.exr")), whole);
+    assert_eq!(
+        attribute(&d.join("m2.exr"), "tress:spp").as_deref(),
+        Some("12")
+    );
+    // Samples 5..7 alone differ from 0..2: the offset really moves the seed stream.
+    render("first2.exr", "0", "2");
+    assert_ne!(
+        pixels(&d.join("b.exr")).channels,
+        pixels(&d.join("first2.exr")).channels
+    );
+}
+
+/// Sends SIGINT to a render in progress: it stops promptly, writes the image of the waves it
+/// finished, says so, and exits with status 130.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_writes_the_finished_samples_and_exits_cleanly() {
+    use std::process::{Command, Stdio};
+    let (dir, _) = scene_dir(&SCENE.replace("width: 24, height: 20", "width: 8, height: 8"));
+    let d = dir.path();
+    let out = d.join("slow.exr");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tress"))
+        .args([
+            "render",
+            "scene.ron",
+            "--spp",
+            "1000000000",
+            "--partial",
+            "--quiet",
+        ])
+        .args(["--out", "slow.exr", "--threads", "2"])
+        .current_dir(d)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The first partial image appears after the first wave.
+    let t0 = Instant::now();
+    while !out.exists() {
+        assert!(t0.elapsed() < Duration::from_secs(60), "no partial image");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let sent = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(sent.elapsed() < Duration::from_secs(20), "did not stop");
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    assert_eq!(status.code(), Some(130), "{err}");
+    assert!(
+        err.contains("interrupted") && err.contains("wrote slow.exr"),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(
+        attribute(&out, "tress:status").as_deref(),
+        Some("interrupted")
+    );
+    let spp = attribute(&out, "tress:spp").unwrap();
+    let n: u64 = spp.parse().unwrap();
+    assert!(n.is_power_of_two() && n < 1_000_000_000, "{spp}");
+    assert_eq!(
+        files_in(d),
+        ["scene.ron", "slow.exr", "slow.png"],
+        "temporary files left"
+    );
+    // What was written is exactly the render of the samples it reports.
+    let o = tress(
+        &[
+            "render",
+            "scene.ron",
+            "--spp",
+            &spp,
+            "--out",
+            "same.exr",
+            "--quiet",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(pixels(&out), pixels(&d.join("same.exr")));
+}
