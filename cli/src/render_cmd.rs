@@ -259,7 +259,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
     let [x0, y0, x1, y1] = desc.film.window();
     let target = desc.film.spp as u64;
     let first = args.spp_offset;
-    let bar = progress_bar((x1 - x0) as u64 * (y1 - y0) as u64 * target, verbose);
+    let bar = progress_bar((x1 - x0) as u64 * (y1 - y0) as u64 * target, verbose, "");
     let progress = |n: u64| bar.inc(n);
     let limit = args.time_limit.map(Duration::from_secs_f64);
     let start = Instant::now();
@@ -372,15 +372,17 @@ fn scene_stem(path: &Path) -> String {
         .unwrap_or_else(|| "render".into())
 }
 
-fn progress_bar(total: u64, verbose: bool) -> ProgressBar {
+/// A progress bar with ETA on stderr, labelled `label`; hidden when `verbose` is off or stderr is
+/// not a terminal.
+pub(crate) fn progress_bar(total: u64, verbose: bool, label: &str) -> ProgressBar {
     if !verbose || !std::io::stderr().is_terminal() {
         return ProgressBar::hidden();
     }
     let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
     bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {wide_bar} {percent}% ETA {eta}",
-        )
+        ProgressStyle::with_template(&format!(
+            "{{spinner}} {label}[{{elapsed_precise}}] {{wide_bar}} {{percent}}% ETA {{eta}}"
+        ))
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     bar

@@ -1930,20 +1930,6 @@ struct SceneOutputs {
     sheets: Vec<String>,
 }
 
-fn progress_bar(total: u64, verbose: bool) -> ProgressBar {
-    if !verbose || !std::io::stderr().is_terminal() {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} study [{elapsed_precise}] {wide_bar} {percent}% ETA {eta}",
-        )
-        .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    bar
-}
-
 pub fn run(args: StudyArgs) -> Result<()> {
     let study = load(&args.study)?;
     let plan = Plan::new(study, &args)?;
@@ -1954,7 +1940,7 @@ pub fn run(args: StudyArgs) -> Result<()> {
         .num_threads(args.threads.unwrap_or(0))
         .build()
         .context("creating the thread pool")?;
-    let bar = progress_bar(plan.total_samples(), verbose);
+    let bar = crate::render_cmd::progress_bar(plan.total_samples(), verbose, "study ");
     let res = execute(&plan, &pool, &bar, verbose);
     bar.finish_and_clear();
     let res = res?;

@@ -1,19 +1,8 @@
 //! The `tress` binary end to end: rendering, outputs, and clear errors for bad input.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn tress(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tress"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("run tress")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use common::{scene_dir, stderr, tress};
 
 const GOOD_SCENE: &str = r#"(
     camera: (look_from: (0, 0, 4), look_at: (0, 0, 0), fov: 35),
@@ -29,13 +18,6 @@ const GOOD_SCENE: &str = r#"(
     ],
     lights: [Sky(), Distant(direction: (0, -1, -1), irradiance: (2, 2, 2), angular_radius: 0.5)],
 )"#;
-
-fn scene_dir(text: &str) -> (tempfile::TempDir, PathBuf) {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("scene.ron");
-    std::fs::write(&path, text).unwrap();
-    (dir, path)
-}
 
 #[test]
 fn renders_exr_and_png_with_metadata() {

@@ -1,5 +1,8 @@
-//! Helpers shared by the hardening and farm tests: running the binary, small scenes, and reading
+//! Helpers shared by the cli, hardening and farm tests: running the binary, small scenes, and reading
 //! every channel of an EXR bit for bit.
+
+// Each test crate that includes this module uses only some of its helpers.
+#![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
