@@ -19,6 +19,7 @@
 //! Absolute figures follow the machine and its load; the ratios compare figures taken minutes
 //! apart in one process. Rows carrying a target of the performance issue say whether it is met.
 
+use crate::cost::{timed, Cost};
 use crate::integrators::IntegratorDesc;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
@@ -989,58 +990,6 @@ fn queries(pool: &ThreadPool) -> [u64; 4] {
     pool.broadcast(|_| QUERIES.with(Cell::get))
         .into_iter()
         .fold([0; 4], |a, b| std::array::from_fn(|i| a[i] + b[i]))
-}
-
-/// Wall time, and where the kernel's scheduler statistics are available, the CPU time of all
-/// the process's threads and the time they were runnable but waiting for a core (other
-/// processes' load), in seconds.
-#[derive(Clone, Copy, Debug)]
-struct Cost {
-    wall: f64,
-    cpu: Option<f64>,
-    wait: Option<f64>,
-}
-
-impl Cost {
-    /// Share of the runnable time spent waiting for a core.
-    fn waiting(&self) -> Option<f64> {
-        let (cpu, wait) = (self.cpu?, self.wait?);
-        (cpu + wait > 0.0).then(|| wait / (cpu + wait))
-    }
-}
-
-/// Run and wait nanoseconds summed over the process's threads (/proc/self/task/*/schedstat).
-fn schedstat() -> Option<(u64, u64)> {
-    let (mut run, mut wait) = (0, 0);
-    for task in std::fs::read_dir("/proc/self/task").ok()? {
-        let text = std::fs::read_to_string(task.ok()?.path().join("schedstat")).ok()?;
-        let mut fields = text.split_whitespace().map(str::parse::<u64>);
-        run += fields.next()?.ok()?;
-        wait += fields.next()?.ok()?;
-    }
-    Some((run, wait))
-}
-
-fn timed<R>(f: impl FnOnce() -> R) -> (R, Cost) {
-    let before = schedstat();
-    let start = Instant::now();
-    let r = f();
-    let wall = start.elapsed().as_secs_f64();
-    let after = schedstat();
-    let delta = before.zip(after).map(|(b, a)| {
-        (
-            a.0.saturating_sub(b.0) as f64 * 1e-9,
-            a.1.saturating_sub(b.1) as f64 * 1e-9,
-        )
-    });
-    (
-        r,
-        Cost {
-            wall,
-            cpu: delta.map(|d| d.0),
-            wait: delta.map(|d| d.1),
-        },
-    )
 }
 
 /// "hit 59.0%, 1.234 M/CPU-s, 12% waiting"-style note of a raw measurement.

@@ -2,6 +2,7 @@
 
 mod bcsdf_cmd;
 mod bench;
+mod cost;
 mod diff;
 mod farm;
 mod merge;

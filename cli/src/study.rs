@@ -26,11 +26,12 @@
 //! ```
 //!
 //! Every render is an EXR (plus a PNG preview) under `renders/<scene>/`, carrying its settings
-//! hash, render time and ray count as header attributes, so a rerun reads finished renders back
+//! hash, render time (CPU and wall) and ray count as header attributes, so a rerun reads finished renders back
 //! instead of redoing them. The seed of a render is a hash of the base seed, the scene name,
 //! the integrator settings, spp and repetition; references hash a different tag, so they are
 //! independent of every test render.
 
+use crate::cost::timed;
 use crate::diff::{self, Rect, REL_EPSILON};
 use crate::integrators::IntegratorDesc;
 use crate::plot::{self, Chart, HeatPanel, Picture, Series};
@@ -615,7 +616,11 @@ struct Job<'a> {
 
 struct Rendered {
     image: Image,
+    /// The render's cost: CPU seconds of the render threads (wall seconds where the kernel
+    /// does not report CPU time), so that other load on the machine does not skew equal-time
+    /// comparisons.
     time_s: f64,
+    wall_s: f64,
     rays: u64,
 }
 
@@ -690,12 +695,15 @@ impl SceneRunner<'_> {
         {
             return Cached::Stale("wrong size".into());
         }
-        let time_s = attribute(&attrs, "tress:render_time_s").and_then(|v| v.parse().ok());
+        let number = |key| attribute(&attrs, key).and_then(|v| v.parse().ok());
+        let time_s = number("tress:render_cpu_s");
+        let wall_s = number("tress:render_time_s");
         let rays = attribute(&attrs, "tress:rays").and_then(|v| v.parse().ok());
-        match (time_s, rays) {
-            (Some(time_s), Some(rays)) => Cached::Hit(Rendered {
+        match (time_s, wall_s, rays) {
+            (Some(time_s), Some(wall_s), Some(rays)) => Cached::Hit(Rendered {
                 image,
                 time_s,
+                wall_s,
                 rays,
             }),
             _ => Cached::Stale("no render time or ray count".into()),
@@ -753,8 +761,10 @@ impl SceneRunner<'_> {
         };
         let bar = self.bar;
         let progress = |n: u64| bar.inc(n);
-        let output = pool.install(|| {
-            tress_core::render::render(&built.scene, integrator.as_ref(), &film, &progress)
+        let (output, cost) = timed(|| {
+            pool.install(|| {
+                tress_core::render::render(&built.scene, integrator.as_ref(), &film, &progress)
+            })
         });
         let stats = &output.stats;
         if stats.nonfinite_samples > 0 {
@@ -767,13 +777,15 @@ impl SceneRunner<'_> {
                 ),
             );
         }
-        let time_s = stats.wall.as_secs_f64();
+        let wall_s = stats.wall.as_secs_f64();
+        let time_s = cost.cpu.unwrap_or(wall_s);
         let attributes = [
             ("tress:scene", scene.source.clone()),
             ("tress:integrator", job.integrator.ron.clone()),
             ("tress:spp", job.spp.to_string()),
             ("tress:seed", job.seed.to_string()),
-            ("tress:render_time_s", time_s.to_string()),
+            ("tress:render_time_s", wall_s.to_string()),
+            ("tress:render_cpu_s", time_s.to_string()),
             ("tress:rays", stats.rays.to_string()),
             ("tress:study_key", key),
         ];
@@ -788,6 +800,7 @@ impl SceneRunner<'_> {
         Ok(Rendered {
             image: output.image,
             time_s,
+            wall_s,
             rays: stats.rays,
         })
     }
@@ -839,6 +852,7 @@ struct Row {
     rep: u32,
     seed: u64,
     time_s: f64,
+    wall_s: f64,
     rays: u64,
     reference: RefKind,
     whole: Errors,
@@ -1054,6 +1068,7 @@ fn execute(
                             rep,
                             seed,
                             time_s: r.time_s,
+                            wall_s: r.wall_s,
                             rays: r.rays,
                             reference: kind,
                             whole,
@@ -1339,7 +1354,7 @@ fn verdict(points: &[Point], noise: Option<f64>) -> String {
 
 fn write_csv(plan: &Plan, res: &Results) -> Result<PathBuf> {
     let mut s = String::from(
-        "scene,integrator,spp,rep,seed,time_s,rays,reference,mse,relmse,mean,ref_mean",
+        "scene,integrator,spp,rep,seed,cpu_s,wall_s,rays,reference,mse,relmse,mean,ref_mean",
     );
     for r in &plan.region_names {
         let _ = write!(s, ",{r}_mse,{r}_relmse,{r}_mean");
@@ -1349,13 +1364,14 @@ fn write_csv(plan: &Plan, res: &Results) -> Result<PathBuf> {
         let e = &r.whole;
         let _ = write!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
             plan.scenes[r.scene].name,
             plan.integrators[r.integrator].label,
             r.spp,
             r.rep,
             r.seed,
             r.time_s,
+            r.wall_s,
             r.rays,
             r.reference.name(),
             e.mse,
@@ -1469,8 +1485,8 @@ fn write_plots(plan: &Plan, res: &Results, si: usize) -> Result<Vec<String>> {
                 Some("1/N"),
             ),
             chart(
-                format!("{name}: relMSE vs time"),
-                "render time (s)",
+                format!("{name}: relMSE vs CPU time"),
+                "render CPU time (s)",
                 "relMSE",
                 series_of(plan, &common, time_x, |p| p.relmse.mean),
                 Some("1/t"),
@@ -1523,8 +1539,8 @@ fn write_plots(plan: &Plan, res: &Results, si: usize) -> Result<Vec<String>> {
                     Some("1/N"),
                 ),
                 chart(
-                    format!("{name}/{region}: relMSE vs time"),
-                    "render time (s)",
+                    format!("{name}/{region}: relMSE vs CPU time"),
+                    "render CPU time (s)",
                     "relMSE",
                     series_of(plan, &c, time_x, |p| p.relmse.mean),
                     Some("1/t"),
@@ -1641,7 +1657,7 @@ fn error_table(s: &mut String, plan: &Plan, curves: &[Vec<Point>]) {
             "MSE (± 95 % CI)",
             "relMSE (± 95 % CI)",
             "bias² (est.)",
-            "time (s)",
+            "CPU time (s)",
             "MSE·spp",
             "efficiency 1/(relMSE·s)",
         ],
@@ -1668,7 +1684,7 @@ fn error_table(s: &mut String, plan: &Plan, curves: &[Vec<Point>]) {
 /// `summary.csv`: the report's numbers per (scene, integrator, spp, reference).
 fn write_summary(plan: &Plan, res: &Results) -> Result<PathBuf> {
     let mut s = String::from(
-        "scene,integrator,spp,reference,repetitions,mse,mse_ci95,relmse,relmse_ci95,bias2,time_s,mse_x_spp,efficiency\n",
+        "scene,integrator,spp,reference,repetitions,mse,mse_ci95,relmse,relmse_ci95,bias2,cpu_s,mse_x_spp,efficiency\n",
     );
     let kinds: &[RefKind] = if plan.own_spp.is_some() {
         &[RefKind::Common, RefKind::Own]
@@ -1759,7 +1775,9 @@ fn write_report(plan: &Plan, res: &Results, figures: &[SceneOutputs]) -> Result<
          interval (Student t). bias² (est.) = (K·MSE(mean of the K repetitions) − mean MSE)/(K − 1), \
          the squared bias averaged over pixels and channels (unbiased; it includes the \
          reference's own error, and is noisy when the samples are heavy-tailed). Efficiency = \
-         1 / (relMSE · render time). MSE·spp is constant \
+         1 / (relMSE · render time). Render time is the CPU time of the render threads \
+         (summed over threads; wall time is in `results.csv`), so other load on the machine \
+         does not tilt the equal-time comparisons. MSE·spp is constant \
          for an unbiased estimator converging as 1/N; a rising tail is an error floor (bias \
          against the reference, or the reference's own noise, estimated below when possible). \
          Ratios are X / `{}` (below 1: X has less error). Equal-time ratios interpolate each \
@@ -1816,7 +1834,7 @@ fn write_report(plan: &Plan, res: &Results, figures: &[SceneOutputs]) -> Result<
                 "\n### MSE ratio at equal time (X / `{}`)\n",
                 plan.integrators[0].label
             );
-            let mut cols = vec!["time (s)"];
+            let mut cols = vec!["CPU time (s)"];
             cols.extend(&others);
             table_header(&mut s, &cols);
             for b in base {
@@ -1836,7 +1854,7 @@ fn write_report(plan: &Plan, res: &Results, figures: &[SceneOutputs]) -> Result<
         }
 
         let _ = writeln!(s, "### Time to relMSE = {:.1e}\n", plan.target_relmse);
-        table_header(&mut s, &["integrator", "spp", "time (s)"]);
+        table_header(&mut s, &["integrator", "spp", "CPU time (s)"]);
         for (i, c) in plan.integrators.iter().zip(&common) {
             let _ = match reach(c, plan.target_relmse) {
                 Reach::AtOnce(spp, t) => writeln!(s, "| {} | ≤ {spp} | ≤ {t:.4} |", i.label),

@@ -127,7 +127,8 @@ fn study_end_to_end_resumable_and_deterministic() {
         "spp",
         "rep",
         "seed",
-        "time_s",
+        "cpu_s",
+        "wall_s",
         "rays",
         "reference",
     ] {
@@ -233,8 +234,9 @@ fn study_end_to_end_resumable_and_deterministic() {
     // The renders carry their cost, and a rerun reads every one back without rendering.
     let renders = out.join("renders/ball");
     let (_, attrs) = image_io::read_exr(renders.join("path-1_00004spp_rep02.exr")).unwrap();
-    assert!(attrs.iter().any(|(k, _)| k == "tress:render_time_s"));
-    assert!(attrs.iter().any(|(k, _)| k == "tress:rays"));
+    for key in ["tress:render_time_s", "tress:render_cpu_s", "tress:rays"] {
+        assert!(attrs.iter().any(|(k, _)| k == key), "{key} missing");
+    }
     let before = modified_times(&renders);
     let o = tress(&["study", "s.ron", "--out", "a"], dir.path());
     assert!(o.status.success(), "{}", stderr(&o));
@@ -252,12 +254,14 @@ fn study_end_to_end_resumable_and_deterministic() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(renders.join("path-2_00016spp_rep01.exr").exists());
     let (_, rows_again) = read_csv(&out.join("results.csv"));
-    let ct = column(&header, "time_s");
+    let timings = [column(&header, "cpu_s"), column(&header, "wall_s")];
     let strip = |rows: &[Vec<String>]| -> Vec<Vec<String>> {
         rows.iter()
             .map(|r| {
                 let mut r = r.clone();
-                r[ct].clear();
+                for c in timings {
+                    r[c].clear();
+                }
                 r
             })
             .collect()
