@@ -100,10 +100,12 @@ use crate::curves::CurveBasis;
 use crate::error::{Error, Result};
 use crate::scene::{CurveData, EmbreeAccel};
 use glam::{UVec3, Vec4};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::HashSet;
 use std::f32::consts::FRAC_PI_4;
 use std::fmt;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use tress_core::accel::FiberDensity;
 use tress_core::math::{Aabb, Ray, Vec3};
@@ -444,7 +446,7 @@ impl DensityGrid {
             let longest = bounds.extent().max_element() as f64;
             let finest = (longest / (AUTO_MIN_DIAMETERS * diameter)).floor();
             let finest = finest.clamp(1.0, MAX_RESOLUTION as f64) as u32;
-            auto_resolution(bounds, total_length, finest, &for_each)
+            auto_resolution(bounds, total_length, finest, &curves)
         });
         let lattice = Lattice::new(bounds, resolution);
         let top_dims = lattice.dims.map(|n| (n + BRICK_MASK) >> BRICK_SHIFT);
@@ -707,23 +709,17 @@ impl OwnStrand {
     }
 }
 
-/// Calls a visitor with every piece (end points, radius in w) of the grid's fibers.
-type ForEachPiece<'a> = dyn Fn(&mut dyn FnMut(Vec4, Vec4)) + 'a;
-
 /// The automatic resolution, at most `finest` (see the module docs).
-fn auto_resolution(bounds: Aabb, total_length: f64, finest: u32, for_each: &ForEachPiece) -> u32 {
+fn auto_resolution(
+    bounds: Aabb,
+    total_length: f64,
+    finest: u32,
+    curves: &[(u32, &Arc<CurveData>)],
+) -> u32 {
     // Mean fiber length per occupied voxel, in voxel sides.
     let fill = |resolution: u32| -> f64 {
         let lattice = Lattice::new(bounds, resolution);
-        let mut occupied = HashSet::new();
-        for_each(&mut |a, b| {
-            if let Some((t, len)) = piece_line(a, b) {
-                lattice.traverse(a.truncate(), t, 0.0, len, |c, _, _| {
-                    occupied.insert(lattice.linear(c));
-                });
-            }
-        });
-        total_length / (occupied.len().max(1) as f64 * lattice.h as f64)
+        total_length / (occupied_voxels(&lattice, curves).max(1) as f64 * lattice.h as f64)
     };
     let mut resolution = finest.min(8);
     let mut prev = fill(resolution);
@@ -742,6 +738,63 @@ fn auto_resolution(bounds: Aabb, total_length: f64, finest: u32, for_each: &ForE
         (resolution, prev) = (next_resolution, next);
     }
     finest
+}
+
+/// Lattices of at most this many voxels count occupancy in a bitmap (≤ 32 MiB).
+const DENSE_OCCUPANCY_LIMIT: u64 = 1 << 28;
+
+/// Primitives per parallel task of the occupancy count.
+const OCCUPANCY_CHUNK: usize = 2048;
+
+/// The number of voxels of `lattice` some fiber piece passes through. Counted in parallel (in
+/// the caller's rayon pool) in a bitmap when the lattice is small enough, else serially in a
+/// hash set; a set's size either way, so it does not depend on the thread count.
+fn occupied_voxels(lattice: &Lattice, curves: &[(u32, &Arc<CurveData>)]) -> usize {
+    let visit = |c: &CurveData, prim: usize, mark: &mut dyn FnMut(u32)| {
+        for_each_piece(c, prim, |a, b| {
+            if let Some((t, len)) = piece_line(a, b) {
+                lattice.traverse(a.truncate(), t, 0.0, len, |v, _, _| mark(lattice.linear(v)));
+            }
+        });
+    };
+    let voxels: u64 = lattice.dims.iter().map(|&n| n as u64).product();
+    if voxels > DENSE_OCCUPANCY_LIMIT {
+        let mut occupied = HashSet::new();
+        for (_, c) in curves {
+            for prim in 0..c.segments() {
+                visit(c, prim, &mut |v| {
+                    occupied.insert(v);
+                });
+            }
+        }
+        return occupied.len();
+    }
+    let words: Vec<AtomicU64> = (0..voxels.div_ceil(64))
+        .map(|_| AtomicU64::new(0))
+        .collect();
+    let tasks: Vec<(&CurveData, usize)> = curves
+        .iter()
+        .flat_map(|(_, c)| {
+            (0..c.segments())
+                .step_by(OCCUPANCY_CHUNK)
+                .map(move |start| (c.as_ref(), start))
+        })
+        .collect();
+    tasks.par_iter().for_each(|&(c, start)| {
+        for prim in start..(start + OCCUPANCY_CHUNK).min(c.segments()) {
+            visit(c, prim, &mut |v| {
+                let (word, bit) = (&words[v as usize / 64], 1u64 << (v % 64));
+                // Most visits find the bit set already: read before the atomic write.
+                if word.load(Ordering::Relaxed) & bit == 0 {
+                    word.fetch_or(bit, Ordering::Relaxed);
+                }
+            });
+        }
+    });
+    words
+        .iter()
+        .map(|w| w.load(Ordering::Relaxed).count_ones() as usize)
+        .sum()
 }
 
 /// The direction record of a voxel with cross-section density `sigma` and normalised
@@ -1269,6 +1322,67 @@ mod tests {
             assert!(
                 (mlg / mlc - 1.0).abs() < 0.08,
                 "leaving: grid {mlg} vs count {mlc}"
+            );
+        }
+    }
+
+    /// The automatic resolution counts occupied voxels in parallel: the grid (resolution and
+    /// every count) must not depend on the number of threads, and the parallel bitmap count
+    /// must equal the serial hash-set count.
+    #[test]
+    fn the_grid_does_not_depend_on_the_thread_count() {
+        let g = ProceduralHair {
+            style: HairStyle::Ball,
+            seed: 5,
+            strands: 2000,
+            points_per_strand: 12,
+            radius: 0.004,
+            length: 2.0,
+            center: Vec3::ZERO,
+            sphere_radius: 1.0,
+        }
+        .generate()
+        .unwrap();
+        let accel = accel(&g);
+        let pool = |n| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .unwrap()
+        };
+        let one = pool(1).install(|| grid(&accel, None, true));
+        let four = pool(4).install(|| grid(&accel, None, true));
+        assert_eq!(one.info(), four.info());
+        let mut rng = Pcg32::new(3, 3);
+        for _ in 0..300 {
+            let d = rng_dir(&mut rng);
+            let r = Ray::new(0.9 * rng_dir(&mut rng) - 3.0 * d, d);
+            assert_eq!(
+                one.fibers_crossed(&r).to_bits(),
+                four.fibers_crossed(&r).to_bits()
+            );
+        }
+
+        let curves: Vec<(u32, &Arc<CurveData>)> = accel.hair_curves().collect();
+        let bounds = accel.info().bounds;
+        for resolution in [8, 40, 100] {
+            let lattice = Lattice::new(bounds, resolution);
+            let mut serial = HashSet::new();
+            for (_, c) in &curves {
+                for prim in 0..c.segments() {
+                    for_each_piece(c, prim, |a, b| {
+                        if let Some((t, len)) = piece_line(a, b) {
+                            lattice.traverse(a.truncate(), t, 0.0, len, |v, _, _| {
+                                serial.insert(lattice.linear(v));
+                            });
+                        }
+                    });
+                }
+            }
+            assert_eq!(
+                occupied_voxels(&lattice, &curves),
+                serial.len(),
+                "{resolution}"
             );
         }
     }

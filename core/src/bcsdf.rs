@@ -41,6 +41,12 @@ pub trait Bcsdf: Send + Sync + Debug {
     /// The solid-angle density with which [`Bcsdf::sample`] produces `wi`.
     fn pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> f32;
 
+    /// `(eval, pdf)` in one call, for next-event estimation with MIS, which needs both. Models
+    /// whose two share per-hit work (angles, Fresnel, attenuations, lobe terms) override it.
+    fn eval_pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> (Rgb, f32) {
+        (self.eval(wo, wi, h), self.pdf(wo, wi, h))
+    }
+
     /// Names of the lobes `eval` is a sum of (e.g. R, TT, TRT, residual), for plots and the
     /// per-lobe dual-scattering tables. A model without a decomposition is one lobe.
     fn lobe_names(&self) -> &'static [&'static str] {

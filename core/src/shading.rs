@@ -98,6 +98,16 @@ impl<'a> ShadingPoint<'a> {
         }
     }
 
+    /// `(eval(wi), pdf(wi))` at once: cheaper than the two calls for models that share work.
+    pub fn eval_pdf(&self, wi: Vec3) -> (Rgb, f32) {
+        match self.scattering {
+            Scattering::Fiber { bcsdf, frame, h } => {
+                bcsdf.eval_pdf(frame.to_local(self.wo), frame.to_local(wi), h)
+            }
+            _ => (self.eval(wi), self.pdf(wi)),
+        }
+    }
+
     /// Importance-samples an incident direction.
     pub fn sample(&self, u: [f32; 4]) -> Option<ScatterSample> {
         match self.scattering {

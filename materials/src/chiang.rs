@@ -230,7 +230,7 @@ impl Chiang {
     }
 
     /// (eval, pdf) at `wi`: the two sums share every M_p and N_p.
-    fn eval_pdf(&self, g: &Geometry, wi: Vec3) -> (Rgb, f32) {
+    fn eval_pdf_at(&self, g: &Geometry, wi: Vec3) -> (Rgb, f32) {
         let (sin_i, cos_i, phi) = self.angles_i(g, wi);
         let mut f = Rgb::ZERO;
         let mut pdf = 0.0;
@@ -280,7 +280,7 @@ impl Chiang {
 
 impl Bcsdf for Chiang {
     fn eval(&self, wo: Vec3, wi: Vec3, h: f32) -> Rgb {
-        self.eval_pdf(&self.geometry(wo, h), wi).0
+        self.eval_pdf_at(&self.geometry(wo, h), wi).0
     }
 
     fn sample(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<BcsdfSample> {
@@ -314,12 +314,16 @@ impl Bcsdf for Chiang {
             TAU * u[3]
         };
         let wi = fiber_direction(sin_i, cos_i, g.phi_o + dphi);
-        let (f, pdf) = self.eval_pdf(&g, wi);
+        let (f, pdf) = self.eval_pdf_at(&g, wi);
         (pdf > 0.0 && pdf.is_finite()).then_some(BcsdfSample { wi, f, pdf })
     }
 
     fn pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> f32 {
-        self.eval_pdf(&self.geometry(wo, h), wi).1
+        self.eval_pdf_at(&self.geometry(wo, h), wi).1
+    }
+
+    fn eval_pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> (Rgb, f32) {
+        self.eval_pdf_at(&self.geometry(wo, h), wi)
     }
 
     fn lobe_names(&self) -> &'static [&'static str] {

@@ -737,16 +737,24 @@ impl Bcsdf for DEon {
         (pdf > 0.0 && pdf.is_finite()).then_some(BcsdfSample { wi, f, pdf })
     }
 
-    fn pdf(&self, wo: Vec3, wi: Vec3, _h: f32) -> f32 {
+    fn pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> f32 {
+        self.eval_pdf(wo, wi, h).1
+    }
+
+    fn eval_pdf(&self, wo: Vec3, wi: Vec3, _h: f32) -> (Rgb, f32) {
         // Lobe choice ∝ luminance(∫N_p dφ), and each lobe's (θ, φ) density is
         // M_p luminance(N_p) / luminance(∫N_p dφ): the mixture is luminance(eval) / Σ weights.
+        let f = self.eval_lobes(wo, wi, 0..4);
         let row = RowLerp::new(Angles::new(wo).cos as f32);
         let total: f32 = self.lobe_weights(row).iter().sum();
-        if total > 0.0 {
-            luminance(self.eval_lobes(wo, wi, 0..4)) / total
-        } else {
-            0.0
-        }
+        (
+            f,
+            if total > 0.0 {
+                luminance(f) / total
+            } else {
+                0.0
+            },
+        )
     }
 }
 

@@ -698,6 +698,27 @@ fn eval_cost() {
     }
 }
 
+/// The fused `eval_pdf` is `(eval, pdf)` for every model (bit for bit: the integrators may use
+/// either).
+#[test]
+fn eval_pdf_is_eval_and_pdf() {
+    let mut rng = tress_core::Sampler::from_seed(78);
+    for inst in HairModel::test_instances() {
+        let b = inst.params.build().unwrap();
+        for _ in 0..500 {
+            let wo = tress_core::sampling::sample_uniform_sphere(rng.next_2d());
+            let wi = tress_core::sampling::sample_uniform_sphere(rng.next_2d());
+            let h = 2.0 * rng.next_1d() - 1.0;
+            assert_eq!(
+                b.eval_pdf(wo, wi, h),
+                (b.eval(wo, wi, h), b.pdf(wo, wi, h)),
+                "{} at wo {wo}, wi {wi}, h {h}",
+                inst.name
+            );
+        }
+    }
+}
+
 /// Every model's lobes (`eval_lobe`) sum to `eval`: the per-lobe plots and dual-scattering
 /// tables rely on it.
 #[test]

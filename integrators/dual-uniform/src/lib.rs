@@ -269,13 +269,13 @@ impl<D: DirectionSampling> Integrator for DualScattering<D> {
                 let light =
                     infinite[((u_select * infinite.len() as f32) as usize).min(infinite.len() - 1)];
                 if let Some(ls) = light.sample_li(sp.p, u_light) {
-                    let f = sp.eval(ls.wi);
+                    let (f, scatter_pdf) = sp.eval_pdf(ls.wi);
                     if ls.pdf > 0.0 && f != Rgb::ZERO && !scene.occluded(&sp.spawn(ls.wi)) {
                         let light_pdf = select_pdf * ls.pdf;
                         radiance += throughput
                             * f
                             * ls.radiance
-                            * (power_heuristic(light_pdf, sp.pdf(ls.wi)) / light_pdf);
+                            * (power_heuristic(light_pdf, scatter_pdf) / light_pdf);
                     }
                 }
             }

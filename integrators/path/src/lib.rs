@@ -83,7 +83,9 @@ impl Integrator for PathTracer {
                 let light =
                     &scene.lights[((u_select * light_count as f32) as usize).min(light_count - 1)];
                 if let Some(ls) = light.sample_li(sp.p, u_light) {
-                    let f = sp.eval(ls.wi);
+                    // The scattering pdf comes with f at little extra cost; it is only used
+                    // when the shadow ray is unoccluded.
+                    let (f, scatter_pdf) = sp.eval_pdf(ls.wi);
                     if ls.pdf > 0.0 && f != Rgb::ZERO && ls.radiance != Rgb::ZERO {
                         let shadow = sp.spawn(ls.wi).with_t_max(ls.distance * (1.0 - 1e-4));
                         if !scene.occluded(&shadow) {
@@ -91,7 +93,7 @@ impl Integrator for PathTracer {
                             let weight = if ls.is_delta {
                                 1.0
                             } else {
-                                power_heuristic(light_pdf, sp.pdf(ls.wi))
+                                power_heuristic(light_pdf, scatter_pdf)
                             };
                             radiance += throughput * f * ls.radiance * (weight / light_pdf);
                         }
