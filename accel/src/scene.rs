@@ -830,13 +830,17 @@ impl Accel for EmbreeAccel {
     }
 
     fn occluded_by_surfaces(&self, ray: &Ray) -> bool {
-        if self.info.triangles == 0 && self.info.spheres == 0 {
+        if !self.has_surfaces() {
             return false;
         }
         let mut ctx = Self::context(ray);
         ctx.ext.skip_hair = true;
         let mut r = Self::embree_ray(ray);
         self.scene.occluded(&mut ctx, &mut r)
+    }
+
+    fn has_surfaces(&self) -> bool {
+        self.info.triangles > 0 || self.info.spheres > 0
     }
 
     fn bounds(&self) -> Aabb {

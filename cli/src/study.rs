@@ -1341,6 +1341,14 @@ fn verdict(points: &[Point], noise: Option<f64>) -> String {
             format!("flat (×{rise:.2} from {span}): consistent with unbiased 1/N convergence")
         };
         match split {
+            // An error floor that MSE·spp does not show yet at these spp (the variance still
+            // dominates at the low end) but that the repetitions' mean already does.
+            Some((b2, var)) if b2 > var => format!(
+                "**bias**: at {at} spp bias² ≈ {b2:.3e} (RMS {:.3e}) exceeds the variance \
+                 {var:.3e}, though MSE·spp only changes ×{rise:.2} from {span}: the estimator \
+                 converges to a different image than this reference",
+                b2.sqrt()
+            ),
             Some((b2, var)) => {
                 format!("{trend}; at {at} spp bias² ≈ {b2:.3e}, variance ≈ {var:.3e}")
             }
@@ -2069,6 +2077,12 @@ mod tests {
         // …and to heavy-tailed variance when the mean image is as close as 1/K predicts.
         split[3].bias2 = Some(0.001);
         assert!(verdict(&split, None).starts_with("**excess variance**"));
+        // A bias that dominates at the highest spp is reported even before MSE·spp rises.
+        let mut early = unbiased.clone();
+        early[3].bias2 = Some(0.6 / 64.0);
+        assert!(verdict(&early, None).starts_with("**bias**"));
+        early[3].bias2 = Some(0.3 / 64.0);
+        assert!(verdict(&early, None).starts_with("flat"));
         // relMSE 1/N reaches 0.1 at 10 spp and 10 s.
         match reach(&unbiased, 0.1) {
             Reach::At(spp, t) => {

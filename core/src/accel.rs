@@ -54,6 +54,11 @@ pub trait Accel: Send + Sync {
     /// Whether a surface that is not hair (a mesh, a sphere) blocks `(0, ray.t_max)`; fibers are
     /// transparent to this query (dual scattering accounts for them statistically).
     fn occluded_by_surfaces(&self, ray: &Ray) -> bool;
+    /// Whether there is any surface for [`Accel::occluded_by_surfaces`] to find; without one
+    /// the query traces nothing (and is not counted as a ray).
+    fn has_surfaces(&self) -> bool {
+        true
+    }
     /// Bounds of all geometry.
     fn bounds(&self) -> Aabb;
 }

@@ -54,6 +54,9 @@ impl Scene {
     /// Visibility against non-hair surfaces only, counted in the ray statistics.
     #[inline]
     pub fn occluded_by_surfaces(&self, ray: &Ray) -> bool {
+        if !self.accel.has_surfaces() {
+            return false;
+        }
         RAYS_TRACED.with(|c| c.set(c.get() + 1));
         self.accel.occluded_by_surfaces(ray)
     }
