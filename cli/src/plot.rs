@@ -6,6 +6,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
 use std::sync::OnceLock;
+use tress_core::image_io;
 
 /// Where Debian (fonts-dejavu-core) and other distributions keep a sans-serif TrueType font.
 const FONT_PATHS: &[&str] = &[
@@ -69,7 +70,7 @@ pub fn write_charts(stem: &Path, charts: &[Chart], panel_width: u32, height: u32
         .unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
 
-    let tmp_png = tempfile::Builder::new().suffix(".png").tempfile_in(dir)?;
+    let tmp_png = image_io::output_temp_file(dir, ".png")?;
     {
         let root = BitMapBackend::new(tmp_png.path(), size).into_drawing_area();
         draw(&root, charts)?;
@@ -531,7 +532,7 @@ fn write_bitmap(
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let tmp = tempfile::Builder::new().suffix(".png").tempfile_in(dir)?;
+    let tmp = image_io::output_temp_file(dir, ".png")?;
     {
         let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
         root.fill(&WHITE).map_err(|e| anyhow!("{e:?}"))?;

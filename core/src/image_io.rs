@@ -338,6 +338,20 @@ fn check_image(image: &Image) -> Result<(), String> {
     Ok(())
 }
 
+/// A temporary file in `dir` (name ending in `suffix`) for an output to be renamed into
+/// place. Created with the mode of an ordinary new file (0666 less the umask) instead of
+/// tempfile's private 0600, so the renamed output is readable like any other.
+pub fn output_temp_file(dir: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
+    let mut builder = tempfile::Builder::new();
+    builder.suffix(suffix);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    builder.tempfile_in(dir)
+}
+
 /// Runs `write` on a temporary file next to `path`, then syncs it and renames it onto `path`.
 /// On any error the temporary file is removed (dropping `NamedTempFile` deletes it).
 fn write_atomically(
@@ -355,8 +369,7 @@ fn write_atomically(
             source,
         }
     };
-    let tmp =
-        tempfile::NamedTempFile::new_in(dir).map_err(io("create a temporary file next to it"))?;
+    let tmp = output_temp_file(dir, ".tmp").map_err(io("create a temporary file next to it"))?;
     {
         let mut w = BufWriter::new(tmp.as_file());
         write(&mut w)?;
@@ -638,6 +651,16 @@ mod tests {
             "failed writes touched the file"
         );
         assert_eq!(files_in(dir.path()), ["out.exr"]);
+        // The mode of any new file (0666 less the umask), not tempfile's private 0600.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode();
+            let plain = dir.path().join("plain");
+            std::fs::write(&plain, b"").unwrap();
+            assert_eq!(mode(&path), mode(&plain));
+            std::fs::remove_file(plain).unwrap();
+        }
 
         let nowhere = dir.path().join("missing-dir/out.exr");
         let msg = write_exr(&nowhere, &img, &[]).unwrap_err().to_string();
