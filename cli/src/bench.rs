@@ -14,7 +14,7 @@
 //! - scaling: time per sample of the large procedural model over the small one — at the same
 //!   fiber radius (10× the optical thickness) and thinned to equal coverage (radius/√10, the
 //!   same picture with 10× the primitives) — and the N-thread speedup;
-//! - bcsdf: eval, sample and pdf cost of every registered hair model, dual-scattering table
+//! - bcsdf: eval, sample, pdf and fused eval+pdf cost of every registered hair model, dual-scattering table
 //!   build time.
 //!
 //! Absolute figures follow the machine and its load; the ratios compare figures taken minutes
@@ -430,7 +430,16 @@ fn bench_bcsdfs(table: &mut Table, calls: usize) -> Result<()> {
         let eval = time(&|i| b.eval(dirs[i].0, dirs[i].1, hs[i]).x);
         let sample = time(&|i| b.sample(dirs[i].0, hs[i], us[i]).map_or(0.0, |s| s.pdf));
         let pdf = time(&|i| b.pdf(dirs[i].0, dirs[i].1, hs[i]));
-        for (metric, ns) in [("eval", eval), ("sample", sample), ("pdf", pdf)] {
+        let eval_pdf = time(&|i| {
+            let (f, pdf) = b.eval_pdf(dirs[i].0, dirs[i].1, hs[i]);
+            f.x + pdf
+        });
+        for (metric, ns) in [
+            ("eval", eval),
+            ("sample", sample),
+            ("pdf", pdf),
+            ("eval_pdf", eval_pdf),
+        ] {
             table.push(
                 (&instance.name, "bcsdf"),
                 metric,
