@@ -14,8 +14,8 @@
 //! - scaling: time per sample of the large procedural model over the small one — at the same
 //!   fiber radius (10× the optical thickness) and thinned to equal coverage (radius/√10, the
 //!   same picture with 10× the primitives) — and the N-thread speedup;
-//! - bcsdf: eval, sample, pdf and fused eval+pdf cost of every registered hair model, dual-scattering table
-//!   build time.
+//! - bcsdf: eval, sample, pdf and fused eval+pdf cost of every registered hair model,
+//!   dual-scattering table build time.
 //!
 //! Absolute figures follow the machine and its load; the ratios compare figures taken minutes
 //! apart in one process. Rows carrying a target of the performance issue say whether it is met.
