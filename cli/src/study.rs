@@ -1730,6 +1730,93 @@ fn write_summary(plan: &Plan, res: &Results) -> Result<PathBuf> {
     Ok(path)
 }
 
+/// MSE of `other` over MSE of `base` at each of `base`'s spp settings.
+fn ratios_at_equal_spp(base: &[Point], other: &[Point]) -> Vec<f64> {
+    base.iter()
+        .zip(other)
+        .map(|(b, o)| o.mse.mean / b.mse.mean)
+        .collect()
+}
+
+/// MSE of `other` (interpolated log-log in time) over MSE of `base` at each of `base`'s
+/// times; `None` outside `other`'s time range.
+fn ratios_at_equal_time(base: &[Point], other: &[Point]) -> Vec<Option<f64>> {
+    let pts: Vec<(f64, f64)> = other.iter().map(|p| (p.time_s, p.mse.mean)).collect();
+    base.iter()
+        .map(|b| loglog_at(&pts, b.time_s).map(|m| m / b.mse.mean))
+        .collect()
+}
+
+/// "min–max (geometric mean g)" of positive finite values, or "–" when there are none.
+fn ratio_range(values: impl IntoIterator<Item = f64>) -> String {
+    let v: Vec<f64> = values
+        .into_iter()
+        .filter(|r| r.is_finite() && *r > 0.0)
+        .collect();
+    if v.is_empty() {
+        return "–".into();
+    }
+    let min = v.iter().copied().fold(f64::INFINITY, f64::min);
+    let max = v.iter().copied().fold(0.0, f64::max);
+    let geo = (v.iter().map(|r| r.ln()).sum::<f64>() / v.len() as f64).exp();
+    format!("{min:.2}–{max:.2} (geo. mean {geo:.2})")
+}
+
+/// The report's first section: per scene and integrator, the ratios against the baseline
+/// summarised over all spp, the cost per sample and the convergence verdict.
+fn summary_section(s: &mut String, plan: &Plan, res: &Results) {
+    let base_label = &plan.integrators[0].label;
+    let _ = writeln!(
+        s,
+        "## Summary
+"
+    );
+    let _ = writeln!(
+        s,
+        "MSE ratios X / `{base_label}` against the common reference over all spp settings \
+         (below 1: X has less error), the CPU time per sample relative to `{base_label}`, and \
+         the convergence verdict against the common reference (details per scene below).\n"
+    );
+    table_header(
+        s,
+        &[
+            "scene",
+            "integrator",
+            "MSE ratio, equal spp",
+            "MSE ratio, equal time",
+            "time per sample",
+            "verdict",
+        ],
+    );
+    for (si, sc) in plan.scenes.iter().enumerate() {
+        let noise = common_noise(plan, res, si);
+        let base = curve(res, plan, si, 0, RefKind::Common, None);
+        for (ii, integ) in plan.integrators.iter().enumerate() {
+            let c = curve(res, plan, si, ii, RefKind::Common, None);
+            let verdict = verdict(&c, noise);
+            let verdict = verdict.split(':').next().unwrap_or_default();
+            if ii == 0 {
+                let _ = writeln!(
+                    s,
+                    "| {} | {} | 1 | 1 | 1 | {verdict} |",
+                    sc.name, integ.label
+                );
+                continue;
+            }
+            let cost = ratio_range(base.iter().zip(&c).map(|(b, o)| o.time_s / b.time_s));
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {} | {cost} | {verdict} |",
+                sc.name,
+                integ.label,
+                ratio_range(ratios_at_equal_spp(&base, &c)),
+                ratio_range(ratios_at_equal_time(&base, &c).into_iter().flatten()),
+            );
+        }
+    }
+    s.push('\n');
+}
+
 fn write_report(plan: &Plan, res: &Results, figures: &[SceneOutputs]) -> Result<PathBuf> {
     let mut s = String::new();
     let _ = writeln!(s, "# Study: {}\n", plan.title);
@@ -1795,6 +1882,9 @@ fn write_report(plan: &Plan, res: &Results, figures: &[SceneOutputs]) -> Result<
     );
 
     let n = plan.integrators.len();
+    if n > 1 {
+        summary_section(&mut s, plan, res);
+    }
     for (si, sc) in plan.scenes.iter().enumerate() {
         let out = &figures[si];
         let _ = writeln!(s, "## Scene `{}`\n", sc.name);
@@ -1830,10 +1920,14 @@ fn write_report(plan: &Plan, res: &Results, figures: &[SceneOutputs]) -> Result<
             let mut cols = vec!["spp"];
             cols.extend(&others);
             table_header(&mut s, &cols);
+            let by_spp: Vec<Vec<f64>> = common[1..]
+                .iter()
+                .map(|c| ratios_at_equal_spp(base, c))
+                .collect();
             for (k, b) in base.iter().enumerate() {
                 let _ = write!(s, "| {} |", b.spp);
-                for c in &common[1..] {
-                    let _ = write!(s, " {:.3} |", c[k].mse.mean / b.mse.mean);
+                for r in &by_spp {
+                    let _ = write!(s, " {:.3} |", r[k]);
                 }
                 s.push('\n');
             }
@@ -1845,13 +1939,16 @@ fn write_report(plan: &Plan, res: &Results, figures: &[SceneOutputs]) -> Result<
             let mut cols = vec!["CPU time (s)"];
             cols.extend(&others);
             table_header(&mut s, &cols);
-            for b in base {
+            let by_time: Vec<Vec<Option<f64>>> = common[1..]
+                .iter()
+                .map(|c| ratios_at_equal_time(base, c))
+                .collect();
+            for (k, b) in base.iter().enumerate() {
                 let _ = write!(s, "| {:.4} |", b.time_s);
-                for c in &common[1..] {
-                    let pts: Vec<(f64, f64)> = c.iter().map(|p| (p.time_s, p.mse.mean)).collect();
-                    match loglog_at(&pts, b.time_s) {
-                        Some(m) => {
-                            let _ = write!(s, " {:.3} |", m / b.mse.mean);
+                for r in &by_time {
+                    match r[k] {
+                        Some(r) => {
+                            let _ = write!(s, " {r:.3} |");
                         }
                         None => s.push_str("  |"),
                     }
