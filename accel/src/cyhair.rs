@@ -221,6 +221,7 @@ fn parse(bytes: &[u8], path: &Path) -> Result<HairGeometry> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_util::shared_data;
 
     /// Optional arrays of a synthetic file.
     #[derive(Default)]
@@ -407,18 +408,6 @@ mod tests {
         let mut nopts = good.clone();
         nopts[12..16].copy_from_slice(&FLAG_SEGMENTS.to_le_bytes());
         assert!(parse(&nopts, Path::new("p.hair")).is_err());
-    }
-
-    fn shared_data(name: &str) -> Option<PathBuf> {
-        let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../shared/data/hair")
-            .join(name);
-        if p.exists() {
-            Some(p)
-        } else {
-            println!("skipping: {} is absent", p.display());
-            None
-        }
     }
 
     #[test]

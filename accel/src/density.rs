@@ -514,14 +514,7 @@ impl DensityGrid {
         let Some((t, len)) = piece_line(a, b) else {
             return;
         };
-        let moments = [
-            t.x * t.x,
-            t.y * t.y,
-            t.z * t.z,
-            t.x * t.y,
-            t.x * t.z,
-            t.y * t.z,
-        ];
+        let moments = orientation_moments(t);
         let lattice = self.lattice;
         lattice.traverse(a.truncate(), t, 0.0, len, |c, s0, s1| {
             let area = ribbon_area(a, b, len, s0, s1);
@@ -797,6 +790,19 @@ fn occupied_voxels(lattice: &Lattice, curves: &[(u32, &Arc<CurveData>)]) -> usiz
         .sum()
 }
 
+/// The orientation moments `[xx, yy, zz, xy, xz, yz]` of a unit tangent `t`, in the order of
+/// [`orientation_record`]'s `m`.
+fn orientation_moments(t: Vec3) -> [f32; 6] {
+    [
+        t.x * t.x,
+        t.y * t.y,
+        t.z * t.z,
+        t.x * t.y,
+        t.x * t.z,
+        t.y * t.z,
+    ]
+}
+
 /// The direction record of a voxel with cross-section density `sigma` and normalised
 /// orientation moments `m = [xx, yy, zz, xy, xz, yz]` of T̄ (trace 1): `σ·κ` and `m`.
 fn orientation_record(sigma: f32, m: [f32; 6]) -> [f32; DIRECTION_STRIDE] {
@@ -900,37 +906,13 @@ fn sym_eigenvalues(a: [[f64; 3]; 3]) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_util::{hair, line, rng_dir, shared_data};
     use crate::{HairGeometry, HairOptions, HairStyle, ProceduralHair, SceneBuilder};
     use glam::Quat;
     use std::f32::consts::PI;
     use std::time::Instant;
-    use tress_core::math::Vec2;
     use tress_core::rng::Pcg32;
-    use tress_core::sampling::sample_uniform_sphere;
     use tress_core::{Accel, HitKind};
-
-    fn hair(strands: &[Vec<Vec3>], radius: f32) -> HairGeometry {
-        let mut g = HairGeometry {
-            name: "test hair".into(),
-            points: Vec::new(),
-            radii: Vec::new(),
-            strand_offsets: vec![0],
-            colors: None,
-            transparency: None,
-        };
-        for s in strands {
-            g.points.extend_from_slice(s);
-            g.strand_offsets.push(g.points.len() as u32);
-        }
-        g.radii = vec![radius; g.points.len()];
-        g
-    }
-
-    fn line(from: Vec3, to: Vec3, points: usize) -> Vec<Vec3> {
-        (0..points)
-            .map(|i| from.lerp(to, i as f32 / (points - 1) as f32))
-            .collect()
-    }
 
     fn accel(g: &HairGeometry) -> EmbreeAccel {
         SceneBuilder::new()
@@ -950,10 +932,6 @@ mod tests {
             },
         )
         .unwrap()
-    }
-
-    fn rng_dir(rng: &mut Pcg32) -> Vec3 {
-        sample_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()))
     }
 
     fn mean(v: &[f32]) -> f64 {
@@ -1276,29 +1254,35 @@ mod tests {
         assert!((mg / mc - 1.0).abs() < 0.05, "grid {mg} vs count {mc}");
     }
 
-    #[test]
-    fn a_ball_of_fibers_matches_the_count_in_both_modes() {
-        let g = ProceduralHair {
+    /// A ball of fibers (radius 0.004, length 2) in the unit sphere about the origin.
+    fn ball(seed: u64, strands: u32, points_per_strand: u32) -> HairGeometry {
+        ProceduralHair {
             style: HairStyle::Ball,
-            seed: 2,
-            strands: 3000,
-            points_per_strand: 16,
+            seed,
+            strands,
+            points_per_strand,
             radius: 0.004,
             length: 2.0,
             center: Vec3::ZERO,
             sphere_radius: 1.0,
         }
         .generate()
-        .unwrap();
-        let accel = accel(&g);
+        .unwrap()
+    }
+
+    /// A ray in a uniform random direction through a uniform random point on the sphere of
+    /// radius 0.9 about the origin, starting 3 before that point (outside the ball).
+    fn ray_through_ball(rng: &mut Pcg32) -> Ray {
+        let d = rng_dir(rng);
+        let offset = 0.9 * rng_dir(rng);
+        Ray::new(offset - 3.0 * d, d)
+    }
+
+    #[test]
+    fn a_ball_of_fibers_matches_the_count_in_both_modes() {
+        let accel = accel(&ball(2, 3000, 16));
         let mut rng = Pcg32::new(8, 8);
-        let through: Vec<Ray> = (0..1000)
-            .map(|_| {
-                let d = rng_dir(&mut rng);
-                let offset = 0.9 * rng_dir(&mut rng);
-                Ray::new(offset - 3.0 * d, d)
-            })
-            .collect();
+        let through: Vec<Ray> = (0..1000).map(|_| ray_through_ball(&mut rng)).collect();
         let count: Vec<f32> = through
             .iter()
             .map(|r| accel.count_fibers_crossed(r) as f32)
@@ -1331,19 +1315,7 @@ mod tests {
     /// must equal the serial hash-set count.
     #[test]
     fn the_grid_does_not_depend_on_the_thread_count() {
-        let g = ProceduralHair {
-            style: HairStyle::Ball,
-            seed: 5,
-            strands: 2000,
-            points_per_strand: 12,
-            radius: 0.004,
-            length: 2.0,
-            center: Vec3::ZERO,
-            sphere_radius: 1.0,
-        }
-        .generate()
-        .unwrap();
-        let accel = accel(&g);
+        let accel = accel(&ball(5, 2000, 12));
         let pool = |n| {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(n)
@@ -1355,8 +1327,7 @@ mod tests {
         assert_eq!(one.info(), four.info());
         let mut rng = Pcg32::new(3, 3);
         for _ in 0..300 {
-            let d = rng_dir(&mut rng);
-            let r = Ray::new(0.9 * rng_dir(&mut rng) - 3.0 * d, d);
+            let r = ray_through_ball(&mut rng);
             assert_eq!(
                 one.fibers_crossed(&r).to_bits(),
                 four.fibers_crossed(&r).to_bits()
@@ -1444,16 +1415,8 @@ mod tests {
         let n = ts.len() as f32;
         let exact = ts.iter().map(|t| t.cross(w).length()).sum::<f32>() / n;
         let mut m = [0.0f32; 6];
-        for t in ts {
-            let v = [
-                t.x * t.x,
-                t.y * t.y,
-                t.z * t.z,
-                t.x * t.y,
-                t.x * t.z,
-                t.y * t.z,
-            ];
-            for (a, b) in m.iter_mut().zip(v) {
+        for &t in ts {
+            for (a, b) in m.iter_mut().zip(orientation_moments(t)) {
                 *a += b / n;
             }
         }
@@ -1474,8 +1437,7 @@ mod tests {
         let spread = |deg: f32, rng: &mut Pcg32| -> Vec<Vec3> {
             (0..2000)
                 .map(|_| {
-                    let ball = sample_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()))
-                        * rng.next_f32().cbrt();
+                    let ball = rng_dir(rng) * rng.next_f32().cbrt();
                     (frame * Vec3::X + deg.to_radians().tan() * ball).normalize()
                 })
                 .collect()
@@ -1626,12 +1588,9 @@ mod tests {
 
     #[test]
     fn straight_hair_grid_matches_the_brute_force_count() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../shared/data/hair/straight.hair");
-        if !path.exists() {
-            eprintln!("skipping: {} is absent", path.display());
+        let Some(path) = shared_data("straight.hair") else {
             return;
-        }
+        };
         let g = crate::HairFile::new(&path).read().unwrap();
         let accel = accel(&g);
         let start = Instant::now();

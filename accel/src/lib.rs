@@ -78,6 +78,8 @@ pub mod mesh;
 pub mod procedural;
 mod scene;
 pub mod source;
+#[cfg(test)]
+mod test_util;
 pub mod tfx;
 
 pub use curves::CurveBasis;

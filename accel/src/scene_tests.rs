@@ -1,31 +1,8 @@
 use super::*;
 use crate::geometry::Rotation;
-use tress_core::math::{Frame, Vec2};
+use crate::test_util::{hair, line, rng_dir, shared_data};
+use tress_core::math::Frame;
 use tress_core::rng::Pcg32;
-use tress_core::sampling::sample_uniform_sphere;
-
-fn hair(strands: &[Vec<Vec3>], radius: f32) -> HairGeometry {
-    let mut g = HairGeometry {
-        name: "test hair".into(),
-        points: Vec::new(),
-        radii: Vec::new(),
-        strand_offsets: vec![0],
-        colors: None,
-        transparency: None,
-    };
-    for s in strands {
-        g.points.extend_from_slice(s);
-        g.strand_offsets.push(g.points.len() as u32);
-    }
-    g.radii = vec![radius; g.points.len()];
-    g
-}
-
-fn line(from: Vec3, to: Vec3, points: usize) -> Vec<Vec3> {
-    (0..points)
-        .map(|i| from.lerp(to, i as f32 / (points - 1) as f32))
-        .collect()
-}
 
 fn with_basis(basis: CurveBasis) -> HairOptions {
     HairOptions {
@@ -45,10 +22,6 @@ fn fiber(hit: &Hit) -> (Vec3, f32, f32, u32, f32) {
         } => (tangent, h, radius, strand, v),
         HitKind::Surface { .. } => panic!("expected a fiber hit, got {hit:?}"),
     }
-}
-
-fn rng_dir(rng: &mut Pcg32) -> Vec3 {
-    sample_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()))
 }
 
 #[test]
@@ -531,12 +504,9 @@ fn bad_objects_are_refused_with_their_name() {
 
 #[test]
 fn straight_hair_builds_and_is_hit() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data/hair/straight.hair");
-    if !path.exists() {
-        println!("skipping: {} is absent", path.display());
+    let Some(path) = shared_data("straight.hair") else {
         return;
-    }
+    };
     let g = crate::HairFile::new(&path).read().unwrap();
     let start = std::time::Instant::now();
     let accel = SceneBuilder::new()

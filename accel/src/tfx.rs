@@ -172,6 +172,7 @@ fn parse(bytes: &[u8], path: &Path, radius: f32) -> Result<HairGeometry> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_util::shared_data;
 
     fn write_tfx(strands: u32, per: u32, thickness: Option<&[f32]>, colors: bool) -> Vec<u8> {
         let n = (strands * per) as usize;
@@ -249,18 +250,6 @@ mod tests {
         }
         .read()
         .is_err());
-    }
-
-    fn shared_data(name: &str) -> Option<PathBuf> {
-        let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../shared/data/hair")
-            .join(name);
-        if p.exists() {
-            Some(p)
-        } else {
-            println!("skipping: {} is absent", p.display());
-            None
-        }
     }
 
     #[test]

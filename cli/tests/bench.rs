@@ -1,21 +1,14 @@
 //! `tress bench --quick` end to end: the table's columns and sections, the CSV beside it, and
 //! clear errors. No timing is checked (the machine is shared and noisy).
 
+mod common;
+
+use common::{stderr, tress};
 use std::collections::BTreeSet;
-use std::path::Path;
-use std::process::{Command, Output};
 
 const COLUMNS: [&str; 7] = [
     "model", "section", "metric", "threads", "value", "unit", "note",
 ];
-
-fn tress(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tress"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("run tress")
-}
 
 /// Splits one CSV line (quoted fields may hold commas and doubled quotes).
 fn csv_fields(line: &str) -> Vec<String> {
@@ -53,8 +46,7 @@ fn quick_bench_prints_and_writes_the_table() {
         ],
         dir.path(),
     );
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stderr}");
+    assert!(out.status.success(), "{}", stderr(&out));
     let stdout = String::from_utf8_lossy(&out.stdout);
     let header: Vec<&str> = stdout.lines().next().unwrap().split_whitespace().collect();
     assert_eq!(header, COLUMNS);
@@ -154,5 +146,5 @@ fn zero_threads_is_an_error() {
     let dir = tempfile::tempdir().unwrap();
     let out = tress(&["bench", "--quick", "--threads", "0"], dir.path());
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--threads"));
+    assert!(stderr(&out).contains("--threads"));
 }

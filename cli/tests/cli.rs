@@ -2,26 +2,11 @@
 
 mod common;
 
-use common::{scene_dir, stderr, tress};
-
-const GOOD_SCENE: &str = r#"(
-    camera: (look_from: (0, 0, 4), look_at: (0, 0, 0), fov: 35),
-    film: (width: 24, height: 20, spp: 2, seed: 3),
-    integrator: Path(max_depth: 20),
-    materials: {
-        "hair": Hair(Chiang(beta_m: 0.3, beta_n: 0.3, pigment: Melanin(eumelanin: 1.0))),
-        "grey": Diffuse(albedo: (0.5, 0.5, 0.5)),
-    },
-    objects: [
-        Hair(source: Procedural(style: Ball, strands: 300, radius: 0.01), material: "hair"),
-        Sphere(center: (0, -2, 0), radius: 1, material: "grey"),
-    ],
-    lights: [Sky(), Distant(direction: (0, -1, -1), irradiance: (2, 2, 2), angular_radius: 0.5)],
-)"#;
+use common::{scene_dir, stderr, tress, SCENE};
 
 #[test]
 fn renders_exr_and_png_with_metadata() {
-    let (dir, _) = scene_dir(GOOD_SCENE);
+    let (dir, _) = scene_dir(SCENE);
     let o = tress(
         &["render", "scene.ron", "--out", "out/img.exr", "--quiet"],
         dir.path(),
@@ -31,7 +16,7 @@ fn renders_exr_and_png_with_metadata() {
     assert_eq!((image.width, image.height), (24, 20));
     assert!(image.mean() > 0.0);
     let get = |k: &str| attrs.iter().find(|(n, _)| n == k).map(|(_, v)| v.clone());
-    assert_eq!(get("tress:spp").as_deref(), Some("2"));
+    assert_eq!(get("tress:spp").as_deref(), Some("6"));
     assert_eq!(get("tress:seed").as_deref(), Some("3"));
     assert!(get("tress:integrator").unwrap().contains("Path"));
     assert!(get("tress:render_time_s").is_some());
@@ -40,7 +25,7 @@ fn renders_exr_and_png_with_metadata() {
 
 #[test]
 fn command_line_overrides_and_crop() {
-    let (dir, _) = scene_dir(GOOD_SCENE);
+    let (dir, _) = scene_dir(SCENE);
     let o = tress(
         &[
             "render",
@@ -73,7 +58,7 @@ fn command_line_overrides_and_crop() {
 
 #[test]
 fn info_describes_the_scene() {
-    let (dir, _) = scene_dir(GOOD_SCENE);
+    let (dir, _) = scene_dir(SCENE);
     let o = tress(&["info", "scene.ron"], dir.path());
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
@@ -113,55 +98,46 @@ fn assert_fails(scene: &str, expect: &[&str]) {
 #[test]
 fn bad_scenes_give_clear_errors() {
     // Syntax error: file, line and column.
-    assert_fails(
-        &GOOD_SCENE.replace("fov: 35),", "fov: 35"),
-        &["scene.ron:3:"],
-    );
+    assert_fails(&SCENE.replace("fov: 35),", "fov: 35"), &["scene.ron:3:"]);
     // Unknown field.
-    assert_fails(&GOOD_SCENE.replace("seed: 3", "seed: 3, sed: 4"), &["sed"]);
+    assert_fails(&SCENE.replace("seed: 3", "seed: 3, sed: 4"), &["sed"]);
     // Wrong type.
-    assert_fails(&GOOD_SCENE.replace("spp: 2", "spp: \"many\""), &["spp"]);
+    assert_fails(&SCENE.replace("spp: 6", "spp: \"many\""), &["spp"]);
     // Negative spp does not fit an unsigned count.
     assert_fails(
-        &GOOD_SCENE.replace("spp: 2", "spp: -4"),
+        &SCENE.replace("spp: 6", "spp: -4"),
         &["out of bounds", "spp"],
     );
     // Zero-size film.
-    assert_fails(
-        &GOOD_SCENE.replace("width: 24", "width: 0"),
-        &["film", "empty"],
-    );
+    assert_fails(&SCENE.replace("width: 24", "width: 0"), &["film", "empty"]);
     // fov out of range.
-    assert_fails(&GOOD_SCENE.replace("fov: 35", "fov: 190"), &["fov"]);
+    assert_fails(&SCENE.replace("fov: 35", "fov: 190"), &["fov"]);
     // Roughness outside its domain.
-    assert_fails(
-        &GOOD_SCENE.replace("beta_m: 0.3", "beta_m: 1.7"),
-        &["beta_m"],
-    );
+    assert_fails(&SCENE.replace("beta_m: 0.3", "beta_m: 1.7"), &["beta_m"]);
     // Negative absorption.
     assert_fails(
-        &GOOD_SCENE.replace("Melanin(eumelanin: 1.0)", "SigmaA(-0.5, 0.1, 0.1)"),
+        &SCENE.replace("Melanin(eumelanin: 1.0)", "SigmaA(-0.5, 0.1, 0.1)"),
         &["sigma_a"],
     );
     // Unknown material name.
     assert_fails(
-        &GOOD_SCENE.replace("material: \"grey\"", "material: \"gray\""),
+        &SCENE.replace("material: \"grey\"", "material: \"gray\""),
         &["gray"],
     );
     // Missing referenced files.
     assert_fails(
-        &GOOD_SCENE.replace(
+        &SCENE.replace(
             "Procedural(style: Ball, strands: 300, radius: 0.01)",
             "File(\"nowhere.hair\")",
         ),
         &["nowhere.hair"],
     );
     assert_fails(
-        &GOOD_SCENE.replace("Sky()", "Environment(file: \"missing.hdr\")"),
+        &SCENE.replace("Sky()", "Environment(file: \"missing.hdr\")"),
         &["missing.hdr"],
     );
     // Unsupported image.
-    let (dir, _) = scene_dir(&GOOD_SCENE.replace("Sky()", "Environment(file: \"junk.exr\")"));
+    let (dir, _) = scene_dir(&SCENE.replace("Sky()", "Environment(file: \"junk.exr\")"));
     std::fs::write(dir.path().join("junk.exr"), b"not an exr").unwrap();
     let o = tress(
         &["render", "scene.ron", "--out", "bad.exr", "--quiet"],
@@ -176,7 +152,7 @@ fn bad_scenes_give_clear_errors() {
 
 #[test]
 fn bad_arguments_give_clear_errors() {
-    let (dir, _) = scene_dir(GOOD_SCENE);
+    let (dir, _) = scene_dir(SCENE);
     let o = tress(
         &["render", "scene.ron", "--integrator", "bogus", "--quiet"],
         dir.path(),

@@ -36,8 +36,7 @@ fn farm(args: &[&str], cwd: &Path) -> String {
 fn tiles_times_passes_merge_into_the_full_render() {
     let (dir, _) = scene_dir(SCENE);
     let d = dir.path();
-    let o = tress(&["render", "scene.ron", "--out", "full.exr", "--quiet"], d);
-    assert!(o.status.success(), "{}", stderr(&o));
+    render_ok(&["--out", "full.exr", "--quiet"], d);
     let full = pixels(&d.join("full.exr"));
     for (tiles, passes) in [(3, 2), (1, 4), (5, 1), (2, 6)] {
         let (t, p) = (tiles.to_string(), passes.to_string());
@@ -69,8 +68,7 @@ fn tiles_times_passes_merge_into_the_full_render() {
         SCENE.replace("seed: 3)", "seed: 3, crop: Some(2, 3, 20, 17))"),
     )
     .unwrap();
-    let o = tress(&["render", "scene.ron", "--out", "crop.exr", "--quiet"], d);
-    assert!(o.status.success(), "{}", stderr(&o));
+    render_ok(&["--out", "crop.exr", "--quiet"], d);
     let args = ["--tiles", "4", "--passes", "3", "--out", "cropfarm"];
     run_lines(&farm(&args, d), d);
     run_lines(&farm(&[&args[..], &["--merge"]].concat(), d), d);
@@ -120,60 +118,49 @@ fn bad_farm_requests_are_refused() {
     assert!(!o.status.success() && stderr(&o).contains("nowhere.ron"));
 }
 
-/// Renders `scene.ron` in `d` with extra arguments to `out`.
-fn render(d: &Path, out: &str, extra: &[&str]) {
-    let mut a = vec![
-        "render",
-        "scene.ron",
-        "--out",
-        out,
-        "--no-preview",
-        "--quiet",
-    ];
-    a.extend_from_slice(extra);
-    let o = tress(&a, d);
-    assert!(o.status.success(), "{}", stderr(&o));
-}
-
 #[test]
 fn incompatible_pieces_are_refused_with_clear_errors() {
     let (dir, _) = scene_dir(SCENE);
     let d = dir.path();
-    render(d, "top.exr", &["--crop", "0,0,24,10", "--spp", "4"]);
-    render(d, "bottom.exr", &["--crop", "0,10,24,20", "--spp", "4"]);
-    render(
-        d,
-        "more_top.exr",
-        &["--crop", "0,0,24,10", "--spp-offset", "4", "--spp", "4"],
-    );
-    render(
-        d,
-        "late_bottom.exr",
-        &["--crop", "0,10,24,20", "--spp-offset", "6", "--spp", "2"],
-    );
-    render(d, "middle.exr", &["--crop", "0,5,24,15", "--spp", "4"]);
-    render(
-        d,
-        "top_seed.exr",
-        &["--crop", "0,0,24,10", "--spp", "4", "--seed", "4"],
-    );
-    render(
-        d,
-        "top_overlap.exr",
-        &["--crop", "0,0,24,10", "--spp-offset", "2", "--spp", "4"],
-    );
-    render(
-        d,
-        "top_other.exr",
-        &[
-            "--crop",
-            "0,0,24,10",
-            "--spp",
-            "4",
-            "--integrator",
-            "Path(max_depth: 2)",
-        ],
-    );
+    // (piece, extra arguments)
+    let renders: [(&str, &[&str]); 8] = [
+        ("top.exr", &["--crop", "0,0,24,10", "--spp", "4"]),
+        ("bottom.exr", &["--crop", "0,10,24,20", "--spp", "4"]),
+        (
+            "more_top.exr",
+            &["--crop", "0,0,24,10", "--spp-offset", "4", "--spp", "4"],
+        ),
+        (
+            "late_bottom.exr",
+            &["--crop", "0,10,24,20", "--spp-offset", "6", "--spp", "2"],
+        ),
+        ("middle.exr", &["--crop", "0,5,24,15", "--spp", "4"]),
+        (
+            "top_seed.exr",
+            &["--crop", "0,0,24,10", "--spp", "4", "--seed", "4"],
+        ),
+        (
+            "top_overlap.exr",
+            &["--crop", "0,0,24,10", "--spp-offset", "2", "--spp", "4"],
+        ),
+        (
+            "top_other.exr",
+            &[
+                "--crop",
+                "0,0,24,10",
+                "--spp",
+                "4",
+                "--integrator",
+                "Path(max_depth: 2)",
+            ],
+        ),
+    ];
+    for (out, extra) in renders {
+        render_ok(
+            &[&["--out", out, "--no-preview", "--quiet"], extra].concat(),
+            d,
+        );
+    }
     std::fs::write(
         d.join("big.ron"),
         SCENE.replace("width: 24, height: 20", "width: 24, height: 30"),
@@ -215,7 +202,71 @@ fn incompatible_pieces_are_refused_with_clear_errors() {
         img.write().to_file(d.join("edited.exr")).unwrap();
     }
 
-    let refuse = |pieces: &[&str], extra: &[&str], expect: &[&str]| {
+    // (pieces, extra arguments, what the message must say)
+    let refused: [(&[&str], &[&str], &[&str]); 13] = [
+        (
+            &["top.exr", "top_seed.exr"],
+            &[],
+            &["top_seed.exr", "seed differs (3 vs 4)"],
+        ),
+        (
+            &["top.exr", "top_other.exr"],
+            &[],
+            &["top_other.exr", "scene"],
+        ),
+        (
+            &["top.exr", "big.exr"],
+            &[],
+            &["big.exr", "film size differs (24x20 vs 24x30)"],
+        ),
+        (
+            &["top.exr", "bottom.exr", "top_overlap.exr"],
+            &[],
+            &["top_overlap.exr", "overlap"],
+        ),
+        (
+            &["top.exr", "middle.exr", "bottom.exr"],
+            &[],
+            &["middle.exr", "tiles overlap"],
+        ),
+        (
+            &["top.exr", "more_top.exr"],
+            &["--crop", "0,0,24,20"],
+            &["no piece covers pixel (0, 10)", "a tile is missing"],
+        ),
+        (
+            &["top.exr", "bottom.exr", "more_top.exr"],
+            &[],
+            &["pixel (0, 10) with samples [4, 8)", "a tile is missing"],
+        ),
+        (
+            &["top.exr", "bottom.exr", "late_bottom.exr"],
+            &[],
+            &["samples [4, 6) are missing"],
+        ),
+        (
+            &["top.exr", "bottom.exr"],
+            &["--expect-spp", "8"],
+            &["4 per pixel, but 8 were expected"],
+        ),
+        (
+            &["top.exr", "plain.exr"],
+            &[],
+            &["plain.exr", "no sample sums"],
+        ),
+        (&["top.exr", "junk.exr"], &[], &["junk.exr", "OpenEXR"]),
+        (
+            &["top.exr", "absent.exr"],
+            &[],
+            &["absent.exr", "not found"],
+        ),
+        (
+            &["edited.exr", "bottom.exr"],
+            &[],
+            &["edited.exr", "pixel (7, 0)", "modified"],
+        ),
+    ];
+    for (pieces, extra, expect) in refused {
         let mut a = vec!["merge", "out.exr"];
         a.extend_from_slice(pieces);
         a.extend_from_slice(extra);
@@ -227,68 +278,7 @@ fn incompatible_pieces_are_refused_with_clear_errors() {
         }
         assert!(!err.contains("panicked"), "{err}");
         assert!(!d.join("out.exr").exists() && !d.join("out.png").exists());
-    };
-    refuse(
-        &["top.exr", "top_seed.exr"],
-        &[],
-        &["top_seed.exr", "seed differs (3 vs 4)"],
-    );
-    refuse(
-        &["top.exr", "top_other.exr"],
-        &[],
-        &["top_other.exr", "scene"],
-    );
-    refuse(
-        &["top.exr", "big.exr"],
-        &[],
-        &["big.exr", "film size differs (24x20 vs 24x30)"],
-    );
-    refuse(
-        &["top.exr", "bottom.exr", "top_overlap.exr"],
-        &[],
-        &["top_overlap.exr", "overlap"],
-    );
-    refuse(
-        &["top.exr", "middle.exr", "bottom.exr"],
-        &[],
-        &["middle.exr", "tiles overlap"],
-    );
-    refuse(
-        &["top.exr", "more_top.exr"],
-        &["--crop", "0,0,24,20"],
-        &["no piece covers pixel (0, 10)", "a tile is missing"],
-    );
-    refuse(
-        &["top.exr", "bottom.exr", "more_top.exr"],
-        &[],
-        &["pixel (0, 10) with samples [4, 8)", "a tile is missing"],
-    );
-    refuse(
-        &["top.exr", "bottom.exr", "late_bottom.exr"],
-        &[],
-        &["samples [4, 6) are missing"],
-    );
-    refuse(
-        &["top.exr", "bottom.exr"],
-        &["--expect-spp", "8"],
-        &["4 per pixel, but 8 were expected"],
-    );
-    refuse(
-        &["top.exr", "plain.exr"],
-        &[],
-        &["plain.exr", "no sample sums"],
-    );
-    refuse(&["top.exr", "junk.exr"], &[], &["junk.exr", "OpenEXR"]);
-    refuse(
-        &["top.exr", "absent.exr"],
-        &[],
-        &["absent.exr", "not found"],
-    );
-    refuse(
-        &["edited.exr", "bottom.exr"],
-        &[],
-        &["edited.exr", "pixel (7, 0)", "modified"],
-    );
+    }
     let o = tress(&["merge", "out.png", "top.exr"], d);
     assert!(!o.status.success() && stderr(&o).contains("out.png"));
     let o = tress(&["merge", "out.exr"], d);

@@ -44,6 +44,18 @@ fn assert_bad_hair(dir: &Path, source: &str, expect: &[&str]) {
     assert_fails_in(dir, &["info", "scene.ron"], &e);
 }
 
+/// Each of `cases` (file name, bytes, expected message) in turn as the only hair file: it must
+/// fail with the expected message and the file's name.
+fn assert_bad_hair_files(dir: &Path, cases: Vec<(&str, Vec<u8>, &[&str])>) {
+    for (name, bytes, expect) in cases {
+        std::fs::write(dir.join(name), bytes).unwrap();
+        let mut e = expect.to_vec();
+        e.push(name);
+        assert_bad_hair(dir, &format!("File(\"{name}\")"), &e);
+        std::fs::remove_file(dir.join(name)).unwrap();
+    }
+}
+
 fn write_hair(
     magic: &[u8; 4],
     strands: u32,
@@ -145,13 +157,7 @@ fn bad_hair_files_give_clear_errors() {
             &["radius NaN"],
         ),
     ];
-    for (name, bytes, expect) in cases {
-        std::fs::write(d.join(name), bytes).unwrap();
-        let mut e = expect.to_vec();
-        e.push(name);
-        assert_bad_hair(d, &format!("File(\"{name}\")"), &e);
-        std::fs::remove_file(d.join(name)).unwrap();
-    }
+    assert_bad_hair_files(d, cases);
     // Header counts far beyond the file: refused from the header, before allocating.
     for (at, expect) in [(4, "strands but only"), (8, "truncated")] {
         let mut huge = good.clone();
@@ -260,13 +266,7 @@ fn bad_tressfx_files_give_clear_errors() {
             &["radius", "positive"],
         ),
     ];
-    for (name, bytes, expect) in cases {
-        std::fs::write(d.join(name), bytes).unwrap();
-        let mut e = expect.to_vec();
-        e.push(name);
-        assert_bad_hair(d, &format!("File(\"{name}\")"), &e);
-        std::fs::remove_file(d.join(name)).unwrap();
-    }
+    assert_bad_hair_files(d, cases);
     std::fs::write(d.join("good.tfx"), &good).unwrap();
     assert_bad_hair(
         d,
@@ -294,90 +294,85 @@ fn assert_bad_scene(text: &str, expect: &[&str]) {
 
 #[test]
 fn bad_scenes_give_clear_errors() {
-    let edit = |from: &str, to: &str| {
-        assert!(SCENE.contains(from), "{from}");
-        SCENE.replace(from, to)
-    };
-    // Syntax and types (beyond cli.rs): unknown variants, unterminated text, a bad crop shape.
-    assert_bad_scene(&edit("Path(max_depth: 20)", "Bogus()"), &["Bogus"]);
-    assert_bad_scene(&edit("Sky()", "Moon()"), &["Moon"]);
+    // Syntax and types (beyond cli.rs): unterminated text, unknown variants, a bad crop shape.
     assert_bad_scene(&SCENE[..SCENE.len() / 2], &["scene.ron:"]);
     assert_bad_scene("", &["scene.ron:1:"]);
-    assert_bad_scene(&edit("seed: 3", "seed: 3, crop: Some(1, 2)"), &["crop"]);
-    assert_bad_scene(&edit("spp: 6", "spp: 4.5"), &["spp"]);
-    assert_bad_scene(&edit("width: 24", "width: 99999999999"), &["width"]);
-    // Out-of-range values.
-    assert_bad_scene(&edit("height: 20", "height: 0"), &["film", "empty"]);
-    assert_bad_scene(&edit("width: 24", "width: 70000"), &["film", "exceeds"]);
-    assert_bad_scene(&edit("spp: 6", "spp: 0"), &["spp must be at least 1"]);
-    assert_bad_scene(
-        &edit("seed: 3", "seed: 3, crop: Some(0, 0, 30, 10)"),
-        &["crop window"],
-    );
-    assert_bad_scene(&edit("fov: 35", "fov: 0"), &["fov"]);
-    assert_bad_scene(&edit("fov: 35", "fov: -20"), &["fov"]);
-    assert_bad_scene(
-        &edit("fov: 35", "fov: 35, lens_radius: -1"),
-        &["lens_radius"],
-    );
-    assert_bad_scene(
-        &edit("look_at: (0, 0, 0)", "look_at: (0, 0, 4)"),
-        &["look_at"],
-    );
-    assert_bad_scene(&edit("beta_n: 0.3", "beta_n: -0.1"), &["beta_n"]);
-    assert_bad_scene(
-        &edit(
+    // (text of SCENE, its replacement, what the message must say)
+    let edits: [(&str, &str, &[&str]); 27] = [
+        ("Path(max_depth: 20)", "Bogus()", &["Bogus"]),
+        ("Sky()", "Moon()", &["Moon"]),
+        ("seed: 3", "seed: 3, crop: Some(1, 2)", &["crop"]),
+        ("spp: 6", "spp: 4.5", &["spp"]),
+        ("width: 24", "width: 99999999999", &["width"]),
+        // Out-of-range values.
+        ("height: 20", "height: 0", &["film", "empty"]),
+        ("width: 24", "width: 70000", &["film", "exceeds"]),
+        ("spp: 6", "spp: 0", &["spp must be at least 1"]),
+        (
+            "seed: 3",
+            "seed: 3, crop: Some(0, 0, 30, 10)",
+            &["crop window"],
+        ),
+        ("fov: 35", "fov: 0", &["fov"]),
+        ("fov: 35", "fov: -20", &["fov"]),
+        ("fov: 35", "fov: 35, lens_radius: -1", &["lens_radius"]),
+        ("look_at: (0, 0, 0)", "look_at: (0, 0, 4)", &["look_at"]),
+        ("beta_n: 0.3", "beta_n: -0.1", &["beta_n"]),
+        (
             "Chiang(beta_m: 0.3, beta_n: 0.3, pigment: Melanin(eumelanin: 1.0))",
             "DEon(longitudinal_roughness: 1.5)",
+            &["longitudinal_roughness"],
         ),
-        &["longitudinal_roughness"],
-    );
-    assert_bad_scene(
-        &edit("Melanin(eumelanin: 1.0)", "Melanin(eumelanin: -1.0)"),
-        &["eumelanin"],
-    );
-    assert_bad_scene(
-        &edit("Melanin(eumelanin: 1.0)", "SigmaA(0.2, -0.1, 0.3)"),
-        &["sigma_a"],
-    );
-    assert_bad_scene(
-        &edit("albedo: (0.5, 0.5, 0.5)", "albedo: (0.5, -0.5, 0.5)"),
-        &["albedo"],
-    );
-    assert_bad_scene(
-        &edit("albedo: (0.5, 0.5, 0.5)", "albedo: (1.5, 0.5, 0.5)"),
-        &["albedo"],
-    );
-    assert_bad_scene(&edit("radius: 1,", "radius: -1,"), &["radius"]);
-    assert_bad_scene(
-        &edit("angular_radius: 0.5", "angular_radius: 95"),
-        &["angular_radius"],
-    );
-    assert_bad_scene(
-        &edit("irradiance: (2, 2, 2)", "irradiance: (2, -2, 2)"),
-        &["irradiance"],
-    );
-    assert_bad_scene(&edit("Sky()", "Sky(scale: -1)"), &["scale"]);
-    assert_bad_scene(
-        &edit("Sky()", "Constant(radiance: (1, 1, -1))"),
-        &["radiance"],
-    );
-    assert_bad_scene(&edit("strands: 300", "strands: 0"), &["strands"]);
-    assert_bad_scene(
-        &edit(
+        (
+            "Melanin(eumelanin: 1.0)",
+            "Melanin(eumelanin: -1.0)",
+            &["eumelanin"],
+        ),
+        (
+            "Melanin(eumelanin: 1.0)",
+            "SigmaA(0.2, -0.1, 0.3)",
+            &["sigma_a"],
+        ),
+        (
+            "albedo: (0.5, 0.5, 0.5)",
+            "albedo: (0.5, -0.5, 0.5)",
+            &["albedo"],
+        ),
+        (
+            "albedo: (0.5, 0.5, 0.5)",
+            "albedo: (1.5, 0.5, 0.5)",
+            &["albedo"],
+        ),
+        ("radius: 1,", "radius: -1,", &["radius"]),
+        (
+            "angular_radius: 0.5",
+            "angular_radius: 95",
+            &["angular_radius"],
+        ),
+        (
+            "irradiance: (2, 2, 2)",
+            "irradiance: (2, -2, 2)",
+            &["irradiance"],
+        ),
+        ("Sky()", "Sky(scale: -1)", &["scale"]),
+        ("Sky()", "Constant(radiance: (1, 1, -1))", &["radiance"]),
+        ("strands: 300", "strands: 0", &["strands"]),
+        (
             "material: \"hair\")",
             "material: \"hair\", options: (strand_fraction: 0))",
+            &["strand_fraction"],
         ),
-        &["strand_fraction"],
-    );
-    // Missing referenced files.
-    assert_bad_scene(
-        &edit(
+        // Missing referenced files.
+        (
             "Sphere(center: (0, -2, 0), radius: 1, material: \"grey\")",
             "Mesh(file: \"head.obj\", material: \"grey\")",
+            &["head.obj"],
         ),
-        &["head.obj"],
-    );
+    ];
+    for (from, to, expect) in edits {
+        assert!(SCENE.contains(from), "{from}");
+        assert_bad_scene(&SCENE.replace(from, to), expect);
+    }
 }
 
 /// Writes an RGB EXR of `w`×`h` (ZIP compression) for the environment-map cases.
@@ -487,21 +482,10 @@ fn bad_arguments_give_clear_errors() {
 fn time_limit_stops_after_the_wave_that_crosses_it() {
     let (dir, _) = scene_dir(SCENE);
     let d = dir.path();
-    let o = tress(
-        &[
-            "render",
-            "scene.ron",
-            "--spp",
-            "64",
-            "--time-limit",
-            "0",
-            "--out",
-            "limited.exr",
-        ],
+    let err = render_ok(
+        &["--spp", "64", "--time-limit", "0", "--out", "limited.exr"],
         d,
     );
-    assert!(o.status.success(), "{}", stderr(&o));
-    let err = stderr(&o);
     assert!(err.contains("1 of 64 spp (time limit"), "{err}");
     let path = d.join("limited.exr");
     assert_eq!(attribute(&path, "tress:spp").as_deref(), Some("1"));
@@ -514,34 +498,10 @@ fn time_limit_stops_after_the_wave_that_crosses_it() {
         Some("time-limit")
     );
     // The image is exactly the one-sample render.
-    let o = tress(
-        &[
-            "render",
-            "scene.ron",
-            "--spp",
-            "1",
-            "--out",
-            "one.exr",
-            "--quiet",
-        ],
-        d,
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
+    render_ok(&["--spp", "1", "--out", "one.exr", "--quiet"], d);
     assert_eq!(pixels(&path), pixels(&d.join("one.exr")));
     // A generous limit changes nothing.
-    let o = tress(
-        &[
-            "render",
-            "scene.ron",
-            "--time-limit",
-            "600",
-            "--out",
-            "all.exr",
-            "--quiet",
-        ],
-        d,
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
+    render_ok(&["--time-limit", "600", "--out", "all.exr", "--quiet"], d);
     assert_eq!(
         attribute(&d.join("all.exr"), "tress:status").as_deref(),
         Some("complete")
@@ -557,18 +517,9 @@ fn waves_and_partial_images_do_not_change_the_image() {
     let (dir, scene) = scene_dir(SCENE);
     let d = dir.path();
     for (out, extra) in [("plain.exr", None), ("partial.exr", Some("--partial"))] {
-        let mut args = vec![
-            "render",
-            "scene.ron",
-            "--spp",
-            "13",
-            "--out",
-            out,
-            "--quiet",
-        ];
+        let mut args = vec!["--spp", "13", "--out", out, "--quiet"];
         args.extend(extra);
-        let o = tress(&args, d);
-        assert!(o.status.success(), "{}", stderr(&o));
+        render_ok(&args, d);
     }
     let plain = pixels(&d.join("plain.exr"));
     assert_eq!(plain, pixels(&d.join("partial.exr")));
@@ -599,18 +550,7 @@ fn waves_and_partial_images_do_not_change_the_image() {
         );
     }
     // The PNG preview can be left out.
-    let o = tress(
-        &[
-            "render",
-            "scene.ron",
-            "--out",
-            "bare.exr",
-            "--no-preview",
-            "--quiet",
-        ],
-        d,
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
+    render_ok(&["--out", "bare.exr", "--no-preview", "--quiet"], d);
     assert!(d.join("bare.exr").exists() && !d.join("bare.png").exists());
 }
 
@@ -619,10 +559,8 @@ fn sample_range_passes_merge_into_the_single_render() {
     let (dir, _) = scene_dir(SCENE);
     let d = dir.path();
     let render = |out: &str, offset: &str, spp: &str| {
-        let o = tress(
+        render_ok(
             &[
-                "render",
-                "scene.ron",
                 "--spp-offset",
                 offset,
                 "--spp",
@@ -633,7 +571,6 @@ fn sample_range_passes_merge_into_the_single_render() {
             ],
             d,
         );
-        assert!(o.status.success(), "{}", stderr(&o));
     };
     render("whole.exr", "0", "12");
     render("a.exr", "0", "5");
@@ -737,18 +674,6 @@ fn ctrl_c_writes_the_finished_samples_and_exits_cleanly() {
         "temporary files left"
     );
     // What was written is exactly the render of the samples it reports.
-    let o = tress(
-        &[
-            "render",
-            "scene.ron",
-            "--spp",
-            &spp,
-            "--out",
-            "same.exr",
-            "--quiet",
-        ],
-        d,
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
+    render_ok(&["--spp", &spp, "--out", "same.exr", "--quiet"], d);
     assert_eq!(pixels(&out), pixels(&d.join("same.exr")));
 }

@@ -1,23 +1,14 @@
 //! `tress study` and `tress diff` end to end: outputs, resumption, determinism, convergence,
 //! hand-computed metrics and clear errors for bad input.
 
+mod common;
+
+use common::{stderr, tress};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 use tress_core::image_io;
 use tress_core::Image;
-
-fn tress(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tress"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("run tress")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 fn stdout(o: &Output) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
@@ -198,6 +189,8 @@ fn study_end_to_end_resumable_and_deterministic() {
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     for needle in [
         "## Scene `ball`",
+        "## Summary",
+        "| ball | path-2 |",
         "MSE ratio at equal spp",
         "MSE ratio at equal time",
         "efficiency",
@@ -524,63 +517,37 @@ fn diff_metrics() {
 fn bad_study_files_are_reported_with_the_file() {
     let dir = tempfile::tempdir().unwrap();
     let good = study_text("");
-    let cases: Vec<(String, &str)> = vec![
-        (good.replace("seed: 5,", "seed: 5, colour: 3,"), "colour"),
-        (good.replace("Path(max_depth: 1)", "Bogus()"), "Bogus"),
+    // (text replaced in the good study, its replacement, what the message must say)
+    let cases = [
+        ("seed: 5,", "seed: 5, colour: 3,", "colour"),
+        ("Path(max_depth: 1)", "Bogus()", "Bogus"),
+        ("spp: [1, 4, 16, 64]", "spp: []", "spp: the list is empty"),
+        ("spp: [1, 4, 16, 64]", "spp: [4, 1]", "strictly increasing"),
+        ("spp: [1, 4, 16, 64]", "spp: [0, 1]", "strictly increasing"),
+        ("repetitions: 3", "repetitions: 0", "repetitions"),
         (
-            good.replace("spp: [1, 4, 16, 64]", "spp: []"),
-            "spp: the list is empty",
-        ),
-        (
-            good.replace("spp: [1, 4, 16, 64]", "spp: [4, 1]"),
-            "strictly increasing",
-        ),
-        (
-            good.replace("spp: [1, 4, 16, 64]", "spp: [0, 1]"),
-            "strictly increasing",
-        ),
-        (
-            good.replace("repetitions: 3", "repetitions: 0"),
-            "repetitions",
-        ),
-        (
-            good.replace("x: 6, y: 6, w: 8, h: 8", "x: 16, y: 6, w: 8, h: 8"),
+            "x: 6, y: 6, w: 8, h: 8",
+            "x: 16, y: 6, w: 8, h: 8",
             "'centre'",
         ),
         (
-            good.replace(
-                "regions: [",
-                r#"regions: [(name: "centre", x: 0, y: 0, w: 1, h: 1), "#,
-            ),
+            "regions: [",
+            r#"regions: [(name: "centre", x: 0, y: 0, w: 1, h: 1), "#,
             "defined twice",
         ),
+        ("name: \"centre\"", "name: \"a b\"", "letters, digits"),
+        ("seed: 5,", "seed: 5, heatmap_spp: 8,", "heatmap_spp = 8"),
         (
-            good.replace("name: \"centre\"", "name: \"a b\""),
-            "letters, digits",
-        ),
-        (
-            good.replace("seed: 5,", "seed: 5, heatmap_spp: 8,"),
-            "heatmap_spp = 8",
-        ),
-        (
-            good.replace(
-                r#"Inline(name: "ball", scene: "#,
-                r#"File("nope.ron"), Inline(name: "ball", scene: "#,
-            ),
+            r#"Inline(name: "ball", scene: "#,
+            r#"File("nope.ron"), Inline(name: "ball", scene: "#,
             "nope.ron",
         ),
-        (
-            good.replace("Path(max_depth: 1)", "Path(max_depth: 20)"),
-            "listed twice",
-        ),
-        (
-            good.replace("spp: 512)", "spp: 0)"),
-            "spp must be at least 1",
-        ),
+        ("Path(max_depth: 1)", "Path(max_depth: 20)", "listed twice"),
+        ("spp: 512)", "spp: 0)", "spp must be at least 1"),
     ];
-    for (i, (text, needle)) in cases.iter().enumerate() {
+    for (i, (from, to, needle)) in cases.into_iter().enumerate() {
         let name = format!("bad{i}.ron");
-        write(dir.path(), &name, text);
+        write(dir.path(), &name, &good.replace(from, to));
         let o = tress(&["study", &name, "--out", "o"], dir.path());
         assert!(!o.status.success(), "case {i} ({needle}) was accepted");
         let e = stderr(&o);

@@ -455,6 +455,7 @@ pub fn test_instances() -> Vec<TestInstance<Params>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_util::assert_rejected;
     use std::f32::consts::FRAC_PI_2;
 
     fn chiang(beta_m: f32, beta_n: f32, alpha: f32, pigment: Pigment) -> Chiang {
@@ -770,63 +771,26 @@ mod tests {
 
     #[test]
     fn invalid_parameters_are_rejected_by_name() {
-        let bad = [
-            (
-                Params {
-                    beta_m: 0.0,
-                    ..Params::default()
-                },
-                "beta_m",
-            ),
-            (
-                Params {
-                    beta_m: 1.5,
-                    ..Params::default()
-                },
-                "beta_m",
-            ),
-            (
-                Params {
-                    beta_n: f32::NAN,
-                    ..Params::default()
-                },
-                "beta_n",
-            ),
-            (
-                Params {
-                    alpha: 120.0,
-                    ..Params::default()
-                },
-                "alpha",
-            ),
-            (
-                Params {
-                    eta: 1.0,
-                    ..Params::default()
-                },
-                "eta",
-            ),
-            (
-                Params {
-                    eta: f32::INFINITY,
-                    ..Params::default()
-                },
-                "eta",
-            ),
-            (
-                Params {
-                    pigment: Pigment::Melanin {
-                        eumelanin: -1.0,
-                        pheomelanin: 0.0,
+        assert_rejected(
+            Chiang::new,
+            &[
+                (|p| p.beta_m = 0.0, "beta_m"),
+                (|p| p.beta_m = 1.5, "beta_m"),
+                (|p| p.beta_n = f32::NAN, "beta_n"),
+                (|p| p.alpha = 120.0, "alpha"),
+                (|p| p.eta = 1.0, "eta"),
+                (|p| p.eta = f32::INFINITY, "eta"),
+                (
+                    |p| {
+                        p.pigment = Pigment::Melanin {
+                            eumelanin: -1.0,
+                            pheomelanin: 0.0,
+                        }
                     },
-                    ..Params::default()
-                },
-                "eumelanin",
-            ),
-        ];
-        for (p, field) in bad {
-            assert_eq!(Chiang::new(&p).unwrap_err().field, field, "{p:?}");
-        }
+                    "eumelanin",
+                ),
+            ],
+        );
         assert!(Chiang::new(&Params {
             beta_m: BETA_MIN,
             beta_n: 1.0,

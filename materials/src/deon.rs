@@ -806,6 +806,7 @@ pub fn test_instances() -> Vec<TestInstance<Params>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_util::assert_rejected;
     use tress_core::math::fiber_direction;
     use tress_core::rng::Sampler;
     use tress_core::sampling::sample_uniform_sphere;
@@ -1166,46 +1167,16 @@ mod tests {
 
     #[test]
     fn invalid_parameters_name_their_field() {
-        let bad = [
-            (
-                Params {
-                    longitudinal_roughness: 1.5,
-                    ..Params::default()
-                },
-                "longitudinal_roughness",
-            ),
-            (
-                Params {
-                    azimuthal_roughness: f32::NAN,
-                    ..Params::default()
-                },
-                "azimuthal_roughness",
-            ),
-            (
-                Params {
-                    alpha: 40.0,
-                    ..Params::default()
-                },
-                "alpha",
-            ),
-            (
-                Params {
-                    eta: 0.9,
-                    ..Params::default()
-                },
-                "eta",
-            ),
-            (
-                Params {
-                    pigment: Pigment::SigmaA((-1.0, 0.0, 0.0)),
-                    ..Params::default()
-                },
-                "sigma_a",
-            ),
-        ];
-        for (p, field) in bad {
-            assert_eq!(DEon::new(&p).unwrap_err().field, field);
-        }
+        assert_rejected(
+            DEon::new,
+            &[
+                (|p| p.longitudinal_roughness = 1.5, "longitudinal_roughness"),
+                (|p| p.azimuthal_roughness = f32::NAN, "azimuthal_roughness"),
+                (|p| p.alpha = 40.0, "alpha"),
+                (|p| p.eta = 0.9, "eta"),
+                (|p| p.pigment = Pigment::SigmaA((-1.0, 0.0, 0.0)), "sigma_a"),
+            ],
+        );
         assert!(DEon::new(&Params::default()).is_ok());
     }
 

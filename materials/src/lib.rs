@@ -16,6 +16,8 @@ pub mod dual_scattering_sampling;
 pub mod lambertian_fiber;
 pub mod marschner;
 pub mod pigment;
+#[cfg(test)]
+mod test_util;
 
 /// An invalid model parameter.
 #[derive(Debug, Clone, thiserror::Error, PartialEq)]

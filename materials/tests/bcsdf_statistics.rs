@@ -228,15 +228,40 @@ fn mc_mean(n: usize, seed: u64, mut g: impl FnMut(&mut Sampler) -> Rgb) -> Estim
 
 const FURNACE_THETAS: [f32; 4] = [0.0, 30.0, 60.0, 80.0];
 
-#[test]
-fn white_furnace_uniform() {
-    let all = instances();
-    let jobs: Vec<(usize, f32)> = all
-        .iter()
+/// (instance, θ_o) for every white-furnace instance and every θ_o of `FURNACE_THETAS`.
+fn furnace_jobs(all: &[Instance]) -> Vec<(usize, f32)> {
+    all.iter()
         .enumerate()
         .filter(|(_, t)| t.white_furnace)
         .flat_map(|(i, _)| FURNACE_THETAS.map(|th| (i, th)))
-        .collect();
+        .collect()
+}
+
+/// Asserts that every channel of the estimates of `jobs` is 1 within `percent` %, with a
+/// standard error below a quarter of the tolerance, so that the test has the resolution to fail.
+fn assert_furnace<'a>(
+    all: &[Instance],
+    jobs: &[(usize, f32)],
+    est: impl IntoIterator<Item = &'a Estimate>,
+    percent: f64,
+) {
+    let tol = percent / 100.0;
+    for ((i, th), e) in jobs.iter().zip(est) {
+        for c in 0..3 {
+            let ctx = format!("{} θ_o = {th}°, channel {c}: {}", all[*i].name, e.fmt(c));
+            assert!(4.0 * e.se[c] < tol, "{ctx}: too noisy to test ±{percent} %");
+            assert!(
+                (e.mean[c] - 1.0).abs() < tol,
+                "{ctx}: not within {percent} % of 1"
+            );
+        }
+    }
+}
+
+#[test]
+fn white_furnace_uniform() {
+    let all = instances();
+    let jobs = furnace_jobs(&all);
     // h uniform in [−1, 1] (16 strata × 2), wi uniform on the sphere (a 125·2ᴸ × 250·2ᴸ
     // jittered grid in (sin θ, φ) per h): 10⁶·4ᴸ samples at refinement level L.
     let est = par_map(&jobs, |&(i, th)| {
@@ -255,24 +280,13 @@ fn white_furnace_uniform() {
          (refinement level: 10⁶·4ᴸ samples)"
     );
     print_theta_table(&all, &jobs, &est, |(e, l)| format!("{} L{l}", e.fmt(0)));
-    for ((i, th), (e, _)) in jobs.iter().zip(&est) {
-        for c in 0..3 {
-            let ctx = format!("{} θ_o = {th}°, channel {c}: {}", all[*i].name, e.fmt(c));
-            assert!(4.0 * e.se[c] < 0.05, "{ctx}: too noisy to test ±5 %");
-            assert!((e.mean[c] - 1.0).abs() < 0.05, "{ctx}: not within 5 % of 1");
-        }
-    }
+    assert_furnace(&all, &jobs, est.iter().map(|(e, _)| e), 5.0);
 }
 
 #[test]
 fn white_furnace_importance_sampled() {
     let all = instances();
-    let jobs: Vec<(usize, f32)> = all
-        .iter()
-        .enumerate()
-        .filter(|(_, t)| t.white_furnace)
-        .flat_map(|(i, _)| FURNACE_THETAS.map(|th| (i, th)))
-        .collect();
+    let jobs = furnace_jobs(&all);
     let est = par_map(&jobs, |&(i, th)| {
         let b = &all[i].bcsdf;
         let wo = wo_at(th);
@@ -284,13 +298,7 @@ fn white_furnace_importance_sampled() {
     });
     println!("\nwhite furnace, importance sampled (h uniform): mean f/pdf, channel 0 ± s.e.");
     print_theta_table(&all, &jobs, &est, |e| e.fmt(0));
-    for ((i, th), e) in jobs.iter().zip(&est) {
-        for c in 0..3 {
-            let ctx = format!("{} θ_o = {th}°, channel {c}: {}", all[*i].name, e.fmt(c));
-            assert!(e.se[c] < 0.0025, "{ctx}: too noisy to test ±1 %");
-            assert!((e.mean[c] - 1.0).abs() < 0.01, "{ctx}: not within 1 % of 1");
-        }
-    }
+    assert_furnace(&all, &jobs, &est, 1.0);
 }
 
 /// Prints one row per instance and one column per θ_o of `jobs`.
@@ -316,6 +324,17 @@ fn print_theta_table<T>(
         row += &format!("{:>20}", cell(r));
     }
     println!("{row}");
+}
+
+/// Fails, naming `name`, with the count `what` describes and the first `shown` of `bad`,
+/// unless `bad` is empty.
+fn assert_none(name: &str, bad: &[String], what: &str, shown: usize) {
+    assert!(
+        bad.is_empty(),
+        "{name}: {} {what}, e.g.\n{}",
+        bad.len(),
+        bad[..bad.len().min(shown)].join("\n")
+    );
 }
 
 #[test]
@@ -352,13 +371,8 @@ fn sample_returns_eval_and_pdf() {
     for (t, (checked, bad)) in all.iter().zip(&failures) {
         println!("{:<32} {checked} samples checked", t.name);
         assert!(*checked > 10_000, "{}: too few samples", t.name);
-        assert!(
-            bad.is_empty(),
-            "{}: {} of {checked} samples disagree with eval/pdf, e.g.\n{}",
-            t.name,
-            bad.len(),
-            bad[..bad.len().min(5)].join("\n")
-        );
+        let what = format!("of {checked} samples disagree with eval/pdf");
+        assert_none(&t.name, bad, &what, 5);
     }
 }
 
@@ -635,13 +649,7 @@ fn outputs_are_finite_and_non_negative() {
         bad
     });
     for (t, bad) in all.iter().zip(&problems) {
-        assert!(
-            bad.is_empty(),
-            "{}: {} problems, e.g.\n{}",
-            t.name,
-            bad.len(),
-            bad[..bad.len().min(10)].join("\n")
-        );
+        assert_none(&t.name, bad, "problems", 10);
     }
 }
 

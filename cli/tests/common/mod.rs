@@ -1,4 +1,4 @@
-//! Helpers shared by the cli, hardening and farm tests: running the binary, small scenes, and reading
+//! Helpers shared by the tests of the `tress` binary: running it, small scenes, and reading
 //! every channel of an EXR bit for bit.
 
 // Each test crate that includes this module uses only some of its helpers.
@@ -17,6 +17,13 @@ pub fn tress(args: &[&str], cwd: &Path) -> Output {
 
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Runs `tress render scene.ron` with `args` in `cwd`, which must succeed; returns its stderr.
+pub fn render_ok(args: &[&str], cwd: &Path) -> String {
+    let o = tress(&[&["render", "scene.ron"], args].concat(), cwd);
+    assert!(o.status.success(), "{}", stderr(&o));
+    stderr(&o)
 }
 
 /// A tiny scene that renders in milliseconds: procedural hair ball, a sphere, sky and sun.
