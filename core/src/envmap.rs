@@ -211,16 +211,32 @@ impl EnvironmentMap {
 
     /// Radiance arriving from direction `dir` (nearest texel).
     pub fn radiance(&self, dir: Vec3) -> Rgb {
-        let (uv, _) = self.uv_of(dir);
-        // Same cell arithmetic as `Distribution2D::pdf`, so lookup and pdf agree on the texel.
+        self.texel_at(self.uv_of(dir).0)
+    }
+
+    /// Same cell arithmetic as `Distribution2D::pdf`, so lookup and pdf agree on the texel.
+    #[inline]
+    fn texel_at(&self, uv: Vec2) -> Rgb {
         let i = ((uv.x * self.width as f32) as usize).min(self.width - 1);
         let j = ((uv.y * self.height as f32) as usize).min(self.height - 1);
         self.texels[j * self.width + i]
     }
 
+    /// `(radiance(dir), pdf(dir))`, locating the texel once: what a path that escapes toward
+    /// the map needs for its MIS weight.
+    pub fn radiance_pdf(&self, dir: Vec3) -> (Rgb, f32) {
+        let (uv, sin_theta) = self.uv_of(dir);
+        (self.texel_at(uv), self.pdf_at(uv, sin_theta))
+    }
+
     /// Solid-angle density with which [`EnvironmentMap::sample`] returns `wi`.
     pub fn pdf(&self, wi: Vec3) -> f32 {
         let (uv, sin_theta) = self.uv_of(wi);
+        self.pdf_at(uv, sin_theta)
+    }
+
+    #[inline]
+    fn pdf_at(&self, uv: Vec2, sin_theta: f32) -> f32 {
         if sin_theta <= 0.0 {
             return 0.0;
         }
@@ -235,15 +251,17 @@ impl EnvironmentMap {
             return None;
         }
         let wi = map_direction(0.5 * PI - uv.y * PI, (uv.x - 0.5) * TAU - self.rotation);
-        // Density and radiance are re-derived from `wi` so that they equal `pdf(wi)` and
-        // `radiance(wi)` bit for bit, also where rounding moves `wi` across a texel edge.
-        let pdf = self.pdf(wi);
+        // Density and radiance are re-derived from `wi` (once, for both) so that they equal
+        // `pdf(wi)` and `radiance(wi)` bit for bit, also where rounding moves `wi` across a
+        // texel edge.
+        let (uv, sin_theta) = self.uv_of(wi);
+        let pdf = self.pdf_at(uv, sin_theta);
         if !(pdf > 0.0 && pdf.is_finite()) {
             return None;
         }
         Some(LightSample {
             wi,
-            radiance: self.radiance(wi),
+            radiance: self.texel_at(uv),
             pdf,
             distance: f32::INFINITY,
             is_delta: false,
@@ -477,6 +495,9 @@ mod tests {
                 returned += 1;
                 assert_eq!(env.radiance(ls.wi), ls.radiance);
                 assert_eq!(env.pdf(ls.wi), ls.pdf);
+                assert_eq!(env.radiance_pdf(ls.wi), (ls.radiance, ls.pdf));
+                let d = crate::sampling::sample_uniform_sphere(s.next_2d());
+                assert_eq!(env.radiance_pdf(d), (env.radiance(d), env.pdf(d)));
                 assert!(ls.pdf > 0.0 && ls.distance.is_infinite() && !ls.is_delta);
                 assert!((ls.wi.length() - 1.0).abs() < 1e-5);
                 // Sampling never lands where there is no light.

@@ -133,6 +133,14 @@ impl Light {
     }
 
     /// Radiance along an escaping ray travelling in direction `dir` (arriving from `dir`).
+    /// `(le(dir), pdf_li(dir))` in one call (the environment map locates its texel once).
+    pub fn le_pdf(&self, dir: Vec3) -> (Rgb, f32) {
+        match self {
+            Light::Environment(env) => env.radiance_pdf(dir),
+            _ => (self.le(dir), self.pdf_li(dir)),
+        }
+    }
+
     pub fn le(&self, dir: Vec3) -> Rgb {
         match self {
             Light::Environment(env) => env.radiance(dir),

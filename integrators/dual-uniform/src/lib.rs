@@ -235,11 +235,10 @@ impl<D: DirectionSampling> Integrator for DualScattering<D> {
         for depth in 0..=self.settings.max_depth {
             let Some(hit) = scene.intersect(&ray) else {
                 for light in &infinite {
-                    let le = light.le(ray.dir);
+                    let (le, light_pdf) = light.le_pdf(ray.dir);
                     if le != Rgb::ZERO {
-                        let w = scatter_pdf.map_or(1.0, |p| {
-                            power_heuristic(p, select_pdf * light.pdf_li(ray.dir))
-                        });
+                        let w =
+                            scatter_pdf.map_or(1.0, |p| power_heuristic(p, select_pdf * light_pdf));
                         radiance += throughput * le * w;
                     }
                 }

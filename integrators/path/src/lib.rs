@@ -59,13 +59,13 @@ impl Integrator for PathTracer {
         for depth in 0.. {
             let Some(hit) = scene.intersect(&ray) else {
                 for light in scene.lights.iter().filter(|l| l.is_infinite()) {
-                    let le = light.le(ray.dir);
+                    let (le, light_pdf) = light.le_pdf(ray.dir);
                     if le == Rgb::ZERO {
                         continue;
                     }
                     let weight = match scatter_pdf {
                         None => 1.0,
-                        Some(pdf) => power_heuristic(pdf, light_select_pdf * light.pdf_li(ray.dir)),
+                        Some(pdf) => power_heuristic(pdf, light_select_pdf * light_pdf),
                     };
                     radiance += throughput * le * weight;
                 }
