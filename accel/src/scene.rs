@@ -44,20 +44,33 @@ pub(crate) struct CurveData {
     /// copied out of the strand's so that a hit finds them from the primitive id alone: one
     /// cache miss instead of two in a row through an index.
     seg_cps: Vec<Vec4>,
-    /// Per primitive: dense strand slot.
-    seg_strand: Vec<u32>,
-    /// Per primitive: index of the segment in its strand's polyline (for `v`).
-    seg_index: Vec<u32>,
+    /// Per primitive: its strand and place in it, one record so that a hit reads one cache
+    /// line for them.
+    segs: Vec<SegmentRecord>,
     /// Per primitive: a capsule containing the fiber swept by the segment.
     capsules: Vec<Capsule>,
-    /// Per strand slot: polyline segment count.
-    strand_segments: Vec<u32>,
-    /// Per strand slot: the strand's index in the hair object.
-    strand_id: Vec<u32>,
-    /// Per strand slot, plus one past the end: its first primitive (a strand's primitives are
-    /// consecutive), so the filter tells a hit on the strand a ray leaves from any other
-    /// without reading the hit primitive's data (a cache miss per candidate hit).
-    strand_first_prim: Vec<u32>,
+    /// Per strand slot: what hits and the filter need of a strand, in one record.
+    strands: Vec<StrandRecord>,
+}
+
+/// A primitive's strand slot and the index of the segment in the strand's polyline (for `v`).
+#[derive(Clone, Copy, Debug)]
+struct SegmentRecord {
+    strand: u32,
+    index: u32,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct StrandRecord {
+    /// The strand's primitives, `first_prim..end_prim` (consecutive), so the filter tells a
+    /// hit on the strand a ray leaves from any other without reading the hit primitive's data
+    /// (a cache miss per candidate hit).
+    first_prim: u32,
+    end_prim: u32,
+    /// Polyline segment count.
+    segments: u32,
+    /// The strand's index in the hair object.
+    id: u32,
 }
 
 impl CurveData {
@@ -68,11 +81,11 @@ impl CurveData {
             return false;
         }
         let (s, k) = (from as usize, hit as usize);
-        let Some(&strand) = self.seg_strand.get(s) else {
+        let Some(seg) = self.segs.get(s) else {
             return true;
         };
-        let strand = strand as usize;
-        if !(self.strand_first_prim[strand]..self.strand_first_prim[strand + 1]).contains(&hit) {
+        let strand = &self.strands[seg.strand as usize];
+        if !(strand.first_prim..strand.end_prim).contains(&hit) {
             return true;
         }
         !self.inside_fiber_until(s, k, org, dir)
@@ -116,23 +129,23 @@ impl CurveData {
         let radius = axis.w.max(f32::MIN_POSITIVE);
         let frame = FiberFrame::new(tangent, -ray.dir);
         let h = ((p - axis.truncate()).dot(frame.width_axis()) / radius).clamp(-1.0, 1.0);
-        let strand = self.seg_strand[prim] as usize;
-        let v = ((self.seg_index[prim] as f32 + u) / self.strand_segments[strand] as f32)
-            .clamp(0.0, 1.0);
+        let seg = self.segs[prim];
+        let strand = &self.strands[seg.strand as usize];
+        let v = ((seg.index as f32 + u) / strand.segments as f32).clamp(0.0, 1.0);
         HitKind::Fiber {
             tangent,
             h,
             radius,
-            strand: self.strand_id[strand],
+            strand: strand.id,
             v,
         }
     }
 
     fn memory_bytes(&self) -> usize {
         self.seg_cps.len() * 16
-            + (self.seg_strand.len() + self.seg_index.len()) * 4
+            + self.segs.len() * std::mem::size_of::<SegmentRecord>()
             + self.capsules.len() * std::mem::size_of::<Capsule>()
-            + (self.strand_segments.len() + self.strand_id.len() + self.strand_first_prim.len()) * 4
+            + self.strands.len() * std::mem::size_of::<StrandRecord>()
     }
 }
 
@@ -331,12 +344,9 @@ impl SceneBuilder {
             basis,
             material,
             seg_cps: Vec::new(),
-            seg_strand: Vec::new(),
-            seg_index: Vec::new(),
+            segs: Vec::new(),
             capsules: Vec::new(),
-            strand_segments: Vec::new(),
-            strand_id: Vec::new(),
-            strand_first_prim: Vec::new(),
+            strands: Vec::new(),
         };
         // Embree's vertex and index buffers.
         let mut cps: Vec<Vec4> = Vec::new();
@@ -359,7 +369,7 @@ impl SceneBuilder {
                         .extend(hair.radii[at] * radius_scale * taper)
                 })
                 .collect();
-            let strand = data.strand_id.len() as u32;
+            let strand = data.strands.len() as u32;
             let base = cps.len();
             cps.extend(basis.control_points(&pts));
             let before = seg_first_cp.len();
@@ -376,20 +386,24 @@ impl SceneBuilder {
                 bounds.grow(cap.b + Vec3::splat(cap.r));
                 data.seg_cps.extend_from_slice(seg);
                 seg_first_cp.push((base + j) as u32);
-                data.seg_strand.push(strand);
-                data.seg_index.push(j as u32);
+                data.segs.push(SegmentRecord {
+                    strand,
+                    index: j as u32,
+                });
                 data.capsules.push(cap);
             }
             if seg_first_cp.len() == before {
                 cps.truncate(base);
                 continue;
             }
-            data.strand_segments.push((n - 1) as u32);
-            data.strand_id.push(id);
-            data.strand_first_prim.push(before as u32);
+            data.strands.push(StrandRecord {
+                first_prim: before as u32,
+                end_prim: seg_first_cp.len() as u32,
+                segments: (n - 1) as u32,
+                id,
+            });
             points += n;
         }
-        data.strand_first_prim.push(seg_first_cp.len() as u32);
         if seg_first_cp.is_empty() {
             return Err(Error::InvalidGeometry {
                 object: hair.name.clone(),
@@ -433,8 +447,8 @@ impl SceneBuilder {
         let info = ObjectInfo {
             name: name.clone(),
             kind: ObjectKind::Hair {
-                strands: data.strand_id.len(),
-                segments: data.seg_strand.len(),
+                strands: data.strands.len(),
+                segments: data.segs.len(),
                 points,
                 basis,
             },
@@ -731,7 +745,7 @@ impl CurveData {
 
     /// Curve segments (Embree primitives).
     pub(crate) fn segments(&self) -> usize {
-        self.seg_strand.len()
+        self.segs.len()
     }
 
     /// The control points (position, radius) of segment `prim`, `basis().order()` of them.
@@ -742,7 +756,7 @@ impl CurveData {
 
     /// Whether two segments belong to the same strand.
     pub(crate) fn same_strand(&self, a: usize, b: usize) -> bool {
-        self.seg_strand[a] == self.seg_strand[b]
+        self.segs[a].strand == self.segs[b].strand
     }
 }
 
