@@ -1,12 +1,67 @@
 //! The integrator interface: radiance along one camera ray.
 
-use crate::math::{Ray, Rgb};
+use crate::light::Light;
+use crate::math::{Ray, Rgb, Vec2, Vec3};
 use crate::rng::Sampler;
+use crate::sampling::power_heuristic;
 use crate::scene::Scene;
+use crate::shading::ShadingPoint;
 
 /// Estimates the radiance arriving along a camera ray. The render loop in [`crate::render`] owns
 /// tiles, seeding, film and progress, so an integrator only writes `li`.
 pub trait Integrator: Send + Sync + std::fmt::Debug {
     /// One sample of the radiance arriving at the camera along `ray` (travelling away from it).
     fn li(&self, ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb;
+}
+
+/// Next-event estimation at `sp` toward `light`, chosen with probability `select_pdf`: what
+/// it adds to a path of weight `throughput`, MIS-weighted (power heuristic) against sampling
+/// the scattering function, which cannot find delta lights (their weight is 1). Zero when the
+/// light is blocked or sends nothing.
+pub fn direct_light(
+    scene: &Scene,
+    sp: &ShadingPoint,
+    light: &Light,
+    u: Vec2,
+    select_pdf: f32,
+    throughput: Rgb,
+) -> Rgb {
+    let Some(ls) = light.sample_li(sp.p, u) else {
+        return Rgb::ZERO;
+    };
+    // The scattering pdf comes with f at little extra cost; it is only used when the shadow
+    // ray is unoccluded.
+    let (f, scatter_pdf) = sp.eval_pdf(ls.wi);
+    if !(ls.pdf > 0.0 && f != Rgb::ZERO && ls.radiance != Rgb::ZERO) {
+        return Rgb::ZERO;
+    }
+    if scene.occluded(&sp.spawn(ls.wi).with_t_max(ls.distance * (1.0 - 1e-4))) {
+        return Rgb::ZERO;
+    }
+    let light_pdf = select_pdf * ls.pdf;
+    let weight = if ls.is_delta {
+        1.0
+    } else {
+        power_heuristic(light_pdf, scatter_pdf)
+    };
+    throughput * f * ls.radiance * (weight / light_pdf)
+}
+
+/// What the light at infinity `light` adds to a path of weight `throughput` that escaped along
+/// `dir`, MIS-weighted against next-event estimation choosing it with probability
+/// `select_pdf`. `scatter_pdf` is the density of the scattering sample that produced the ray;
+/// `None` for a camera ray, which light sampling cannot produce (weight 1).
+pub fn escaped_light(
+    light: &Light,
+    dir: Vec3,
+    scatter_pdf: Option<f32>,
+    select_pdf: f32,
+    throughput: Rgb,
+) -> Rgb {
+    let (le, light_pdf) = light.le_pdf(dir);
+    if le == Rgb::ZERO {
+        return Rgb::ZERO;
+    }
+    let weight = scatter_pdf.map_or(1.0, |p| power_heuristic(p, select_pdf * light_pdf));
+    throughput * le * weight
 }

@@ -21,7 +21,8 @@
 
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
-use tress_core::sampling::{power_heuristic, sample_uniform_sphere, INV_4PI};
+use tress_core::integrator::{direct_light, escaped_light};
+use tress_core::sampling::{sample_uniform_sphere, INV_4PI};
 use tress_core::shading::Scattering;
 use tress_core::{Integrator, Material, Ray, Rgb, Sampler, Scene, ShadingPoint};
 use tress_materials::dual_scattering::{
@@ -235,12 +236,7 @@ impl<D: DirectionSampling> Integrator for DualScattering<D> {
         for depth in 0..=self.settings.max_depth {
             let Some(hit) = scene.intersect(&ray) else {
                 for light in &infinite {
-                    let (le, light_pdf) = light.le_pdf(ray.dir);
-                    if le != Rgb::ZERO {
-                        let w =
-                            scatter_pdf.map_or(1.0, |p| power_heuristic(p, select_pdf * light_pdf));
-                        radiance += throughput * le * w;
-                    }
+                    radiance += escaped_light(light, ray.dir, scatter_pdf, select_pdf, throughput);
                 }
                 break;
             };
@@ -254,29 +250,14 @@ impl<D: DirectionSampling> Integrator for DualScattering<D> {
             }
             // A surface: next-event estimation as in the path tracer (hair blocks fully here).
             let (u_select, u_light) = (sampler.next_1d(), sampler.next_2d());
+            // Every delta light (chosen with probability 1), and one of the others.
             for light in scene.lights.iter().filter(|l| l.is_delta()) {
-                if let Some(ls) = light.sample_li(sp.p, u_light) {
-                    let f = sp.eval(ls.wi);
-                    if f != Rgb::ZERO
-                        && !scene.occluded(&sp.spawn(ls.wi).with_t_max(ls.distance * (1.0 - 1e-4)))
-                    {
-                        radiance += throughput * f * ls.radiance;
-                    }
-                }
+                radiance += direct_light(scene, &sp, light, u_light, 1.0, throughput);
             }
             if !infinite.is_empty() {
                 let light =
                     infinite[((u_select * infinite.len() as f32) as usize).min(infinite.len() - 1)];
-                if let Some(ls) = light.sample_li(sp.p, u_light) {
-                    let (f, scatter_pdf) = sp.eval_pdf(ls.wi);
-                    if ls.pdf > 0.0 && f != Rgb::ZERO && !scene.occluded(&sp.spawn(ls.wi)) {
-                        let light_pdf = select_pdf * ls.pdf;
-                        radiance += throughput
-                            * f
-                            * ls.radiance
-                            * (power_heuristic(light_pdf, scatter_pdf) / light_pdf);
-                    }
-                }
+                radiance += direct_light(scene, &sp, light, u_light, select_pdf, throughput);
             }
             let Some(s) = sp.sample(sampler.next_4d()) else {
                 break;

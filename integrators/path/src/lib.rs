@@ -7,7 +7,7 @@
 //! RON: `Path(max_depth: 100, rr_depth: 5)`
 
 use serde::{Deserialize, Serialize};
-use tress_core::sampling::power_heuristic;
+use tress_core::integrator::{direct_light, escaped_light};
 use tress_core::{Integrator, Ray, Rgb, Sampler, Scene, ShadingPoint};
 
 /// Path tracer settings.
@@ -59,15 +59,8 @@ impl Integrator for PathTracer {
         for depth in 0.. {
             let Some(hit) = scene.intersect(&ray) else {
                 for light in scene.lights.iter().filter(|l| l.is_infinite()) {
-                    let (le, light_pdf) = light.le_pdf(ray.dir);
-                    if le == Rgb::ZERO {
-                        continue;
-                    }
-                    let weight = match scatter_pdf {
-                        None => 1.0,
-                        Some(pdf) => power_heuristic(pdf, light_select_pdf * light_pdf),
-                    };
-                    radiance += throughput * le * weight;
+                    radiance +=
+                        escaped_light(light, ray.dir, scatter_pdf, light_select_pdf, throughput);
                 }
                 break;
             };
@@ -82,23 +75,7 @@ impl Integrator for PathTracer {
             if light_count > 0 {
                 let light =
                     &scene.lights[((u_select * light_count as f32) as usize).min(light_count - 1)];
-                if let Some(ls) = light.sample_li(sp.p, u_light) {
-                    // The scattering pdf comes with f at little extra cost; it is only used
-                    // when the shadow ray is unoccluded.
-                    let (f, scatter_pdf) = sp.eval_pdf(ls.wi);
-                    if ls.pdf > 0.0 && f != Rgb::ZERO && ls.radiance != Rgb::ZERO {
-                        let shadow = sp.spawn(ls.wi).with_t_max(ls.distance * (1.0 - 1e-4));
-                        if !scene.occluded(&shadow) {
-                            let light_pdf = light_select_pdf * ls.pdf;
-                            let weight = if ls.is_delta {
-                                1.0
-                            } else {
-                                power_heuristic(light_pdf, scatter_pdf)
-                            };
-                            radiance += throughput * f * ls.radiance * (weight / light_pdf);
-                        }
-                    }
-                }
+                radiance += direct_light(scene, &sp, light, u_light, light_select_pdf, throughput);
             }
 
             // Continue the path by sampling the scattering function.
