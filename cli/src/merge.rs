@@ -18,7 +18,6 @@ use exr::prelude::{AttributeValue, ReadChannels, ReadLayers, Text, WritableImage
 use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
-use tress_core::image_io;
 use tress_core::render::{dyadic_cover, SampleSums};
 
 /// Value of the `tress:sums` attribute: the layout of the sum channels.
@@ -370,12 +369,8 @@ pub struct MergeArgs {
     /// Refuse unless the merged image holds exactly this many samples per pixel.
     #[arg(long)]
     pub expect_spp: Option<u64>,
-    /// Exposure of the PNG preview, in stops.
-    #[arg(long, default_value_t = 0.0)]
-    pub exposure: f32,
-    /// Do not write the PNG preview.
-    #[arg(long)]
-    pub no_preview: bool,
+    #[command(flatten)]
+    pub preview: crate::render_cmd::PreviewArgs,
     /// No summary.
     #[arg(long)]
     pub quiet: bool,
@@ -467,10 +462,7 @@ pub fn run(args: MergeArgs) -> Result<()> {
             .with_context(|| format!("creating output folder {}", dir.display()))?;
     }
     write_render(&args.out, &merged, &identity, &attributes)?;
-    let png = args.out.with_extension("png");
-    if !args.no_preview {
-        image_io::write_png(&png, &merged.image(), args.exposure)?;
-    }
+    args.preview.write(&args.out, &merged.image())?;
     if !args.quiet {
         let [x0, y0, x1, y1] = plan.window;
         eprintln!(

@@ -58,15 +58,32 @@ pub struct RenderArgs {
     /// finished so far.
     #[arg(long)]
     pub partial: bool,
+    #[command(flatten)]
+    pub preview: PreviewArgs,
+    /// No progress bar and no summary.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// The tone-mapped PNG written beside an output EXR (render and merge).
+#[derive(Args, Debug)]
+pub struct PreviewArgs {
     /// Exposure of the PNG preview, in stops.
     #[arg(long, default_value_t = 0.0)]
     pub exposure: f32,
     /// Do not write the PNG preview.
     #[arg(long)]
     pub no_preview: bool,
-    /// No progress bar and no summary.
-    #[arg(long)]
-    pub quiet: bool,
+}
+
+impl PreviewArgs {
+    /// Writes the preview of `image` beside `exr` (same name, `.png`) unless disabled.
+    pub fn write(&self, exr: &Path, image: &tress_core::Image) -> Result<()> {
+        if !self.no_preview {
+            image_io::write_png(exr.with_extension("png"), image, self.exposure)?;
+        }
+        Ok(())
+    }
 }
 
 pub fn parse_crop(s: &str) -> Result<[u32; 4], String> {
@@ -177,14 +194,7 @@ impl Outputs<'_> {
             ("tress:rays", stats.rays.to_string()),
         ];
         merge::write_render(&self.out, sums, &self.identity, &attributes)?;
-        if !self.args.no_preview {
-            image_io::write_png(
-                self.out.with_extension("png"),
-                &sums.image(),
-                self.args.exposure,
-            )?;
-        }
-        Ok(())
+        self.args.preview.write(&self.out, &sums.image())
     }
 }
 
@@ -306,7 +316,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
     }
     outputs.write(&done, &stats, status)?;
     let png = out.with_extension("png");
-    let wrote = if args.no_preview {
+    let wrote = if args.preview.no_preview {
         out.display().to_string()
     } else {
         format!("{} and {}", out.display(), png.display())
