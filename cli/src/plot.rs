@@ -62,24 +62,9 @@ pub fn write_charts(stem: &Path, charts: &[Chart], panel_width: u32, height: u32
         bail!("nothing to plot");
     }
     let size = (panel_width * charts.len() as u32, height);
-    let png = stem.with_extension("png");
     let svg = stem.with_extension("svg");
-    let dir = stem
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-
-    let tmp_png = image_io::output_temp_file(dir, ".png")?;
-    {
-        let root = BitMapBackend::new(tmp_png.path(), size).into_drawing_area();
-        draw(&root, charts)?;
-        root.present()
-            .map_err(|e| anyhow!("drawing {}: {e}", png.display()))?;
-    }
-    tmp_png
-        .persist(&png)
-        .with_context(|| format!("writing {}", png.display()))?;
+    // Also creates the folder the SVG goes to.
+    write_bitmap(&stem.with_extension("png"), size, |root| draw(root, charts))?;
 
     let mut svg_text = String::new();
     {
