@@ -73,6 +73,7 @@ mod curves;
 pub mod cyhair;
 pub mod density;
 mod error;
+mod fp_mode;
 pub mod geometry;
 pub mod mesh;
 pub mod procedural;

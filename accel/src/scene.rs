@@ -4,6 +4,7 @@
 
 use crate::curves::{Capsule, CurveBasis};
 use crate::error::{Error, Result};
+use crate::fp_mode;
 use crate::geometry::{HairGeometry, Transform};
 use crate::mesh::TriangleMesh;
 use crate::source::HairOptions;
@@ -268,8 +269,8 @@ pub struct SceneBuilder {
 impl SceneBuilder {
     /// A new Embree device and empty scene.
     pub fn new() -> Result<Self> {
-        let device =
-            Device::new().map_err(|e| Error::Embree(format!("cannot create device: {e}")))?;
+        let device = fp_mode::preserving_fp_mode(Device::new)
+            .map_err(|e| Error::Embree(format!("cannot create device: {e}")))?;
         for (prop, what) in [
             (
                 DeviceProperty::FILTER_FUNCTION_SUPPORTED,

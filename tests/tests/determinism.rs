@@ -1,74 +1,134 @@
-//! Same scene + seed ⇒ the bit-identical image, whatever the thread count or crop window.
+//! Same scene + seed ⇒ the bit-identical image, whatever the integrator, the thread count, the
+//! crop window or the run.
 
 use std::sync::Arc;
 use tress_core::light::{EnvironmentMap, Light};
 use tress_core::render::render;
-use tress_core::Scene;
+use tress_core::{Integrator, Scene};
+use tress_dual_mis::{DualMis, MisDirections};
+use tress_dual_uniform::{DualSettings, DualUniform, UniformDirections};
+use tress_materials::pigment::Pigment;
 use tress_materials::HairModel;
 use tress_path::{PathSettings, PathTracer};
-use tress_tests::{film, hair_ball_scene};
+use tress_tests::{film, hair_ball, hair_ball_scene, with_density_grid};
 
+/// Dark hair under a sky so dim (scale 1e-36) that most radiance values are denormal floats, so
+/// any thread computing in another floating-point mode (flush-to-zero) shows in the bits; with
+/// the density grid the dual-scattering integrators need.
 fn scene() -> Scene {
-    let model = HairModel::Chiang(Default::default()).build().unwrap();
-    let sky = EnvironmentMap::builtin_sky(30.0, 1.0).unwrap();
-    hair_ball_scene(Arc::clone(&model), 1500, vec![Light::Environment(sky)])
+    let model = HairModel::Chiang(tress_materials::chiang::Params {
+        pigment: Pigment::Melanin {
+            eumelanin: 8.0,
+            pheomelanin: 0.5,
+        },
+        ..Default::default()
+    })
+    .build()
+    .unwrap();
+    let sky = EnvironmentMap::builtin_sky(30.0, 1e-36).unwrap();
+    let scene = hair_ball_scene(Arc::clone(&model), 1500, vec![Light::Environment(sky)]);
+    with_density_grid(scene, &hair_ball(1500))
 }
 
+type BuildIntegrator = fn(&Scene) -> Box<dyn Integrator>;
+
+fn integrators() -> [(&'static str, BuildIntegrator); 3] {
+    fn ds() -> DualSettings {
+        DualSettings {
+            tables: tress_materials::dual_scattering::DualScatteringSettings {
+                theta_nodes: 16,
+                ..Default::default()
+            },
+            ..Default::default()
+        }
+    }
+    [
+        ("path", |_| {
+            Box::new(PathTracer::new(PathSettings::default()))
+        }),
+        ("dual-uniform", |s| {
+            Box::new(DualUniform::new(ds(), s, UniformDirections).unwrap())
+        }),
+        ("dual-mis", |s| {
+            Box::new(DualMis::new(ds(), s, MisDirections).unwrap())
+        }),
+    ]
+}
+
+/// Builds the scene and the integrator on a fresh pool of `threads` workers — as the CLI does,
+/// so that whatever building leaves behind on a worker thread is part of the test — and renders
+/// there.
 fn render_with(
-    scene: &Scene,
     threads: usize,
+    integrator: BuildIntegrator,
     film: &tress_core::film::FilmSettings,
 ) -> tress_core::Image {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .unwrap();
-    let integrator = PathTracer::new(PathSettings::default());
-    pool.install(|| render(scene, &integrator, film, &|_| {}))
-        .image
+    pool.install(|| {
+        let scene = scene();
+        let integrator = integrator(&scene);
+        render(&scene, integrator.as_ref(), film, &|_| {}).image
+    })
 }
 
-#[test]
-fn image_is_identical_for_any_thread_count() {
-    let scene = scene();
-    let f = film(40, 40, 4, 5);
-    let one = render_with(&scene, 1, &f);
-    let four = render_with(&scene, 4, &f);
-    assert!(one.mean() > 0.0);
-    assert_eq!(one.pixels.len(), four.pixels.len());
-    for (a, b) in one.pixels.iter().zip(&four.pixels) {
+fn assert_bit_identical(a: &tress_core::Image, b: &tress_core::Image, what: &str) {
+    assert_eq!(a.pixels.len(), b.pixels.len());
+    for (i, (p, q)) in a.pixels.iter().zip(&b.pixels).enumerate() {
         assert_eq!(
-            a.to_array().map(f32::to_bits),
-            b.to_array().map(f32::to_bits)
+            p.to_array().map(f32::to_bits),
+            q.to_array().map(f32::to_bits),
+            "{what}: pixel {i}"
         );
     }
 }
 
 #[test]
-fn crop_window_equals_the_same_window_of_the_full_render() {
-    let scene = scene();
-    let full = render_with(&scene, 2, &film(40, 40, 4, 5));
-    let mut cropped_film = film(40, 40, 4, 5);
-    cropped_film.crop = Some([7, 13, 29, 31]);
-    let crop = render_with(&scene, 3, &cropped_film);
-    assert_eq!((crop.x0, crop.y0, crop.width, crop.height), (7, 13, 22, 18));
-    for y in 0..crop.height {
-        for x in 0..crop.width {
-            let a = crop.get(x, y);
-            let b = full.get(x + 7, y + 13);
-            assert_eq!(
-                a.to_array().map(f32::to_bits),
-                b.to_array().map(f32::to_bits),
-                "pixel ({x}, {y})"
+fn image_is_identical_for_any_thread_count_and_run() {
+    let f = film(40, 40, 4, 5);
+    for (name, integrator) in integrators() {
+        let one = render_with(1, integrator, &f);
+        assert!(one.mean() > 0.0, "{name}: black image");
+        for (threads, run) in [(2, 1), (2, 2), (3, 1)] {
+            let other = render_with(threads, integrator, &f);
+            assert_bit_identical(
+                &one,
+                &other,
+                &format!("{name}, {threads} threads, run {run}"),
             );
         }
     }
 }
 
 #[test]
+fn crop_window_equals_the_same_window_of_the_full_render() {
+    for (name, integrator) in integrators() {
+        let full = render_with(2, integrator, &film(40, 40, 4, 5));
+        let mut cropped_film = film(40, 40, 4, 5);
+        cropped_film.crop = Some([7, 13, 29, 31]);
+        let crop = render_with(3, integrator, &cropped_film);
+        assert_eq!((crop.x0, crop.y0, crop.width, crop.height), (7, 13, 22, 18));
+        for y in 0..crop.height {
+            for x in 0..crop.width {
+                let a = crop.get(x, y);
+                let b = full.get(x + 7, y + 13);
+                assert_eq!(
+                    a.to_array().map(f32::to_bits),
+                    b.to_array().map(f32::to_bits),
+                    "{name}: pixel ({x}, {y})"
+                );
+            }
+        }
+    }
+}
+
+#[test]
 fn a_different_seed_gives_a_different_image() {
-    let scene = scene();
-    let a = render_with(&scene, 2, &film(24, 24, 2, 1));
-    let b = render_with(&scene, 2, &film(24, 24, 2, 2));
-    assert_ne!(a.pixels, b.pixels);
+    for (name, integrator) in integrators() {
+        let a = render_with(2, integrator, &film(24, 24, 2, 1));
+        let b = render_with(2, integrator, &film(24, 24, 2, 2));
+        assert_ne!(a.pixels, b.pixels, "{name}");
+    }
 }
