@@ -229,6 +229,8 @@ impl Plan {
                     h_nodes: 8,
                     theta_quad: 16,
                     phi_quad: 24,
+                    walks: 1024,
+                    ..Default::default()
                 },
             }
         } else {

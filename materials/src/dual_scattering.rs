@@ -45,6 +45,13 @@
 //!   lobe's N_t is half its energy per radian, and the paper's `N^G = (1/π)∫_{Ω_f} N_t dφ` is
 //!   `a_f^t / (2π)`. This makes `f_s_scatter` computable from the tables for any model.
 //!
+//! # Multiple scattering
+//! [`MultipleScattering::Paper`] uses the closed forms above (T_f = d_f ā_f^n, Ā_b, Δ_b, σ_b).
+//! [`MultipleScattering::FiberMedium`], the default, measures the scattered transmittance and
+//! the back-scattering of the fibers by random walks in a homogeneous medium of them
+//! ([`crate::fiber_medium`]): the closed forms treat a fiber as passing light straight on or
+//! straight back, and make light hair 35–45 % too dark in red (README).
+//!
 //! # Quadrature
 //! Midpoint rule in θ ∈ [−π/2, π/2] (`theta_quad` nodes) and in φ over the whole circle
 //! (`phi_quad` nodes, even, so both half-space boundaries fall between nodes); Gauss–Legendre
@@ -78,6 +85,7 @@
 //! visible (of which f_s: 1.00), 3.43 scattered only with n = 1; brown Chiang 0.43 (f_s: 0.40)
 //! and 0.13.
 
+use crate::fiber_medium::{BackScattering, FiberMedium};
 use crate::ParamError;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
@@ -110,6 +118,19 @@ pub struct DualScatteringSettings {
     /// Midpoint nodes over the integrated direction's azimuth (even); a minimum, doubled
     /// automatically for narrow azimuthal lobes (module docs, "Quadrature").
     pub phi_quad: usize,
+    /// How light that crossed other fibers is modelled (module docs, "Multiple scattering").
+    pub multiple_scattering: MultipleScattering,
+    /// Random walks per θ node for [`MultipleScattering::FiberMedium`].
+    pub walks: u32,
+}
+
+/// Where the multiple-scattering quantities of F come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum MultipleScattering {
+    /// Zinke et al.'s closed forms: `T_f = d_f ā_f^n`, Ā_b, Δ_b, σ_b (eqs. 14–17).
+    Paper,
+    /// Random walks in a homogeneous medium of the fibers ([`crate::fiber_medium`]).
+    FiberMedium,
 }
 
 impl Default for DualScatteringSettings {
@@ -119,6 +140,8 @@ impl Default for DualScatteringSettings {
             h_nodes: 32,
             theta_quad: 64,
             phi_quad: 96,
+            multiple_scattering: MultipleScattering::FiberMedium,
+            walks: 4096,
         }
     }
 }
@@ -140,6 +163,13 @@ impl DualScatteringSettings {
         check("h_nodes", self.h_nodes, 1)?;
         check("theta_quad", self.theta_quad, 2)?;
         check("phi_quad", self.phi_quad, 2)?;
+        if !(64..=1 << 24).contains(&self.walks) {
+            return Err(ParamError::new(
+                "walks",
+                self.walks,
+                "must lie in [64, 16777216]",
+            ));
+        }
         if !self.phi_quad.is_multiple_of(2) {
             return Err(ParamError::new(
                 "phi_quad",
@@ -151,7 +181,8 @@ impl DualScatteringSettings {
     }
 }
 
-/// The paper's density factors d_f (forward) and d_b (backward), in [0, 1].
+/// The density factors d_f (forward) and d_b (backward), in [0, 1]: the paper's free
+/// parameters, or scales of the measured terms (see [`DensityFactors::for_model`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DensityFactors {
@@ -163,6 +194,17 @@ impl Default for DensityFactors {
     /// 0.7 for both, as Zinke et al. suggest and every public implementation uses.
     fn default() -> Self {
         DensityFactors { d_f: 0.7, d_b: 0.7 }
+    }
+}
+
+impl DensityFactors {
+    /// The defaults for `model`: the paper's 0.7 for its closed forms; 1 (nothing removed)
+    /// for the measured fiber medium, whose transport already accounts for the hair density.
+    pub fn for_model(model: MultipleScattering) -> Self {
+        match model {
+            MultipleScattering::Paper => Self::default(),
+            MultipleScattering::FiberMedium => DensityFactors { d_f: 1.0, d_b: 1.0 },
+        }
     }
 }
 
@@ -265,6 +307,8 @@ pub struct DualScatteringTables {
     globals: Vec<DsGlobals>,
     /// `theta_nodes × lobes`, node-major.
     lobes: Vec<DsLobe>,
+    /// Measured multiple scattering ([`MultipleScattering::FiberMedium`]).
+    medium: Option<FiberMedium>,
     build_time: Duration,
 }
 
@@ -286,40 +330,18 @@ impl DualScatteringTables {
         let start = Instant::now();
         let n = settings.theta_nodes;
         let quad = Quadrature::new(settings, domain, refined_phi_quad(bcsdf, settings, domain)?);
-        let threads = std::thread::available_parallelism()
-            .map_or(1, |c| c.get())
-            .min(n);
-        // Thread j computes nodes j, j + threads, …: each node is independent, so the result
-        // does not depend on the thread count, and interleaving balances the cheap and the
-        // expensive inclinations.
-        let mut per_node: Vec<Option<Result<NodeMoments, DualScatteringError>>> =
-            (0..n).map(|_| None).collect();
-        std::thread::scope(|s| {
-            let handles: Vec<_> = (0..threads)
-                .map(|j| {
-                    let quad = &quad;
-                    s.spawn(move || {
-                        (j..n)
-                            .step_by(threads)
-                            .map(|k| (k, quad.node(bcsdf, node_theta(k, n))))
-                            .collect::<Vec<_>>()
-                    })
-                })
-                .collect();
-            for h in handles {
-                for (k, m) in h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)) {
-                    per_node[k] = Some(m);
-                }
-            }
-        });
+        let per_node = crate::parallel_map(n, |k| quad.node(bcsdf, node_theta(k, n)));
         let lobe_names = bcsdf.lobe_names();
         let mut globals = Vec::with_capacity(n);
         let mut lobes = Vec::with_capacity(n * lobe_names.len());
-        for m in per_node.into_iter().flatten() {
+        for m in per_node {
             let (g, l) = m?.finish();
             globals.push(g);
             lobes.extend(l);
         }
+        let medium = (settings.multiple_scattering == MultipleScattering::FiberMedium).then(|| {
+            FiberMedium::build(bcsdf, &globals, |k| node_theta(k, n) as f32, settings.walks)
+        });
         let build_time = start.elapsed();
         let albedo_max = globals
             .iter()
@@ -347,6 +369,7 @@ impl DualScatteringTables {
             lobe_names,
             globals,
             lobes,
+            medium,
             build_time,
         })
     }
@@ -387,6 +410,37 @@ impl DualScatteringTables {
         }
         let (i, t) = self.locate(theta);
         self.lobes[i * nl + lobe].lerp(&self.lobes[(i + 1) * nl + lobe], t)
+    }
+
+    /// Light returned by the hair behind a fiber met by light from inclination `theta`: the
+    /// local term f_back. `behind` is the fibers (expected) behind it, away from the light
+    /// (the fiber medium's layer; the paper assumes a half-space); `d_b` enters the paper's
+    /// σ_b only.
+    pub fn back_scattering(&self, theta: f32, d_b: f32, behind: f32) -> BackScattering {
+        match &self.medium {
+            Some(m) => {
+                let (i, t) = self.locate(theta);
+                m.back_scattering(i, t, behind)
+            }
+            None => {
+                let g = self.globals(theta);
+                BackScattering {
+                    energy: g.big_a_b,
+                    mean: g.delta_b,
+                    variance: g.sigma_b2(d_b),
+                }
+            }
+        }
+    }
+
+    /// The random-walk tables, for [`MultipleScattering::FiberMedium`].
+    pub fn fiber_medium(&self) -> Option<&FiberMedium> {
+        self.medium.as_ref()
+    }
+
+    /// The multiple-scattering model the tables were built for.
+    pub fn multiple_scattering(&self) -> MultipleScattering {
+        self.settings.multiple_scattering
     }
 
     /// Lower node index and interpolation weight, clamped to the end nodes.
@@ -832,14 +886,38 @@ impl DualScatteringShading {
     /// T_f and σ̄_f² for light arriving from local direction `wi` through `n` fibers
     /// (constant-θ approximation: every crossing at the light's inclination). Negative or NaN
     /// `n` counts as 0.
+    ///
+    /// With the paper's closed forms `T_f = d_f ā_f^n`. With the fiber medium `T_f` is the
+    /// scattered transmittance T_s(n) of a layer n fibers deep, divided by `1 − e^{−n}`, the
+    /// chance that the shadow ray is blocked: F adds the scattered light only when it is, and
+    /// the scattered light reaches a point whether or not its own line to the light is blocked,
+    /// so this keeps its expectation over the Poisson crossings the grid's mean n stands for.
     pub fn forward(&self, wi: Vec3, n: f32) -> ForwardScattering {
-        let n = n.max(0.0);
-        let g = self.tables.globals(safe_asin(wi.x));
-        let a_f = g.a_f_eff;
+        let n = if n > 0.0 { n } else { 0.0 };
+        let theta = safe_asin(wi.x);
+        let g = self.tables.globals(theta);
+        let t_f = match &self.tables.medium {
+            Some(m) => {
+                let (i, t) = self.tables.locate(theta);
+                let blocked = -(-n).exp_m1();
+                // n → 0: T_s(n) ≈ T_s'(0)·n, and so is the blocking chance.
+                let n = n.max(1e-4);
+                m.scattered_transmittance(i, t, n) / blocked.max(-(-1e-4f32).exp_m1())
+            }
+            None => {
+                let a_f = g.a_f_eff;
+                Rgb::new(a_f.x.powf(n), a_f.y.powf(n), a_f.z.powf(n))
+            }
+        };
         ForwardScattering {
-            t_f: self.factors.d_f * Rgb::new(a_f.x.powf(n), a_f.y.powf(n), a_f.z.powf(n)),
+            t_f: self.factors.d_f * t_f,
             sigma2_f: n * g.beta2_f,
         }
+    }
+
+    /// Whether [`Self::eval_layered`] uses the depth of hair behind the shading point.
+    pub fn uses_depth_behind(&self) -> bool {
+        self.tables.medium.is_some()
     }
 
     /// F(wo, wi) for light from local direction `wi` (ω_d) seen from `wo`, at offset `h`, where
@@ -868,7 +946,31 @@ impl DualScatteringShading {
     /// (`wi.z > 0`, the light's side) with azimuthal density 1/π. So
     /// `∫ d_b f_back_direct cos θ_i dω = d_b Ā_b` and `∫ f_s_scatter cos θ_i dω = ā_f`
     /// (N^G = a_f^t/2π over the whole circle).
+    ///
+    /// **Fiber medium.** With [`MultipleScattering::FiberMedium`] tables the closed forms give
+    /// way to the measured light ([`crate::fiber_medium`]): for every ω_d, whether or not the
+    /// shadow ray is blocked,
+    /// `F = direct·f_s + d_f·S_down(n)·f_around + d_b·S_up(n)·albedo·f_up`, where S_down, S_up
+    /// are the scattered light reaching a fiber at depth n travelling away from the light and
+    /// back toward it; f_around is the lobes of f_s_scatter each with its full energy
+    /// `(a_f^t + a_b^t)` (the fiber scatters all the light that reaches it), and f_up the
+    /// backward lobe around the up-going light's measured θ_h. Each term is normalised as above.
     pub fn eval(&self, wo: Vec3, wi: Vec3, h: f32, n: f32, direct_fraction: f32) -> Rgb {
+        self.eval_layered(wo, wi, h, n, f32::INFINITY, direct_fraction)
+    }
+
+    /// [`Self::eval`] where `behind` fibers (expected) lie behind the shading point, away from
+    /// the light: the depth of hair that can return light to it (the fiber medium's local term;
+    /// the paper's ignores it).
+    pub fn eval_layered(
+        &self,
+        wo: Vec3,
+        wi: Vec3,
+        h: f32,
+        n: f32,
+        behind: f32,
+        direct_fraction: f32,
+    ) -> Rgb {
         let direct = if direct_fraction.is_nan() {
             0.0
         } else {
@@ -877,14 +979,13 @@ impl DualScatteringShading {
         let DensityFactors { d_f, d_b } = self.factors;
         let theta_i = safe_asin(wi.x);
         let theta_o = safe_asin(wo.x);
-        let g = self.tables.globals(theta_i);
-        let sigma_b2 = g.sigma_b2(d_b);
+        let b = self.tables.back_scattering(theta_i, d_b, behind);
         let backward = wi.z > 0.0;
         // Longitudinal density in sin θ_i of a Gaussian in θ_h (see `longitudinal_density`).
         let lobe = |mean: Rgb, var: Rgb| longitudinal_density(wi.x, theta_o, mean, var);
         let back = |extra_var: Rgb| {
             if backward {
-                g.big_a_b * lobe(g.delta_b, sigma_b2 + extra_var) / PI
+                b.energy * lobe(b.mean, b.variance + extra_var) / PI
             } else {
                 Rgb::ZERO
             }
@@ -895,14 +996,18 @@ impl DualScatteringShading {
             f += direct * (self.bcsdf.eval(wo, wi, h) + d_b * back(Rgb::ZERO));
         }
         let fwd = self.forward(wi, n);
-        let w_scatter = (fwd.t_f - Rgb::splat(direct)).max(Rgb::ZERO);
+        let w_scatter = match self.tables.multiple_scattering() {
+            // The paper's d_f stands both in T_f and before the scattered term.
+            MultipleScattering::Paper => (fwd.t_f - Rgb::splat(direct)).max(Rgb::ZERO) * d_f,
+            MultipleScattering::FiberMedium => fwd.t_f * (1.0 - direct),
+        };
         if w_scatter.max_element() > 0.0 {
             let mut f_s_scatter = Rgb::ZERO;
             for t in 0..self.tables.lobe_names().len() {
                 let l = self.tables.lobe(theta_i, t);
                 f_s_scatter += lobe(l.alpha, l.beta2 + fwd.sigma2_f) * l.n_g();
             }
-            f += w_scatter * d_f * (f_s_scatter + d_b * back(fwd.sigma2_f));
+            f += w_scatter * (f_s_scatter + d_b * back(fwd.sigma2_f));
         }
         f
     }
@@ -922,6 +1027,8 @@ mod tests {
             h_nodes: 12,
             theta_quad: 48,
             phi_quad: 64,
+            walks: 1024,
+            ..Default::default()
         }
     }
 
@@ -1349,9 +1456,22 @@ mod tests {
         );
     }
 
-    fn shading(b: Arc<dyn Bcsdf>, factors: DensityFactors) -> DualScatteringShading {
-        let t = tables(b.as_ref(), &coarse());
+    fn shading_with(
+        model: MultipleScattering,
+        b: Arc<dyn Bcsdf>,
+        factors: DensityFactors,
+    ) -> DualScatteringShading {
+        let settings = DualScatteringSettings {
+            multiple_scattering: model,
+            ..coarse()
+        };
+        let t = tables(b.as_ref(), &settings);
         DualScatteringShading::new(b, t, factors).unwrap()
+    }
+
+    /// The paper's closed forms, whose formulas several tests write out independently.
+    fn shading(b: Arc<dyn Bcsdf>, factors: DensityFactors) -> DualScatteringShading {
+        shading_with(MultipleScattering::Paper, b, factors)
     }
 
     /// §8.14: with no fibers in the way and the light fully visible, F is the single-fiber BCSDF
@@ -1429,8 +1549,12 @@ mod tests {
     #[test]
     fn shading_is_finite_and_non_negative_for_every_model() {
         let mut rng = Sampler::from_seed(11);
-        for (name, b, _) in all_models() {
-            let ds = shading(b, DensityFactors::default());
+        let models = [MultipleScattering::Paper, MultipleScattering::FiberMedium];
+        for ((name, b, _), model) in all_models()
+            .into_iter()
+            .flat_map(|m| models.map(|model| (m.clone(), model)))
+        {
+            let ds = shading_with(model, b, DensityFactors::for_model(model));
             for i in 0..300 {
                 let (wo, wi, h) = random_pair(&mut rng);
                 let n = (i % 7) as f32 * 1.5;
@@ -1438,12 +1562,15 @@ mod tests {
                 let f = ds.eval(wo, wi, h, n, direct);
                 assert!(
                     f.is_finite() && f.min_element() >= 0.0,
-                    "{name} n {n}: F = {f}"
+                    "{name} ({model:?}) n {n}: F = {f}"
                 );
             }
             // Along the fiber and with nonsense inputs.
             let f = ds.eval(Vec3::X, -Vec3::X, 1.0, f32::NAN, f32::NAN);
-            assert!(f.is_finite() && f.min_element() >= 0.0, "{name}: F = {f}");
+            assert!(
+                f.is_finite() && f.min_element() >= 0.0,
+                "{name} ({model:?}): F = {f}"
+            );
         }
     }
 

@@ -18,8 +18,8 @@
 //! `p(s)/2π` has no 1/cos θ singularity at the poles. A component centred where F's
 //! Gaussian in θ_h peaks (θ_i = 2θ_h − θ_o) with the matching width in s is a close proposal.
 
-use crate::dual_scattering::DualScatteringShading;
-use std::f32::consts::{PI, TAU};
+use crate::dual_scattering::{DualScatteringShading, MultipleScattering};
+use std::f32::consts::{FRAC_PI_2, PI, TAU};
 use tress_core::luminance;
 use tress_core::math::{fiber_direction, safe_asin, safe_sqrt, Vec3};
 
@@ -27,6 +27,8 @@ use tress_core::math::{fiber_direction, safe_asin, safe_sqrt, Vec3};
 const UNIFORM_WEIGHT: f32 = 0.1;
 /// Fibers-crossed values whose forward spreads the mixture covers.
 const FORWARD_DEPTHS: [f32; 3] = [2.0, 8.0, 32.0];
+/// Fibers crossed at which the mixture weighs the multiple-scattering terms.
+const PROPOSAL_DEPTH: f32 = 2.0;
 /// Smallest logistic scale in s, so narrow lobes stay finite.
 const MIN_SCALE: f32 = 0.01;
 
@@ -84,10 +86,20 @@ impl DualScatteringShading {
         // The tables are indexed by the light's inclination; light on the specular cone of wo.
         let g = self.tables().globals(-theta_o);
         let d = self.factors();
-        let back_var = g.sigma_b2(d.d_b);
         let e_direct = luminance(g.a_f + g.a_b).max(1e-4);
-        let e_back = d.d_b * luminance(g.big_a_b).max(0.0);
-        let e_forward = d.d_f * d.d_f * luminance(g.a_f_eff).max(0.0);
+        let b = self
+            .tables()
+            .back_scattering(-theta_o, d.d_b, f32::INFINITY);
+        let (e_back, back_mean, back_var) =
+            (d.d_b * luminance(b.energy).max(0.0), b.mean, b.variance);
+        let e_forward = match self.tables().multiple_scattering() {
+            MultipleScattering::Paper => d.d_f * d.d_f * luminance(g.a_f_eff).max(0.0),
+            // The scattered light a few fibers deep, from the light on the specular cone.
+            MultipleScattering::FiberMedium => {
+                let light = fiber_direction((-theta_o).sin(), theta_o.cos(), -FRAC_PI_2);
+                luminance(g.a_f_eff * self.forward(light, PROPOSAL_DEPTH).t_f).max(0.0)
+            }
+        };
         let total = e_direct + e_back + e_forward;
         let scale = (1.0 - UNIFORM_WEIGHT) / total;
         let f = e_forward * scale / FORWARD_DEPTHS.len() as f32;
@@ -95,7 +107,7 @@ impl DualScatteringShading {
         let lum = |v: tress_core::Rgb| luminance(v).max(0.0);
         // θ_h ~ N(μ, v) ⇒ θ_i = 2θ_h − θ_o has mean 2μ − θ_o and standard deviation 2√v.
         let back =
-            TruncatedLogistic::new(2.0 * lum(g.delta_b) - theta_o, 2.0 * lum(back_var).sqrt());
+            TruncatedLogistic::new(2.0 * lum(back_mean) - theta_o, 2.0 * lum(back_var).sqrt());
         let forward = FORWARD_DEPTHS.map(|n| {
             let v = lum(g.beta2_f) * (1.0 + n);
             TruncatedLogistic::new(2.0 * lum(g.alpha_f) - theta_o, 2.0 * v.sqrt())

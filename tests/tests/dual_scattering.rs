@@ -141,7 +141,7 @@ fn with_no_fibers_to_cross_and_no_back_scattering_dual_scattering_is_single_scat
     let scene = with_density_grid(base, &hair);
     let ds = DualUniform::new(
         DualSettings {
-            d_b: 0.0,
+            d_b: Some(0.0),
             ..settings()
         },
         &scene,

@@ -59,3 +59,67 @@ fn spp() -> u32 {
         .and_then(|s| s.parse().ok())
         .unwrap_or(32)
 }
+
+/// Dual scattering in the white furnace, over the roughness range, for both integrators and both
+/// multiple-scattering models. The approximation is not exact (the path tracer is), but it must
+/// not blow up: the paper's closed forms lose energy (measured 0.44–0.48 at β ≥ 0.3, less for
+/// narrower fibers, whose light mostly crosses the ball unscattered), and the fiber medium's
+/// half-space/layer model returns 0.48–1.13 (its largest excess at β = 0.3; its layers are slabs,
+/// the ball is not). Uniform directions miss narrow lobes for a few spp (variance, not bias), so
+/// the bound is on both integrators' mean and on their agreement where lobes are broad.
+#[test]
+fn dual_scattering_does_not_blow_up_in_a_white_furnace() {
+    use tress_dual_mis::{DualMis, MisDirections};
+    use tress_dual_uniform::{DualSettings, DualUniform, UniformDirections};
+    use tress_materials::dual_scattering::{DualScatteringSettings, MultipleScattering};
+    let unwrap = ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES;
+    for beta in [0.01f32, 0.1, 0.3, 0.9] {
+        let model: HairModel = ron::Options::default()
+            .with_default_extension(unwrap)
+            .from_str(&format!(
+                "Chiang(beta_m: {beta}, beta_n: {beta}, pigment: SigmaA(0, 0, 0))"
+            ))
+            .unwrap();
+        let scene = tress_tests::with_density_grid(
+            hair_ball_scene(model.build().unwrap(), 3000, white_environment()),
+            &tress_tests::hair_ball(3000),
+        );
+        for (ms, bound) in [
+            (MultipleScattering::Paper, 1.0),
+            (MultipleScattering::FiberMedium, 1.2),
+        ] {
+            let settings = DualSettings {
+                tables: DualScatteringSettings {
+                    theta_nodes: 32,
+                    multiple_scattering: ms,
+                    ..Default::default()
+                },
+                ..Default::default()
+            };
+            // The middle of the ball: every pixel sees hair.
+            let mut f = film(48, 48, 16, 11);
+            f.crop = Some([14, 14, 34, 34]);
+            let uniform = DualUniform::new(settings.clone(), &scene, UniformDirections).unwrap();
+            let mis = DualMis::new(settings, &scene, MisDirections).unwrap();
+            let means = [&uniform as &dyn Integrator, &mis].map(|integrator| {
+                let out = render(&scene, integrator, &f, &|_| {});
+                assert_eq!(out.stats.nonfinite_samples, 0);
+                out.image.mean()
+            });
+            eprintln!(
+                "β {beta} {ms:?}: dual-uniform {:.4}, dual-mis {:.4}",
+                means[0], means[1]
+            );
+            for m in means {
+                assert!(m < bound, "β {beta} {ms:?}: furnace mean {m} ≥ {bound}");
+            }
+            if beta >= 0.3 {
+                let rel = (means[0] - means[1]).abs() / means[1];
+                assert!(
+                    rel < 0.05,
+                    "β {beta} {ms:?}: the integrators disagree: {means:?}"
+                );
+            }
+        }
+    }
+}

@@ -4,7 +4,7 @@
 //! longitudinal and azimuthal sampling, exact pdf), combined with the power heuristic. The
 //! estimator itself is `tress_dual_uniform::DualScattering`; only the directions differ.
 //!
-//! RON: `DualMis(d_f: 0.7, d_b: 0.7)`
+//! RON: `DualMis(d_f: Some(0.9), d_b: None)` (settings as for `DualUniform`)
 
 use tress_core::sampling::power_heuristic;
 use tress_core::{Rgb, Sampler, Scene};

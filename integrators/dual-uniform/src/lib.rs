@@ -9,6 +9,8 @@
 //! - V(ω_d) is a shadow ray: unoccluded ⇒ the light arrives directly (direct fraction 1, n = 0);
 //!   blocked by hair only ⇒ it arrives forward-scattered through n fibers (direct fraction 0);
 //!   blocked by a surface (a head, an occluder) ⇒ nothing arrives;
+//! - with the fiber-medium tables (the default), the fibers behind the point along −ω_d, from
+//!   the grid too: the depth of hair that returns the local back-scattering;
 //! - F is the shading function of `tress_materials::dual_scattering`.
 //!
 //! Surfaces that are not hair shade as in the path tracer (next-event estimation plus a
@@ -17,7 +19,9 @@
 //! distant with a disc), sampled by the direction strategy, and delta lights (point, distant
 //! without a disc), evaluated directly.
 //!
-//! RON: `DualUniform(d_f: 0.7, d_b: 0.7, grid_resolution: None)`
+//! RON: `DualUniform(d_f: None, d_b: None, grid_resolution: None, tables: (multiple_scattering:
+//! FiberMedium))` — `d_f`/`d_b` default to the tables' model (1 for `FiberMedium`, the paper's
+//! 0.7 for `Paper`).
 
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -34,10 +38,11 @@ use tress_materials::dual_scattering::{
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct DualSettings {
-    /// Forward density factor d_f (Zinke et al.: 0.7).
-    pub d_f: f32,
-    /// Backward density factor d_b (0.7).
-    pub d_b: f32,
+    /// Forward density factor d_f; `None`: the default of the tables' multiple-scattering model
+    /// (`DensityFactors::for_model`: 0.7 for the paper's closed forms, 1 for the fiber medium).
+    pub d_f: Option<f32>,
+    /// Backward density factor d_b; `None` as for d_f.
+    pub d_b: Option<f32>,
     /// Voxels along the longest side of the hair's bounds; `None` chooses from the hair.
     pub grid_resolution: Option<u32>,
     /// Resolution of the precomputed tables.
@@ -49,8 +54,8 @@ pub struct DualSettings {
 impl Default for DualSettings {
     fn default() -> Self {
         DualSettings {
-            d_f: 0.7,
-            d_b: 0.7,
+            d_f: None,
+            d_b: None,
             grid_resolution: None,
             tables: DualScatteringSettings::default(),
             max_depth: 16,
@@ -97,17 +102,24 @@ impl HairPoint<'_> {
         if scene.occluded_by_surfaces(&ray) {
             return Rgb::ZERO;
         }
-        let (n, direct) = if scene.occluded(&ray) {
-            let n = scene
+        let crossed = || {
+            scene
                 .density
                 .as_ref()
-                .map_or(0.0, |d| d.fibers_crossed(&ray));
-            (n, 0.0)
+                .map_or(0.0, |d| d.fibers_crossed(&ray))
+        };
+        let (n, direct) = if scene.occluded(&ray) {
+            (crossed(), 0.0)
         } else {
             (0.0, 1.0)
         };
+        // The hair behind the point, away from the light, returns the local back-scattering.
+        let behind = match &scene.density {
+            Some(d) if self.shading.uses_depth_behind() => d.fibers_crossed(&self.sp.spawn(-wi)),
+            _ => f32::INFINITY,
+        };
         self.shading
-            .eval(self.wo_local, self.to_local(wi), self.h, n, direct)
+            .eval_layered(self.wo_local, self.to_local(wi), self.h, n, behind, direct)
     }
 
     /// Radiance from all lights at infinity along `wi`, times F.
@@ -153,9 +165,10 @@ pub type DualUniform = DualScattering<UniformDirections>;
 impl<D: DirectionSampling> DualScattering<D> {
     /// Builds (or fetches from the cache) the tables of every hair material of `scene`.
     pub fn new(settings: DualSettings, scene: &Scene, directions: D) -> Result<Self, DualError> {
+        let defaults = DensityFactors::for_model(settings.tables.multiple_scattering);
         let factors = DensityFactors {
-            d_f: settings.d_f,
-            d_b: settings.d_b,
+            d_f: settings.d_f.unwrap_or(defaults.d_f),
+            d_b: settings.d_b.unwrap_or(defaults.d_b),
         };
         let has_hair = scene
             .materials
