@@ -2,6 +2,7 @@
 
 mod bcsdf_cmd;
 mod bench;
+mod calibrate;
 mod cost;
 mod diff;
 mod farm;
@@ -47,6 +48,8 @@ enum Command {
     Merge(merge::MergeArgs),
     /// Print a render split into tiles x passes as shell commands for a render farm.
     Farm(farm::FarmArgs),
+    /// Fit dual scattering's d_f and d_b to a short path-traced reference of a scene.
+    Calibrate(calibrate::CalibrateArgs),
 }
 
 fn main() {
@@ -73,6 +76,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bench(args) => bench::run(args),
         Command::Merge(args) => merge::run(args),
         Command::Farm(args) => farm::run(args),
+        Command::Calibrate(args) => calibrate::run(args),
     }
 }
 

@@ -247,3 +247,59 @@ fn bcsdf_tools_work() {
         stderr(&o)
     );
 }
+
+#[test]
+fn calibrate_fits_the_density_factors_and_writes_them() {
+    let (dir, _) = scene_dir(SCENE);
+    let small_tables = "DualMis(tables: (theta_nodes: 16, h_nodes: 8, theta_quad: 16, \
+                        phi_quad: 24, walks: 512))";
+    let o = tress(
+        &[
+            "calibrate",
+            "scene.ron",
+            "--integrator",
+            small_tables,
+            "--reference-spp",
+            "16",
+            "--spp",
+            "8",
+            "--out",
+            "fit.ron",
+            "--quiet",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("hair pixels") && stdout.contains("fitted"),
+        "{stdout}"
+    );
+    let text = std::fs::read_to_string(dir.path().join("fit.ron")).unwrap();
+    let fitted: tress_cli::integrators::IntegratorDesc = tress_cli::ron_options()
+        .from_str(&text)
+        .unwrap_or_else(|e| panic!("{e}: {text}"));
+    let tress_cli::integrators::IntegratorDesc::DualMis(s) = fitted else {
+        panic!("{text}");
+    };
+    for d in [s.d_f.unwrap(), s.d_b.unwrap()] {
+        assert!((0.0..=1.0).contains(&d), "{text}");
+    }
+    assert_eq!(s.tables.walks, 512, "the other settings are kept");
+
+    // The path tracer is not what calibration fits; a window with no hair has nothing to fit.
+    let o = tress(
+        &["calibrate", "scene.ron", "--integrator", "path"],
+        dir.path(),
+    );
+    assert!(!o.status.success() && stderr(&o).contains("dual-scattering integrator"));
+    let o = tress(
+        &["calibrate", "scene.ron", "--crop", "0,0,2,2", "--quiet"],
+        dir.path(),
+    );
+    assert!(
+        !o.status.success() && stderr(&o).contains("no pixel"),
+        "{}",
+        stderr(&o)
+    );
+}

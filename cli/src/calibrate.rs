@@ -1,0 +1,344 @@
+//! `tress calibrate`: fits the dual-scattering density factors d_f and d_b of a groom and
+//! material to a short path-traced reference.
+//!
+//! Dual scattering's expected image is bilinear in its free parameters: with the fiber-medium
+//! tables `F = V·(f_s + d_b·B) + (1 − V)·d_f·T·(S + d_b·B')`, so the mean over any set of
+//! pixels is `A + x·B + y·C + x·y·D` with `x = d_f`, `y = d_b` (the paper's closed forms carry
+//! d_f twice: there `x = d_f²`). Four renders at the corners of [0, 1]² therefore give that
+//! mean for every (d_f, d_b), and the fit minimises the squared relative error of the three
+//! channels' means over the hair pixels against the path tracer's. A fifth render checks the
+//! fitted values.
+
+use crate::render_cmd::{parse_crop, progress_bar};
+use crate::{atomic_write, integrators::IntegratorDesc, scene_desc};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use tress_core::film::FilmSettings;
+use tress_core::render::render_samples;
+use tress_core::{Hit, HitKind, Image, Integrator, Ray, Rgb, Sampler, Scene};
+use tress_dual_uniform::DualSettings;
+use tress_materials::dual_scattering::{DensityFactors, MultipleScattering};
+
+#[derive(Args, Debug)]
+pub struct CalibrateArgs {
+    /// Scene file (RON): the groom, material, lights and camera to calibrate for.
+    pub scene: PathBuf,
+    /// Calibrate on the pixel window x0,y0,x1,y1 only (faster; pick one with hair in it).
+    #[arg(long, value_parser = parse_crop)]
+    pub crop: Option<[u32; 4]>,
+    /// Samples per pixel of the path-traced reference.
+    #[arg(long, default_value_t = 256)]
+    pub reference_spp: u32,
+    /// Samples per pixel of each dual-scattering render.
+    #[arg(long, default_value_t = 64)]
+    pub spp: u32,
+    /// The dual-scattering integrator to calibrate (a name or RON value); default: the
+    /// scene's, if it is one, else dual-mis.
+    #[arg(long)]
+    pub integrator: Option<String>,
+    /// Write the calibrated integrator (RON, for a scene's `integrator:` or `--integrator`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// No progress bars.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Renders 1 where the camera sees hair first, 0 elsewhere: averaged over a pixel's samples,
+/// its hair coverage.
+#[derive(Debug)]
+struct HairCoverage;
+
+impl Integrator for HairCoverage {
+    fn li(&self, ray: &Ray, scene: &Scene, _: &mut Sampler) -> Rgb {
+        match scene.intersect(ray) {
+            Some(Hit {
+                kind: HitKind::Fiber { .. },
+                ..
+            }) => Rgb::ONE,
+            _ => Rgb::ZERO,
+        }
+    }
+}
+
+/// Per-channel means over the masked pixels.
+fn masked_mean(img: &Image, mask: &[bool]) -> [f64; 3] {
+    let mut sum = [0.0f64; 3];
+    for (p, _) in img.pixels.iter().zip(mask).filter(|(_, &m)| m) {
+        for (s, v) in sum.iter_mut().zip(p.to_array()) {
+            *s += v as f64;
+        }
+    }
+    let n = mask.iter().filter(|&&m| m).count().max(1) as f64;
+    sum.map(|s| s / n)
+}
+
+/// relMSE over the masked pixels (ε = 1e-2, as `tress diff`).
+fn masked_relmse(img: &Image, reference: &Image, mask: &[bool]) -> f64 {
+    let mut sum = 0.0;
+    let mut n = 0usize;
+    for ((a, r), _) in img
+        .pixels
+        .iter()
+        .zip(&reference.pixels)
+        .zip(mask)
+        .filter(|(_, &m)| m)
+    {
+        for (a, r) in a.to_array().into_iter().zip(r.to_array()) {
+            let (a, r) = (a as f64, r as f64);
+            sum += (a - r) * (a - r) / (r * r + 1e-2);
+            n += 1;
+        }
+    }
+    sum / n.max(1) as f64
+}
+
+/// The hair-pixel means `A + x·B + y·C + x·y·D` from the four corner renders.
+struct Bilinear {
+    corner: [[[f64; 3]; 2]; 2],
+}
+
+impl Bilinear {
+    fn at(&self, x: f64, y: f64) -> [f64; 3] {
+        let c = &self.corner;
+        std::array::from_fn(|k| {
+            c[0][0][k] * (1.0 - x) * (1.0 - y)
+                + c[1][0][k] * x * (1.0 - y)
+                + c[0][1][k] * (1.0 - x) * y
+                + c[1][1][k] * x * y
+        })
+    }
+}
+
+/// Squared relative error of the channel means.
+fn misfit(m: [f64; 3], reference: [f64; 3]) -> f64 {
+    m.iter()
+        .zip(reference)
+        .map(|(m, r)| (m / r - 1.0).powi(2))
+        .sum()
+}
+
+/// The (x, y) ∈ [0, 1]² of least misfit: a grid search, then a finer one around its best.
+fn fit(model: &Bilinear, reference: [f64; 3]) -> (f64, f64) {
+    let mut best = (0.0, 0.0, f64::INFINITY);
+    let search = |x0: f64, x1: f64, y0: f64, y1: f64, best: &mut (f64, f64, f64)| {
+        let steps = 100;
+        for i in 0..=steps {
+            for j in 0..=steps {
+                let x = x0 + (x1 - x0) * i as f64 / steps as f64;
+                let y = y0 + (y1 - y0) * j as f64 / steps as f64;
+                let e = misfit(model.at(x, y), reference);
+                if e < best.2 {
+                    *best = (x, y, e);
+                }
+            }
+        }
+    };
+    search(0.0, 1.0, 0.0, 1.0, &mut best);
+    let (x, y) = (best.0, best.1);
+    search(
+        (x - 0.01).max(0.0),
+        (x + 0.01).min(1.0),
+        (y - 0.01).max(0.0),
+        (y + 0.01).min(1.0),
+        &mut best,
+    );
+    (best.0, best.1)
+}
+
+fn ratios(m: [f64; 3], reference: [f64; 3]) -> String {
+    format!(
+        "{:.3} / {:.3} / {:.3}",
+        m[0] / reference[0],
+        m[1] / reference[1],
+        m[2] / reference[2]
+    )
+}
+
+pub fn run(args: CalibrateArgs) -> Result<()> {
+    let mut desc = scene_desc::load(&args.scene)?;
+    if let Some(crop) = args.crop {
+        desc.film.crop = Some(crop);
+    }
+    desc.film.validate().map_err(anyhow::Error::msg)?;
+    for (what, spp) in [("--reference-spp", args.reference_spp), ("--spp", args.spp)] {
+        if spp == 0 {
+            bail!("{what} must be at least 1");
+        }
+    }
+    let chosen = match &args.integrator {
+        Some(arg) => IntegratorDesc::parse_arg(arg).map_err(anyhow::Error::msg)?,
+        None => match &desc.integrator {
+            d @ (IntegratorDesc::DualUniform(_) | IntegratorDesc::DualMis(_)) => d.clone(),
+            IntegratorDesc::Path(_) => IntegratorDesc::DualMis(Default::default()),
+        },
+    };
+    let (settings, with_settings): (DualSettings, fn(DualSettings) -> IntegratorDesc) = match chosen
+    {
+        IntegratorDesc::DualUniform(s) => (s, IntegratorDesc::DualUniform),
+        IntegratorDesc::DualMis(s) => (s, IntegratorDesc::DualMis),
+        IntegratorDesc::Path(_) => bail!(
+            "--integrator: calibration fits a dual-scattering integrator (dual-uniform or \
+                 dual-mis), not the path tracer"
+        ),
+    };
+    let reference_integrator = match &desc.integrator {
+        IntegratorDesc::Path(p) => IntegratorDesc::Path(p.clone()),
+        _ => IntegratorDesc::Path(tress_path::PathSettings {
+            max_depth: 100,
+            ..Default::default()
+        }),
+    };
+    desc.integrator = with_settings(settings.clone());
+
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads.unwrap_or(0))
+        .build()
+        .context("creating the thread pool")?;
+    let built = pool.install(|| scene_desc::build(&desc, &args.scene))?;
+    let scene = &built.scene;
+    let cancel = AtomicBool::new(false);
+    let render = |integrator: &dyn Integrator, spp: u32, label: &str| -> Result<Image> {
+        let film = FilmSettings {
+            spp,
+            ..desc.film.clone()
+        };
+        let [x0, y0, x1, y1] = film.window();
+        let bar = progress_bar(
+            (x1 - x0) as u64 * (y1 - y0) as u64 * spp as u64,
+            !args.quiet,
+            label,
+        );
+        let out = pool
+            .install(|| {
+                render_samples(scene, integrator, &film, 0..spp as u64, &cancel, &|n| {
+                    bar.inc(n)
+                })
+            })
+            .context("render interrupted")?;
+        bar.finish_and_clear();
+        Ok(out.sums.image())
+    };
+
+    let coverage = render(&HairCoverage, 16, "hair coverage")?;
+    let mask: Vec<bool> = coverage.pixels.iter().map(|p| p.x >= 0.5).collect();
+    let hair_pixels = mask.iter().filter(|&&m| m).count();
+    if hair_pixels == 0 {
+        bail!(
+            "{}: no pixel of the film{} is mostly hair; choose a --crop with hair in it",
+            args.scene.display(),
+            if args.crop.is_some() { " window" } else { "" }
+        );
+    }
+    let path = reference_integrator.build(scene)?;
+    let reference = render(path.as_ref(), args.reference_spp, "path reference")?;
+    let reference_mean = masked_mean(&reference, &mask);
+    if reference_mean.iter().any(|&m| m <= 0.0) {
+        bail!("the path-traced reference is black in a channel over the hair pixels");
+    }
+
+    let model = settings.tables.multiple_scattering;
+    // The paper's d_f enters squared (module docs).
+    let forward_power = match model {
+        MultipleScattering::Paper => 2.0,
+        MultipleScattering::FiberMedium => 1.0,
+    };
+    let ds_image = |d_f: f64, d_b: f64, label: &str| -> Result<Image> {
+        let s = DualSettings {
+            d_f: Some(d_f as f32),
+            d_b: Some(d_b as f32),
+            ..settings.clone()
+        };
+        let integrator = with_settings(s).build(scene)?;
+        render(integrator.as_ref(), args.spp, label)
+    };
+    let mut corner = [[[0.0; 3]; 2]; 2];
+    for (i, row) in corner.iter_mut().enumerate() {
+        for (j, c) in row.iter_mut().enumerate() {
+            let img = ds_image(i as f64, j as f64, &format!("d_f = {i}, d_b = {j}"))?;
+            *c = masked_mean(&img, &mask);
+        }
+    }
+    let bilinear = Bilinear { corner };
+    let (x, y) = fit(&bilinear, reference_mean);
+    let (d_f, d_b) = (x.powf(1.0 / forward_power), y);
+    let defaults = DensityFactors::for_model(model);
+    let default_x = (settings.d_f.unwrap_or(defaults.d_f) as f64).powf(forward_power);
+    let default_y = settings.d_b.unwrap_or(defaults.d_b) as f64;
+    let fitted_image = ds_image(d_f, d_b, "check")?;
+    let fitted_mean = masked_mean(&fitted_image, &mask);
+
+    println!(
+        "{}: {hair_pixels} hair pixels; path reference {} spp, dual scattering {} spp ({model:?})",
+        args.scene.display(),
+        args.reference_spp,
+        args.spp
+    );
+    println!(
+        "path reference, hair mean R/G/B: {:.4} / {:.4} / {:.4}",
+        reference_mean[0], reference_mean[1], reference_mean[2]
+    );
+    println!(
+        "default d_f = {:.3}, d_b = {:.3}: ÷ path {}",
+        default_x.powf(1.0 / forward_power),
+        default_y,
+        ratios(bilinear.at(default_x, default_y), reference_mean)
+    );
+    println!(
+        "fitted  d_f = {d_f:.3}, d_b = {d_b:.3}: ÷ path {} (predicted), {} (rendered), \
+         hair relMSE {:.3e}",
+        ratios(bilinear.at(x, y), reference_mean),
+        ratios(fitted_mean, reference_mean),
+        masked_relmse(&fitted_image, &reference, &mask)
+    );
+    for (name, v) in [("d_f", x), ("d_b", y)] {
+        if v <= 0.0 || v >= 1.0 {
+            println!(
+                "note: {name} reached the end of [0, 1]: the approximation cannot match the \
+                 reference's mean with that factor alone"
+            );
+        }
+    }
+    if let Some(out) = &args.out {
+        let fitted = with_settings(DualSettings {
+            d_f: Some((d_f * 1000.0).round() as f32 / 1000.0),
+            d_b: Some((d_b * 1000.0).round() as f32 / 1000.0),
+            ..settings
+        });
+        let text = format!(
+            "// tress calibrate {}: hair mean ÷ path {} (R/G/B)\n{}\n",
+            args.scene.display(),
+            ratios(fitted_mean, reference_mean),
+            crate::ron_options().to_string_pretty(&fitted, ron::ser::PrettyConfig::default())?
+        );
+        atomic_write(out, text.as_bytes())?;
+        println!("wrote {}", out.display());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_fit_recovers_the_factors_of_a_bilinear_model() {
+        // Means of an exactly bilinear model, with the reference taken at (0.4, 0.8).
+        let model = Bilinear {
+            corner: [
+                [[0.1, 0.08, 0.05], [0.15, 0.1, 0.06]],
+                [[0.2, 0.12, 0.07], [0.3, 0.16, 0.08]],
+            ],
+        };
+        let (x, y) = fit(&model, model.at(0.4, 0.8));
+        assert!((x - 0.4).abs() < 1e-3 && (y - 0.8).abs() < 1e-3, "{x} {y}");
+        // Out of reach: the fit stops at the border.
+        let (x, _) = fit(&model, [1.0, 1.0, 1.0]);
+        assert_eq!(x, 1.0);
+    }
+}
