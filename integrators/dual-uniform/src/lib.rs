@@ -9,8 +9,9 @@
 //! - V(ω_d) is a shadow ray: unoccluded ⇒ the light arrives directly (direct fraction 1, n = 0);
 //!   blocked by hair only ⇒ it arrives forward-scattered through n fibers (direct fraction 0);
 //!   blocked by a surface (a head, an occluder) ⇒ nothing arrives;
-//! - with the fiber-medium tables (the default), the fibers behind the point along −ω_d, from
-//!   the grid too: the depth of hair that returns the local back-scattering;
+//! - with the fiber-medium tables (the default), the fibers behind the point along the ray
+//!   that found it, from the grid too: the depth of hair that returns the local
+//!   back-scattering (see `HairPoint`);
 //! - F is the shading function of `tress_materials::dual_scattering`.
 //!
 //! Surfaces that are not hair shade as in the path tracer (next-event estimation plus a
@@ -82,6 +83,11 @@ pub struct HairPoint<'a> {
     pub wo_local: tress_core::math::Vec3,
     pub h: f32,
     frame: tress_core::FiberFrame,
+    /// Fibers behind the point as seen along the ray that found it: the depth of hair that
+    /// returns the local back-scattering. Back-scattering reaches the viewer from lights on its
+    /// side, for which "behind, away from the light" and "behind, away from the viewer" are
+    /// nearly the same line, and this one is shared by every light direction.
+    behind: f32,
 }
 
 impl HairPoint<'_> {
@@ -113,13 +119,14 @@ impl HairPoint<'_> {
         } else {
             (0.0, 1.0)
         };
-        // The hair behind the point, away from the light, returns the local back-scattering.
-        let behind = match &scene.density {
-            Some(d) if self.shading.uses_depth_behind() => d.fibers_crossed(&self.sp.spawn(-wi)),
-            _ => f32::INFINITY,
-        };
-        self.shading
-            .eval_layered(self.wo_local, self.to_local(wi), self.h, n, behind, direct)
+        self.shading.eval_layered(
+            self.wo_local,
+            self.to_local(wi),
+            self.h,
+            n,
+            self.behind,
+            direct,
+        )
     }
 
     /// Radiance from all lights at infinity along `wi`, times F.
@@ -212,12 +219,17 @@ impl<D: DirectionSampling> DualScattering<D> {
         else {
             return Rgb::ZERO;
         };
+        let behind = match &scene.density {
+            Some(d) if shading.uses_depth_behind() => d.fibers_crossed(&sp.spawn(-sp.wo)),
+            _ => f32::INFINITY,
+        };
         let point = HairPoint {
             wo_local: frame.to_local(sp.wo),
             sp,
             shading,
             h,
             frame,
+            behind,
         };
         let mut radiance = self.directions.estimate(&point, scene, sampler);
         // Delta lights have one direction each: evaluate them all.
