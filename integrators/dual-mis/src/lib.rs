@@ -2,15 +2,15 @@
 //! infinity (environment-map importance sampling) and one from the dual-scattering shading
 //! function F (`DualScatteringShading::sample_direction`: lobe selection by attenuation,
 //! longitudinal and azimuthal sampling, exact pdf), combined with the power heuristic. The
-//! estimator itself is `tress_dual_uniform::DualScattering`; only the directions differ.
+//! estimator itself is `tress_dual_scattering::DualScattering`; only the directions differ.
 //!
 //! RON: `DualMis(d_f: Some(0.9), d_b: None)` (settings as for `DualUniform`)
 
 use tress_core::sampling::power_heuristic;
 use tress_core::{Rgb, Sampler, Scene};
-use tress_dual_uniform::{DirectionSampling, DualScattering, HairPoint};
+use tress_dual_scattering::{DirectionSampling, DualScattering, HairPoint};
 
-pub use tress_dual_uniform::{DualError, DualSettings};
+pub use tress_dual_scattering::{DualError, DualSettings};
 
 /// Light sampling and F sampling, one sample each, power heuristic.
 #[derive(Clone, Copy, Debug, Default)]

@@ -1,0 +1,285 @@
+//! The dual-scattering estimator (Zinke, Yuksel, Weber & Keyser 2008) that both
+//! dual-scattering integrators share: [`DualScattering`], parameterised by how it chooses light
+//! directions ([`DirectionSampling`]): `tress-dual-uniform` uniformly, `tress-dual-mis` by
+//! multiple importance sampling.
+//!
+//! At a hair hit x seen from ω_o the outgoing radiance is
+//! `L_o = ∫ L(ω_d) F(ω_o, ω_d; n(ω_d), V(ω_d)) dω_d` (+ the delta lights' terms), where
+//! - n(ω_d) is the expected number of fibers crossed from x toward ω_d, from the voxel
+//!   density grid (`Scene::density`);
+//! - V(ω_d) is a shadow ray: unoccluded ⇒ the light arrives directly (direct fraction 1, n = 0);
+//!   blocked by hair only ⇒ it arrives forward-scattered through n fibers (direct fraction 0);
+//!   blocked by a surface (a head, an occluder) ⇒ nothing arrives;
+//! - with the fiber-medium tables (the default), the fibers behind the point along the ray
+//!   that found it, from the grid too: the depth of hair that returns the local
+//!   back-scattering (see `HairPoint`);
+//! - F is the shading function of `tress_materials::dual_scattering`.
+//!
+//! Surfaces that are not hair shade as in the path tracer (next-event estimation plus a
+//! continued path, MIS on lights at infinity); a path that reaches hair ends there with the
+//! dual-scattering estimate. Lights are the scene's lights at infinity (environment, constant,
+//! distant with a disc), sampled by the direction strategy, and delta lights (point, distant
+//! without a disc), evaluated directly.
+//!
+//! Settings ([`DualSettings`]), in RON: `DualUniform(d_f: None, d_b: None, grid_resolution:
+//! None, tables: (multiple_scattering: FiberMedium))` — `d_f`/`d_b` default to the tables'
+//! model (1 for `FiberMedium`, the paper's 0.7 for `Paper`).
+
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+use tress_core::integrator::{direct_light, escaped_light};
+use tress_core::shading::Scattering;
+use tress_core::{Integrator, Material, Ray, Rgb, Sampler, Scene, ShadingPoint};
+use tress_materials::dual_scattering::{
+    DensityFactors, DualScatteringCache, DualScatteringError, DualScatteringSettings,
+    DualScatteringShading,
+};
+
+/// Settings shared by both dual-scattering integrators.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct DualSettings {
+    /// Forward density factor d_f; `None`: the default of the tables' multiple-scattering model
+    /// (`DensityFactors::for_model`: 0.7 for the paper's closed forms, 1 for the fiber medium).
+    pub d_f: Option<f32>,
+    /// Backward density factor d_b; `None` as for d_f.
+    pub d_b: Option<f32>,
+    /// Voxels along the longest side of the hair's bounds; `None` chooses from the hair.
+    pub grid_resolution: Option<u32>,
+    /// Resolution of the precomputed tables.
+    pub tables: DualScatteringSettings,
+    /// Bounces on non-hair surfaces before a path ends.
+    pub max_depth: u32,
+}
+
+impl Default for DualSettings {
+    fn default() -> Self {
+        DualSettings {
+            d_f: None,
+            d_b: None,
+            grid_resolution: None,
+            tables: DualScatteringSettings::default(),
+            max_depth: 16,
+        }
+    }
+}
+
+/// Why a dual-scattering integrator could not be set up for a scene.
+#[derive(Debug, thiserror::Error)]
+pub enum DualError {
+    #[error("dual scattering needs the hair density grid, but the scene has none")]
+    NoDensityGrid,
+    #[error("dual-scattering tables: {0}")]
+    Tables(#[from] DualScatteringError),
+    #[error("dual-scattering settings: {0}")]
+    Param(#[from] tress_materials::ParamError),
+}
+
+/// A hair point being shaded: everything a [`DirectionSampling`] needs.
+pub struct HairPoint<'a> {
+    pub sp: ShadingPoint<'a>,
+    pub shading: &'a DualScatteringShading,
+    /// `wo` in the local fiber frame.
+    pub wo_local: tress_core::math::Vec3,
+    pub h: f32,
+    frame: tress_core::FiberFrame,
+    /// Fibers behind the point as seen along the ray that found it: the depth of hair that
+    /// returns the local back-scattering. Back-scattering reaches the viewer from lights on its
+    /// side, for which "behind, away from the light" and "behind, away from the viewer" are
+    /// nearly the same line, and this one is shared by every light direction.
+    behind: f32,
+}
+
+impl HairPoint<'_> {
+    /// World direction from local.
+    pub fn to_world(&self, v: tress_core::math::Vec3) -> tress_core::math::Vec3 {
+        self.frame.to_world(v)
+    }
+
+    /// Local direction from world.
+    pub fn to_local(&self, v: tress_core::math::Vec3) -> tress_core::math::Vec3 {
+        self.frame.to_local(v)
+    }
+
+    /// F(ω_o, ω) for light from world direction `wi` at distance `distance`, with its
+    /// visibility resolved by shadow rays and the fibers crossed from the density grid.
+    pub fn transport(&self, scene: &Scene, wi: tress_core::math::Vec3, distance: f32) -> Rgb {
+        let ray = self.sp.spawn(wi).with_t_max(distance);
+        if scene.occluded_by_surfaces(&ray) {
+            return Rgb::ZERO;
+        }
+        let crossed = || {
+            scene
+                .density
+                .as_ref()
+                .map_or(0.0, |d| d.fibers_crossed(&ray))
+        };
+        let (n, direct) = if scene.occluded(&ray) {
+            (crossed(), 0.0)
+        } else {
+            (0.0, 1.0)
+        };
+        self.shading.eval_layered(
+            self.wo_local,
+            self.to_local(wi),
+            self.h,
+            n,
+            self.behind,
+            direct,
+        )
+    }
+
+    /// Radiance from all lights at infinity along `wi`, times F.
+    pub fn radiance_from(&self, scene: &Scene, wi: tress_core::math::Vec3) -> Rgb {
+        let le = scene.escaped_radiance(wi);
+        if le == Rgb::ZERO {
+            return Rgb::ZERO;
+        }
+        le * self.transport(scene, wi, f32::INFINITY)
+    }
+}
+
+/// How a dual-scattering integrator chooses light directions at a hair point: the one thing
+/// the two integrators do differently.
+pub trait DirectionSampling: Send + Sync + std::fmt::Debug {
+    /// One-sample estimate of `∫ L(ω) F(ω) dω` over the lights at infinity.
+    fn estimate(&self, point: &HairPoint, scene: &Scene, sampler: &mut Sampler) -> Rgb;
+}
+
+/// The dual-scattering estimator, parameterised by its direction sampling.
+#[derive(Debug)]
+pub struct DualScattering<D: DirectionSampling> {
+    settings: DualSettings,
+    /// Per scene material: the shading function, for hair materials.
+    shading: Vec<Option<DualScatteringShading>>,
+    directions: D,
+}
+
+impl<D: DirectionSampling> DualScattering<D> {
+    /// Builds (or fetches from the cache) the tables of every hair material of `scene`.
+    pub fn new(settings: DualSettings, scene: &Scene, directions: D) -> Result<Self, DualError> {
+        let defaults = DensityFactors::for_model(settings.tables.multiple_scattering);
+        let factors = DensityFactors {
+            d_f: settings.d_f.unwrap_or(defaults.d_f),
+            d_b: settings.d_b.unwrap_or(defaults.d_b),
+        };
+        let has_hair = scene
+            .materials
+            .iter()
+            .any(|m| matches!(m, Material::Hair(_)));
+        if has_hair && scene.density.is_none() {
+            return Err(DualError::NoDensityGrid);
+        }
+        let shading = scene
+            .materials
+            .iter()
+            .map(|m| match m {
+                Material::Hair(b) => {
+                    let tables =
+                        DualScatteringCache::global().get_or_build(b.as_ref(), &settings.tables)?;
+                    Ok(Some(DualScatteringShading::new(
+                        Arc::clone(b),
+                        tables,
+                        factors,
+                    )?))
+                }
+                Material::Diffuse { .. } => Ok(None),
+            })
+            .collect::<Result<Vec<_>, DualError>>()?;
+        Ok(DualScattering {
+            settings,
+            shading,
+            directions,
+        })
+    }
+
+    fn hair_radiance(
+        &self,
+        sp: ShadingPoint,
+        material: u32,
+        scene: &Scene,
+        sampler: &mut Sampler,
+    ) -> Rgb {
+        let (Scattering::Fiber { frame, h, .. }, Some(Some(shading))) =
+            (sp.scattering, self.shading.get(material as usize))
+        else {
+            return Rgb::ZERO;
+        };
+        let behind = match &scene.density {
+            Some(d) if shading.uses_depth_behind() => d.fibers_crossed(&sp.spawn(-sp.wo)),
+            _ => f32::INFINITY,
+        };
+        let point = HairPoint {
+            wo_local: frame.to_local(sp.wo),
+            sp,
+            shading,
+            h,
+            frame,
+            behind,
+        };
+        let mut radiance = self.directions.estimate(&point, scene, sampler);
+        // Delta lights have one direction each: evaluate them all.
+        for light in scene.lights.iter() {
+            if let Some(ls) = light
+                .sample_li(point.sp.p, tress_core::math::Vec2::ZERO)
+                .filter(|ls| ls.is_delta)
+            {
+                radiance += ls.radiance * point.transport(scene, ls.wi, ls.distance * (1.0 - 1e-4));
+            }
+        }
+        radiance
+    }
+}
+
+impl<D: DirectionSampling> Integrator for DualScattering<D> {
+    fn li(&self, camera_ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb {
+        let infinite: Vec<&tress_core::Light> =
+            scene.lights.iter().filter(|l| !l.is_delta()).collect();
+        let select_pdf = if infinite.is_empty() {
+            0.0
+        } else {
+            1.0 / infinite.len() as f32
+        };
+        let mut radiance = Rgb::ZERO;
+        let mut throughput = Rgb::ONE;
+        let mut ray = *camera_ray;
+        let mut scatter_pdf: Option<f32> = None;
+        for depth in 0..=self.settings.max_depth {
+            let Some(hit) = scene.intersect(&ray) else {
+                for light in &infinite {
+                    radiance += escaped_light(light, ray.dir, scatter_pdf, select_pdf, throughput);
+                }
+                break;
+            };
+            let sp = ShadingPoint::new(&hit, &ray, &scene.materials);
+            if sp.is_fiber() {
+                radiance += throughput * self.hair_radiance(sp, hit.material, scene, sampler);
+                break;
+            }
+            if depth == self.settings.max_depth {
+                break;
+            }
+            // A surface: next-event estimation as in the path tracer (hair blocks fully here).
+            let (u_select, u_light) = (sampler.next_1d(), sampler.next_2d());
+            // Every delta light (chosen with probability 1), and one of the others.
+            for light in scene.lights.iter().filter(|l| l.is_delta()) {
+                radiance += direct_light(scene, &sp, light, u_light, 1.0, throughput);
+            }
+            if !infinite.is_empty() {
+                let light =
+                    infinite[((u_select * infinite.len() as f32) as usize).min(infinite.len() - 1)];
+                radiance += direct_light(scene, &sp, light, u_light, select_pdf, throughput);
+            }
+            let Some(s) = sp.sample(sampler.next_4d()) else {
+                break;
+            };
+            if s.pdf <= 0.0 || s.f == Rgb::ZERO {
+                break;
+            }
+            throughput *= s.f / s.pdf;
+            scatter_pdf = Some(s.pdf);
+            ray = sp.spawn(s.wi);
+        }
+        radiance
+    }
+}
