@@ -119,10 +119,39 @@ impl DualScatteringShading {
         }
     }
 
+    /// The direction sampler for shading from `wo`: build it once per shading point when
+    /// drawing several directions or evaluating several pdfs there.
+    pub fn direction_sampler(&self, wo: Vec3) -> DirectionSampler<'_> {
+        DirectionSampler {
+            shading: self,
+            wo,
+            mixture: self.mixture(wo),
+        }
+    }
+
     /// Draws a light direction ω_d (local frame) for shading from `wo` at offset `h`, with its
     /// solid-angle pdf ([`DualScatteringShading::direction_pdf`]).
     pub fn sample_direction(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<(Vec3, f32)> {
-        let m = self.mixture(wo);
+        self.direction_sampler(wo).sample(h, u)
+    }
+
+    /// Solid-angle density of [`DualScatteringShading::sample_direction`].
+    pub fn direction_pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> f32 {
+        self.direction_sampler(wo).pdf(wi, h)
+    }
+}
+
+/// Samples light directions for one `wo` ([`DualScatteringShading::direction_sampler`]).
+pub struct DirectionSampler<'a> {
+    shading: &'a DualScatteringShading,
+    wo: Vec3,
+    mixture: Mixture,
+}
+
+impl DirectionSampler<'_> {
+    /// A light direction ω_d (local frame) at offset `h`, with its solid-angle pdf.
+    pub fn sample(&self, h: f32, u: [f32; 4]) -> Option<(Vec3, f32)> {
+        let (m, wo) = (&self.mixture, self.wo);
         // Pick the component with u[0], then reuse its position within the component's bin.
         let mut acc = 0.0;
         let mut chosen = m.weights.len() - 1;
@@ -135,7 +164,8 @@ impl DualScatteringShading {
         }
         let wi = match chosen {
             0 => {
-                self.bcsdf()
+                self.shading
+                    .bcsdf()
                     .sample(
                         wo,
                         h,
@@ -157,19 +187,16 @@ impl DualScatteringShading {
                 fiber_direction(s, safe_sqrt(1.0 - s * s), phi)
             }
         };
-        let pdf = self.direction_pdf_with(&m, wo, wi, h);
+        let pdf = self.pdf(wi, h);
         (pdf > 0.0 && pdf.is_finite()).then_some((wi, pdf))
     }
 
-    /// Solid-angle density of [`DualScatteringShading::sample_direction`].
-    pub fn direction_pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> f32 {
-        self.direction_pdf_with(&self.mixture(wo), wo, wi, h)
-    }
-
-    fn direction_pdf_with(&self, m: &Mixture, wo: Vec3, wi: Vec3, h: f32) -> f32 {
+    /// Solid-angle density of [`Self::sample`] at `wi`.
+    pub fn pdf(&self, wi: Vec3, h: f32) -> f32 {
+        let m = &self.mixture;
         let s = wi.x.clamp(-1.0, 1.0);
         let inv_2pi = 1.0 / TAU;
-        let mut pdf = m.weights[0] * self.bcsdf().pdf(wo, wi, h);
+        let mut pdf = m.weights[0] * self.shading.bcsdf().pdf(self.wo, wi, h);
         if wi.z > 0.0 {
             pdf += m.weights[1] * m.back.pdf(s) / PI;
         }

@@ -38,20 +38,18 @@ impl DirectionSampling for MisDirections {
         let mut radiance = Rgb::ZERO;
 
         let (u_select, u_light, u_f) = (sampler.next_1d(), sampler.next_2d(), sampler.next_4d());
+        // One mixture for the light sample's pdf and the F sample.
+        let f_sampler = point.shading.direction_sampler(point.wo_local);
         let light = lights[((u_select * lights.len() as f32) as usize).min(lights.len() - 1)];
         if let Some(ls) = light.sample_li(point.sp.p, u_light) {
             let p_light = light_pdf(ls.wi);
             if p_light > 0.0 {
-                let p_f =
-                    point
-                        .shading
-                        .direction_pdf(point.wo_local, point.to_local(ls.wi), point.h);
+                let p_f = f_sampler.pdf(point.to_local(ls.wi), point.h);
                 radiance +=
                     point.radiance_from(scene, ls.wi) * (power_heuristic(p_light, p_f) / p_light);
             }
         }
-        if let Some((wi_local, p_f)) = point.shading.sample_direction(point.wo_local, point.h, u_f)
-        {
+        if let Some((wi_local, p_f)) = f_sampler.sample(point.h, u_f) {
             let wi = point.to_world(wi_local);
             let w = power_heuristic(p_f, light_pdf(wi));
             radiance += point.radiance_from(scene, wi) * (w / p_f);
