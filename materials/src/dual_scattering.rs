@@ -821,10 +821,21 @@ fn longitudinal_density(s: f32, theta_o: f32, mean: Rgb, var: Rgb) -> Rgb {
             .max(0.5 * sd_theta * sd_theta)
             .max(1e-3);
         let mu = centre.sin();
-        let k = std::f32::consts::SQRT_2 * sd;
-        let inside = (0.5 * (erf((1.0 - mu) / k) - erf((-1.0 - mu) / k))).max(1e-6);
         let x = s - mu;
-        (-(x * x) / (2.0 * sd * sd)).exp() / ((2.0 * PI).sqrt() * sd * inside)
+        let z = x * x / (2.0 * sd * sd);
+        // exp(−z) < 1e-17: below anything a render shows, and below the f32 precision of the
+        // lobes it is added to.
+        if z > 40.0 {
+            return 0.0;
+        }
+        // The share of the Gaussian inside [−1, 1]: 1 to f32 precision more than 6 sd inside.
+        let inside = if (1.0 - mu.abs()) > 6.0 * sd {
+            1.0
+        } else {
+            let k = std::f32::consts::SQRT_2 * sd;
+            (0.5 * (erf((1.0 - mu) / k) - erf((-1.0 - mu) / k))).max(1e-6)
+        };
+        (-z).exp() / ((2.0 * PI).sqrt() * sd * inside)
     }))
 }
 
