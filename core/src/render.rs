@@ -2,9 +2,11 @@
 //! and the exact per-pixel sample sums that let renders of sample ranges, waves and tiles be
 //! merged bit for bit.
 //!
-//! Every pixel sample draws its random numbers from `Sampler::for_pixel_sample(x, y, index,
-//! seed)`, so a sample's radiance depends only on the scene, the pixel, the sample index and the
-//! seed, never on threads, tiles, crops or which process rendered it.
+//! Every pixel sample takes its position in the pixel from `rng::pixel_position(x, y, index,
+//! seed)` (stratified across a pixel's samples) and its other random numbers from
+//! `Sampler::for_pixel_sample(x, y, index, seed)`, so a sample's radiance depends only on the
+//! scene, the pixel, the sample index and the seed, never on threads, tiles, crops or which
+//! process rendered it.
 //!
 //! # Exact accumulation: aligned dyadic blocks
 //!
@@ -28,7 +30,7 @@
 use crate::film::{FilmSettings, Image};
 use crate::integrator::Integrator;
 use crate::math::Rgb;
-use crate::rng::Sampler;
+use crate::rng::{pixel_position, Sampler};
 use crate::scene::{rays_traced_on_this_thread, Scene};
 use rayon::prelude::*;
 use std::ops::Range;
@@ -417,7 +419,7 @@ fn render_tile(
                     return None;
                 }
                 let mut sampler = Sampler::for_pixel_sample(x, y, s, film.seed);
-                let jitter = sampler.next_2d();
+                let jitter = pixel_position(x, y, s, film.seed);
                 let lens = sampler.next_2d();
                 let ray = scene.camera.generate_ray(
                     x as f32 + jitter.x,
