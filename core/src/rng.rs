@@ -111,7 +111,7 @@ impl Sampler {
 /// of hair once the shading itself is smooth (dual scattering). Depends only on the sample's
 /// index, so sample ranges rendered apart (`--spp-offset`, farms) add up exactly as before.
 pub fn pixel_position(x: u32, y: u32, sample_index: u64, seed: u64) -> Vec2 {
-    let h = hash_words(&[x as u64, y as u64, seed, 0x7069_7865_6c]);
+    let h = hash_words(&[x as u64, y as u64, seed, 0x0070_6978_656c]);
     // Sobol's first two dimensions for a 32-bit index: its bit reversal, and the Pascal-matrix
     // dimension.
     let i = sample_index as u32;
