@@ -316,6 +316,43 @@ fn shipped_quick_study_runs() {
     assert!(out.join("plots/ball_heatmap_4spp.png").exists());
 }
 
+/// The hair-colour study's quick variant (24², 1…4 spp; about 15 s): every colour and groom
+/// renders and reaches the report. Needs ../shared/data for straight.hair.
+#[test]
+fn hair_colour_quick_study_runs() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    if !root.join("../shared/data/hair/straight.hair").exists() {
+        eprintln!("note: ../shared/data not found; skipping the hair-colour study");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let study = root.join("scenes/studies/hair_colour.ron");
+    let o = tress(
+        &[
+            "study",
+            study.to_str().unwrap(),
+            "--out",
+            "hc",
+            "--quick",
+            "--quiet",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report = std::fs::read_to_string(dir.path().join("hc/report.md")).unwrap();
+    for groom in ["straight", "head"] {
+        for colour in ["platinum", "blond", "brown", "dark"] {
+            assert!(
+                report.contains(&format!("## Scene `{groom}_{colour}`")),
+                "{groom}_{colour} missing"
+            );
+        }
+    }
+    let (header, rows) = read_csv(&dir.path().join("hc/summary.csv"));
+    let integrator = column(&header, "integrator");
+    assert!(rows.iter().any(|r| r[integrator] == "dual-mis"));
+}
+
 #[test]
 fn quick_flag_scales_the_study_down() {
     let dir = tempfile::tempdir().unwrap();
