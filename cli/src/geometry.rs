@@ -11,6 +11,7 @@ use tress_core::Material;
 
 /// An object of the scene, referring to a material by name.
 #[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub enum ObjectDesc {
     /// Hair: `Hair(source: File("straight.hair"), material: "brown", options: (...))`.
     Hair {

@@ -12,3 +12,55 @@ pub fn ron_options() -> ron::Options {
     ron::Options::default()
         .with_default_extension(ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES)
 }
+
+#[cfg(test)]
+mod tests {
+    use serde::de::DeserializeOwned;
+
+    /// The variant names of `T`, from the error a variant that does not exist gives.
+    fn variants<T: DeserializeOwned + std::fmt::Debug>() -> Vec<String> {
+        let err = crate::ron_options()
+            .from_str::<T>("NoSuchVariant()")
+            .unwrap_err()
+            .to_string();
+        let expected = err.rsplit("expected").next().unwrap_or_default();
+        let names: Vec<String> = expected
+            .split('`')
+            .skip(1)
+            .step_by(2)
+            .filter(|n| *n != "NoSuchVariant" && n.chars().next().is_some_and(char::is_uppercase))
+            .map(str::to_string)
+            .collect();
+        assert!(names.len() >= 2, "cannot read the variants from: {err}");
+        names
+    }
+
+    /// Every variant of every enum a scene is written with refuses a misspelt field (the list of
+    /// variants comes from serde, so a new variant is covered automatically).
+    fn refuses_typos<T: DeserializeOwned + std::fmt::Debug>(what: &str) {
+        for v in variants::<T>() {
+            let text = format!("{v}(zz_typo: 1)");
+            match crate::ron_options().from_str::<T>(&text) {
+                Ok(parsed) => panic!("{what}: `{text}` was accepted as {parsed:?}"),
+                // Struct variants name the field; tuple variants refuse the syntax. A missing-field
+                // error would mean the misspelt field was skipped silently.
+                Err(e) => assert!(
+                    e.to_string().contains("zz_typo") || !e.to_string().contains("field"),
+                    "{what}: `{text}` failed without naming the field: {e}"
+                ),
+            }
+        }
+    }
+
+    #[test]
+    fn misspelt_fields_are_refused_in_every_variant() {
+        refuses_typos::<crate::scene_desc::MaterialDesc>("material");
+        refuses_typos::<crate::scene_desc::LightDesc>("light");
+        refuses_typos::<crate::geometry::ObjectDesc>("object");
+        refuses_typos::<crate::integrators::IntegratorDesc>("integrator");
+        refuses_typos::<tress_materials::HairModel>("hair model");
+        refuses_typos::<tress_materials::pigment::Pigment>("pigment");
+        refuses_typos::<tress_accel::HairSource>("hair source");
+        refuses_typos::<tress_accel::HairStyle>("hair style");
+    }
+}

@@ -59,6 +59,7 @@ fn default_fov() -> f32 {
 
 /// A material: a hair model for fibers, or a diffuse surface for meshes and spheres.
 #[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub enum MaterialDesc {
     Hair(HairModel),
     Diffuse { albedo: Vec3 },
@@ -66,6 +67,7 @@ pub enum MaterialDesc {
 
 /// A light source.
 #[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub enum LightDesc {
     /// Equirectangular HDR environment (Radiance .hdr or OpenEXR).
     Environment {

@@ -17,6 +17,7 @@ const PHEOMELANIN_SIGMA_A: [f32; 3] = [0.187, 0.4, 1.05];
 
 /// How a fiber's absorption is specified.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
 pub enum Pigment {
     /// Absorption coefficient per unit radius, RGB.
     SigmaA((f32, f32, f32)),
