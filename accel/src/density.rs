@@ -437,8 +437,25 @@ impl DensityGrid {
                 },
             });
         }
+        // The lattice needs a finite, non-degenerate extent and finite fiber widths: hair scaled
+        // by 1e±30 or fibers as wide as f32::MAX leave nothing a voxel size or a density can
+        // represent (they made the lattice panic, or the orientation integral loop forever).
+        let extent = bounds.extent().max_element();
+        let mean_width = total_area / total_length;
+        if !(extent.is_finite() && extent > 1e-20 && extent < 1e30)
+            || !(mean_width.is_finite() && mean_width < 1e30)
+        {
+            return Err(Error::InvalidGeometry {
+                object: "hair".into(),
+                reason: format!(
+                    "it spans {extent:e} units with fibers {mean_width:e} wide on average: \
+                     outside what the grid can represent (extent in 1e-20…1e30, finite widths); \
+                     scale the hair to ordinary units"
+                ),
+            });
+        }
         // A margin keeps the end points off the outer faces.
-        let pad = Vec3::splat(1e-4 * bounds.extent().max_element());
+        let pad = Vec3::splat(1e-4 * extent);
         let bounds = Aabb {
             min: bounds.min - pad,
             max: bounds.max + pad,
@@ -862,7 +879,8 @@ fn carlson_rg(x: f64, y: f64, z: f64) -> f64 {
 /// with the f64 tolerance).
 fn carlson_rf(x: f64, y: f64, z: f64) -> f64 {
     let (mut x, mut y, mut z) = (x, y, z);
-    loop {
+    // Converges in about ten steps for finite arguments; NaN or infinite ones never would.
+    for _ in 0..64 {
         let (sx, sy, sz) = (x.sqrt(), y.sqrt(), z.sqrt());
         let l = sx * (sy + sz) + sy * sz;
         (x, y, z) = (0.25 * (x + l), 0.25 * (y + l), 0.25 * (z + l));
@@ -874,6 +892,7 @@ fn carlson_rf(x: f64, y: f64, z: f64) -> f64 {
             return (1.0 + (e2 / 24.0 - 0.1 - 3.0 * e3 / 44.0) * e2 + e3 / 14.0) / a.sqrt();
         }
     }
+    f64::NAN
 }
 
 /// Carlson's R_D(x, y, z), z > 0 and at most one of x, y zero (duplication; Numerical
@@ -1585,6 +1604,13 @@ mod tests {
             assert!((l[0] + l[1] + l[2] - trace).abs() < 1e-9);
             assert!((l[0] * l[1] + l[0] * l[2] + l[1] * l[2] - minors).abs() < 1e-9);
             assert!((l[0] * l[1] * l[2] - det).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn carlson_rf_ends_on_arguments_it_cannot_converge_on() {
+        for bad in [f64::NAN, f64::INFINITY] {
+            assert!(carlson_rf(bad, 1.0, 1.0).is_nan());
         }
     }
 

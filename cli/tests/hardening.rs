@@ -677,3 +677,56 @@ fn ctrl_c_writes_the_finished_samples_and_exits_cleanly() {
     render_ok(&["--spp", &spp, "--out", "same.exr", "--quiet"], d);
     assert_eq!(pixels(&out), pixels(&d.join("same.exr")));
 }
+
+/// Hair at extreme scales or with absurd fiber widths under dual scattering: the density grid
+/// refuses it with a message (it panicked on `min > max`, or looped forever in the orientation
+/// integral), and a huge but harmless procedural length still renders.
+#[test]
+fn extreme_hair_extents_under_dual_scattering_give_clear_errors() {
+    let dual = "DualMis(tables: (theta_nodes: 8, h_nodes: 4, theta_quad: 8, phi_quad: 8, \
+                walks: 64))";
+    let ball =
+        r#"Hair(source: Procedural(style: Ball, strands: 300, radius: 0.01), material: "hair")"#;
+    for (options, expect) in [
+        ("transform: (scale: 1e30)", "spans 1.97"),
+        ("transform: (scale: 1e-30)", "spans 1.97"),
+        ("radius_scale: 3e38", "wide on average"),
+    ] {
+        let object = format!(
+            r#"Hair(source: Procedural(style: Ball, strands: 300, radius: 0.01), material: "hair", options: ({options}))"#
+        );
+        let (dir, _) = scene_dir(&SCENE.replace(ball, &object));
+        assert_fails_in(
+            dir.path(),
+            &[
+                "render",
+                "scene.ron",
+                "--integrator",
+                dual,
+                "--out",
+                "o.exr",
+                "--quiet",
+            ],
+            &["scene.ron", "density grid", expect, "scale the hair"],
+        );
+    }
+    let long = ball.replace("radius: 0.01", "radius: 0.01, length: 1e30");
+    let (dir, _) = scene_dir(&SCENE.replace(ball, &long));
+    let o = tress(
+        &[
+            "render",
+            "scene.ron",
+            "--integrator",
+            dual,
+            "--out",
+            "o.exr",
+            "--quiet",
+        ],
+        dir.path(),
+    );
+    assert!(
+        o.status.success() && !stderr(&o).contains("panicked"),
+        "{}",
+        stderr(&o)
+    );
+}
