@@ -442,9 +442,12 @@ impl DensityGrid {
         // represent (they made the lattice panic, or the orientation integral loop forever).
         let extent = bounds.extent().max_element();
         let mean_width = total_area / total_length;
-        if !(extent.is_finite() && extent > 1e-20 && extent < 1e30)
-            || !(mean_width.is_finite() && mean_width < 1e30)
-        {
+        let representable = extent.is_finite()
+            && extent > 1e-20
+            && extent < 1e30
+            && mean_width.is_finite()
+            && mean_width < 1e30;
+        if !representable {
             return Err(Error::InvalidGeometry {
                 object: "hair".into(),
                 reason: format!(
