@@ -99,6 +99,10 @@ pub enum LightDesc {
     Point { position: Vec3, intensity: Vec3 },
 }
 
+/// Largest coordinate a camera or light may have: Embree aborts on ray origins beyond about
+/// 1.8e18.
+const MAX_COORDINATE: f32 = 1e16;
+
 fn one() -> f32 {
     1.0
 }
@@ -158,8 +162,15 @@ pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
             ))
         );
     }
-    if !finite3(c.look_from) || !finite3(c.look_at) || !finite3(c.up) {
-        bail!("{}", here("camera positions must be finite"));
+    // Embree refuses (aborts on) ray origins beyond about 1.8e18; keep well inside.
+    let placeable = |v: Vec3| finite3(v) && v.abs().max_element() <= MAX_COORDINATE;
+    if !placeable(c.look_from) || !placeable(c.look_at) || !finite3(c.up) {
+        bail!(
+            "{}",
+            here(&format!(
+                "camera positions must be finite and within ±{MAX_COORDINATE:e}"
+            ))
+        );
     }
     if (c.look_at - c.look_from).length() == 0.0
         || (c.look_at - c.look_from).cross(c.up).length() < 1e-6
@@ -169,14 +180,24 @@ pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
             here("camera.look_at must differ from look_from and not be parallel to up")
         );
     }
-    if !(c.lens_radius >= 0.0 && c.lens_radius.is_finite()) {
+    if !(c.lens_radius >= 0.0 && c.lens_radius <= MAX_COORDINATE) {
         bail!(
             "{}",
             here(&format!(
-                "camera.lens_radius = {} must be finite and >= 0",
+                "camera.lens_radius = {} must lie in [0, {MAX_COORDINATE:e}]",
                 c.lens_radius
             ))
         );
+    }
+    if let Some(f) = c.focus_distance {
+        if !(f > 0.0 && f <= MAX_COORDINATE) {
+            bail!(
+                "{}",
+                here(&format!(
+                    "camera.focus_distance = Some({f}) must lie in (0, {MAX_COORDINATE:e}]"
+                ))
+            );
+        }
     }
     let camera = Camera::perspective(
         c.look_from,
@@ -302,8 +323,9 @@ fn build_light(l: &LightDesc, scene_path: &Path) -> Result<Light> {
             angular_radius,
         } => {
             check("irradiance", *irradiance)?;
-            if !direction.is_finite() || direction.length() == 0.0 {
-                bail!("direction {direction} must be finite and non-zero");
+            // `try_normalize` also refuses vectors whose length overflows (3e38, 3e38, 0).
+            if direction.try_normalize().is_none() {
+                bail!("direction {direction} must be finite, non-zero and normalisable");
             }
             if !(0.0..90.0).contains(angular_radius) {
                 bail!("angular_radius = {angular_radius} must lie in [0, 90) degrees");

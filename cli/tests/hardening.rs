@@ -298,7 +298,39 @@ fn bad_scenes_give_clear_errors() {
     assert_bad_scene(&SCENE[..SCENE.len() / 2], &["scene.ron:"]);
     assert_bad_scene("", &["scene.ron:1:"]);
     // (text of SCENE, its replacement, what the message must say)
-    let edits: [(&str, &str, &[&str]); 27] = [
+    let edits: [(&str, &str, &[&str]); 34] = [
+        // Ray-producing quantities that passed validation and made Embree abort.
+        (
+            "look_from: (0, 0, 4)",
+            "look_from: (0, 0, 1.9e18)",
+            &["camera positions", "1e16"],
+        ),
+        ("fov: 35", "fov: 35, lens_radius: 3e38", &["lens_radius"]),
+        (
+            "fov: 35",
+            "fov: 35, lens_radius: 0.5, focus_distance: Some(NaN)",
+            &["focus_distance"],
+        ),
+        (
+            "fov: 35",
+            "fov: 35, lens_radius: 0.5, focus_distance: Some(inf)",
+            &["focus_distance"],
+        ),
+        (
+            "fov: 35",
+            "fov: 35, focus_distance: Some(0)",
+            &["focus_distance"],
+        ),
+        (
+            "fov: 35",
+            "fov: 35, focus_distance: Some(-5)",
+            &["focus_distance"],
+        ),
+        (
+            "direction: (0, -1, -1)",
+            "direction: (3e38, 3e38, 0)",
+            &["direction", "normalisable"],
+        ),
         ("Path(max_depth: 20)", "Bogus()", &["Bogus"]),
         ("Sky()", "Moon()", &["Moon"]),
         ("seed: 3", "seed: 3, crop: Some(1, 2)", &["crop"]),
