@@ -122,8 +122,12 @@ pub fn albedo(
 
 fn furnace(a: FurnaceArgs) -> Result<()> {
     let bcsdf = build_model(&a.model)?;
-    if !(a.step > 0.0 && a.step <= 90.0) {
-        bail!("--step must lie in (0, 90] degrees");
+    // A step below 0.01° would mean over 18 000 rows (and one below f32 resolution, none).
+    if !(a.step >= 0.01 && a.step <= 90.0) {
+        bail!("--step must lie in [0.01, 90] degrees");
+    }
+    if a.samples < 2 {
+        bail!("--samples must be at least 2 (the standard error needs two)");
     }
     let mut out = String::new();
     if a.csv {

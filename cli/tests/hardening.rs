@@ -490,6 +490,23 @@ fn bad_arguments_give_clear_errors() {
     run(&["--crop", "5,5,5,9"], &["scene.ron", "crop window"]);
     run(&["--crop", "1,2,3"], &["--crop", "x0,y0,x1,y1"]);
     run(&["--integrator", "Path(max_depth: -1)"], &["max_depth"]);
+    // The furnace tool: a step too small looped forever growing memory; no samples printed NaN.
+    let model = "Chiang(beta_m: 0.3, beta_n: 0.3)";
+    for (args, expect) in [
+        (["--step", "1e-30"], "--step"),
+        (["--samples", "0"], "--samples"),
+        (["--samples", "1"], "--samples"),
+    ] {
+        let o = tress(
+            &[&["bcsdf", "furnace", "--model", model], &args[..]].concat(),
+            d,
+        );
+        assert!(
+            o.status.code() == Some(1) && stderr(&o).contains(expect),
+            "{args:?}: {}",
+            stderr(&o)
+        );
+    }
     let o = tress(&["render", "scene.ron", "--out", "o.png", "--quiet"], d);
     assert!(
         !o.status.success() && stderr(&o).contains("o.png"),
