@@ -165,7 +165,9 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     if let Some(crop) = args.crop {
         desc.film.crop = Some(crop);
     }
-    desc.film.validate().map_err(anyhow::Error::msg)?;
+    desc.film
+        .validate_for_render()
+        .map_err(|e| anyhow::anyhow!("{}: film: {e}", args.scene.display()))?;
     for (what, spp) in [("--reference-spp", args.reference_spp), ("--spp", args.spp)] {
         if spp == 0 {
             bail!("{what} must be at least 1");

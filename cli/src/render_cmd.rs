@@ -124,7 +124,7 @@ fn load_with_overrides(args: &RenderArgs) -> Result<SceneDesc> {
         desc.film.crop = args.crop;
     }
     desc.film
-        .validate()
+        .validate_for_render()
         .map_err(|e| anyhow::anyhow!("{}: film: {e}", args.scene.display()))?;
     if args.spp_offset.checked_add(desc.film.spp as u64).is_none() {
         bail!(

@@ -298,7 +298,18 @@ fn bad_scenes_give_clear_errors() {
     assert_bad_scene(&SCENE[..SCENE.len() / 2], &["scene.ron:"]);
     assert_bad_scene("", &["scene.ron:1:"]);
     // (text of SCENE, its replacement, what the message must say)
-    let edits: [(&str, &str, &[&str]); 34] = [
+    let edits: [(&str, &str, &[&str]); 36] = [
+        // Films that would not fit in memory (they allocated until the process aborted).
+        (
+            "width: 24, height: 20",
+            "width: 65536, height: 65536",
+            &["GiB", "TRESS_MEMORY_LIMIT_GIB"],
+        ),
+        (
+            "width: 24, height: 20",
+            "width: 20000, height: 20000",
+            &["62.6 GiB", "tress farm"],
+        ),
         // Ray-producing quantities that passed validation and made Embree abort.
         (
             "look_from: (0, 0, 4)",

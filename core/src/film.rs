@@ -22,6 +22,12 @@ fn default_spp() -> u32 {
     16
 }
 
+/// Environment variable overriding [`DEFAULT_MEMORY_LIMIT_GIB`].
+pub const MEMORY_LIMIT_VAR: &str = "TRESS_MEMORY_LIMIT_GIB";
+/// Films whose render would need more memory than this are refused (override with
+/// [`MEMORY_LIMIT_VAR`]).
+pub const DEFAULT_MEMORY_LIMIT_GIB: f64 = 16.0;
+
 impl FilmSettings {
     /// The pixel window actually rendered, `[x0, y0, x1, y1)`.
     pub fn window(&self) -> [u32; 4] {
@@ -52,6 +58,39 @@ impl FilmSettings {
             }
         }
         Ok(())
+    }
+
+    /// [`Self::validate`], and that the render fits the memory limit ([`MEMORY_LIMIT_VAR`]).
+    pub fn validate_for_render(&self) -> Result<(), String> {
+        self.validate()?;
+        let limit_gib = std::env::var(MEMORY_LIMIT_VAR)
+            .ok()
+            .and_then(|v| v.parse::<f64>().ok())
+            .filter(|g| *g > 0.0)
+            .unwrap_or(DEFAULT_MEMORY_LIMIT_GIB);
+        let need_gib = self.memory_bytes() as f64 / (1u64 << 30) as f64;
+        if need_gib > limit_gib {
+            let [x0, y0, x1, y1] = self.window();
+            return Err(format!(
+                "a {}x{} window at {} spp needs about {need_gib:.1} GiB for its sample sums and \
+                 image, over the {limit_gib} GiB limit: render it in tiles (`tress farm`) or set \
+                 {MEMORY_LIMIT_VAR} to a larger number of GiB",
+                x1 - x0,
+                y1 - y0,
+                self.spp
+            ));
+        }
+        Ok(())
+    }
+
+    /// Memory the render of the window needs at the least: per pixel an f64 RGB sum for each
+    /// aligned block of its samples (at most ⌊log2 spp⌋ + 1 of them; `render::dyadic_cover`)
+    /// and the f32 image, twice over while waves are merged.
+    pub fn memory_bytes(&self) -> u64 {
+        let [x0, y0, x1, y1] = self.window();
+        let pixels = (x1 - x0) as u64 * (y1 - y0) as u64;
+        let blocks = 64 - (self.spp.max(1) as u64).leading_zeros() as u64;
+        2 * pixels * (24 * blocks + 12)
     }
 }
 
