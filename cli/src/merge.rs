@@ -377,7 +377,12 @@ pub struct MergeArgs {
 }
 
 pub fn run(args: MergeArgs) -> Result<()> {
-    if args.out.extension().and_then(|e| e.to_str()) != Some("exr") {
+    if !args
+        .out
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+    {
         bail!(
             "{}: the output must be an .exr file (a .png preview is written beside it)",
             args.out.display()

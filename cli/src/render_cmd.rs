@@ -104,6 +104,9 @@ pub fn parse_crop(s: &str) -> Result<[u32; 4], String> {
 fn parse_seconds(s: &str) -> Result<f64, String> {
     match s.trim().parse::<f64>() {
         Ok(v) if (0.0..1e9).contains(&v) => Ok(v),
+        Ok(v) if v >= 1e9 => Err(format!(
+            "{s} seconds is more than the 1e9 (about 32 years) a time limit may be"
+        )),
         _ => Err(format!("'{s}' is not a number of seconds >= 0")),
     }
 }
@@ -204,7 +207,11 @@ pub fn render(args: RenderArgs) -> Result<()> {
         Some(p) => p.clone(),
         None => PathBuf::from(format!("{}.exr", scene_stem(&args.scene))),
     };
-    if out.extension().and_then(|e| e.to_str()) != Some("exr") {
+    if !out
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+    {
         bail!(
             "--out {}: the output must be an .exr file (a .png preview is written beside it)",
             out.display()

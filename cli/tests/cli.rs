@@ -249,6 +249,17 @@ fn bcsdf_tools_work() {
 }
 
 #[test]
+fn output_extension_case_does_not_matter() {
+    let (dir, _) = scene_dir(SCENE);
+    let o = tress(
+        &["render", "scene.ron", "--out", "IMG.EXR", "--quiet"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(dir.path().join("IMG.EXR").exists() && dir.path().join("IMG.png").exists());
+}
+
+#[test]
 fn calibrate_fits_the_density_factors_and_writes_them() {
     let (dir, _) = scene_dir(SCENE);
     let small_tables = "DualMis(tables: (theta_nodes: 16, h_nodes: 8, theta_quad: 16, \
