@@ -24,10 +24,42 @@ pub struct SceneDesc {
     pub film: FilmSettings,
     #[serde(default)]
     pub integrator: IntegratorDesc,
-    /// Named materials, referred to by objects.
+    /// Named materials, referred to by objects; a name given twice is an error.
+    #[serde(deserialize_with = "unique_names")]
     pub materials: BTreeMap<String, MaterialDesc>,
     pub objects: Vec<crate::geometry::ObjectDesc>,
     pub lights: Vec<LightDesc>,
+}
+
+/// A map that refuses a key given twice (serde's own keeps the last silently).
+fn unique_names<'de, D, V>(d: D) -> std::result::Result<BTreeMap<String, V>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    V: Deserialize<'de>,
+{
+    struct Unique<V>(std::marker::PhantomData<V>);
+    impl<'de, V: Deserialize<'de>> serde::de::Visitor<'de> for Unique<V> {
+        type Value = BTreeMap<String, V>;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("a map of names")
+        }
+        fn visit_map<A: serde::de::MapAccess<'de>>(
+            self,
+            mut map: A,
+        ) -> std::result::Result<Self::Value, A::Error> {
+            let mut out = BTreeMap::new();
+            while let Some((name, value)) = map.next_entry::<String, V>()? {
+                if out.contains_key(&name) {
+                    return Err(serde::de::Error::custom(format!(
+                        "material \"{name}\" is defined twice"
+                    )));
+                }
+                out.insert(name, value);
+            }
+            Ok(out)
+        }
+    }
+    d.deserialize_map(Unique(std::marker::PhantomData))
 }
 
 /// Perspective camera.

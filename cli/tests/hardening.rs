@@ -298,7 +298,12 @@ fn bad_scenes_give_clear_errors() {
     assert_bad_scene(&SCENE[..SCENE.len() / 2], &["scene.ron:"]);
     assert_bad_scene("", &["scene.ron:1:"]);
     // (text of SCENE, its replacement, what the message must say)
-    let edits: [(&str, &str, &[&str]); 36] = [
+    let edits: [(&str, &str, &[&str]); 37] = [
+        (
+            r#""grey": Diffuse"#,
+            r#""hair": Diffuse(albedo: (0.5, 0.5, 0.5)), "grey": Diffuse"#,
+            &["\"hair\" is defined twice"],
+        ),
         // Films that would not fit in memory (they allocated until the process aborted).
         (
             "width: 24, height: 20",
