@@ -449,9 +449,9 @@ impl DensityGrid {
             && mean_width < 1e30;
         if !representable {
             return Err(Error::InvalidGeometry {
-                object: "hair".into(),
+                object: "density grid".into(),
                 reason: format!(
-                    "it spans {extent:e} units with fibers {mean_width:e} wide on average: \
+                    "the hair spans {extent:e} units with fibers {mean_width:e} wide on average: \
                      outside what the grid can represent (extent in 1e-20…1e30, finite widths); \
                      scale the hair to ordinary units"
                 ),

@@ -293,7 +293,7 @@ pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
         Some(settings) if accel.info().strands > 0 => {
             let t2 = Instant::now();
             let grid = tress_accel::DensityGrid::build(&accel, &settings)
-                .map_err(|e| anyhow!("{}: density grid: {e}", scene_path.display()))?;
+                .map_err(|e| anyhow!("{}: {e}", scene_path.display()))?;
             summary.push_str(&format!(
                 "\n{} built in {:.2} s",
                 grid.info(),

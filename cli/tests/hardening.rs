@@ -773,7 +773,11 @@ fn extreme_hair_extents_under_dual_scattering_give_clear_errors() {
                 "o.exr",
                 "--quiet",
             ],
-            &["scene.ron", "density grid", expect, "scale the hair"],
+            &[
+                "scene.ron: density grid: the hair",
+                expect,
+                "scale the hair",
+            ],
         );
     }
     let long = ball.replace("radius: 0.01", "radius: 0.01, length: 1e30");
