@@ -31,6 +31,26 @@ pub struct SceneDesc {
     pub lights: Vec<LightDesc>,
 }
 
+impl SceneDesc {
+    /// Every file the scene reads (hair, meshes, environment maps), resolved against
+    /// `scene_path` as [`build`] resolves them.
+    pub fn referenced_files(&self, scene_path: &Path) -> Vec<PathBuf> {
+        let objects = self.objects.iter().filter_map(|o| match o {
+            crate::geometry::ObjectDesc::Hair { source, .. } => source.path(),
+            crate::geometry::ObjectDesc::Mesh { file, .. } => Some(file.as_path()),
+            crate::geometry::ObjectDesc::Sphere { .. } => None,
+        });
+        let lights = self.lights.iter().filter_map(|l| match l {
+            LightDesc::Environment { file, .. } => Some(file.as_path()),
+            _ => None,
+        });
+        objects
+            .chain(lights)
+            .map(|p| resolve(scene_path, p))
+            .collect()
+    }
+}
+
 /// A map that refuses a key given twice (serde's own keeps the last silently).
 fn unique_names<'de, D, V>(d: D) -> std::result::Result<BTreeMap<String, V>, D::Error>
 where

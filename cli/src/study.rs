@@ -249,8 +249,13 @@ fn valid_name(s: &str) -> bool {
 
 /// A stable 64-bit hash of a string (FNV-1a, then mixed), for seeds and cache keys.
 fn str_hash(s: &str) -> u64 {
+    bytes_hash(s.as_bytes())
+}
+
+/// [`str_hash`] of any bytes (files' contents for the cache key).
+fn bytes_hash(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in s.bytes() {
+    for &b in bytes {
         h = (h ^ b as u64).wrapping_mul(0x0100_0000_01b3);
     }
     tress_core::rng::mix64(h)
@@ -534,10 +539,19 @@ impl Plan {
             }
             let mut keyed = desc.clone();
             keyed.integrator = IntegratorDesc::default();
+            // The files' contents and tress's version too: replacing an environment map (or
+            // updating tress) must not reuse renders of the old one.
+            let mut files = String::new();
+            for f in desc.referenced_files(&base) {
+                let bytes = std::fs::read(&f)
+                    .map_err(|e| here(format!("scene '{name}': {}: {e}", f.display())))?;
+                files.push_str(&format!("{:016x}|", bytes_hash(&bytes)));
+            }
             let content = str_hash(&format!(
-                "{}|{}",
+                "{}|{}|{files}|tress {}",
                 ron::to_string(&keyed).unwrap_or_else(|_| format!("{keyed:?}")),
-                base.display()
+                base.display(),
+                env!("CARGO_PKG_VERSION")
             ));
             scenes.push(PlanScene {
                 name,

@@ -598,3 +598,47 @@ fn bad_study_files_are_reported_with_the_file() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("absent.ron"));
 }
+
+/// The render cache is keyed on the contents of the files a scene reads: replacing an
+/// environment map by another of the same name redoes every render (it reused them, and the
+/// report showed the old numbers).
+#[test]
+fn the_cache_follows_the_contents_of_referenced_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let write_env = |radiance: f32| {
+        let mut img = Image::new(8, 4);
+        img.pixels
+            .iter_mut()
+            .for_each(|p| *p = tress_core::Rgb::splat(radiance));
+        image_io::write_exr(dir.path().join("env.exr"), &img, &[]).unwrap();
+    };
+    write_env(1.0);
+    let scene = SCENE.replace(
+        "lights: [Sky()]",
+        r#"lights: [Environment(file: "env.exr")]"#,
+    );
+    let text = format!(
+        r#"(
+    scenes: [Inline(name: "ball", scene: {scene})],
+    integrators: [Path(max_depth: 5)],
+    spp: [1, 2],
+    repetitions: 2,
+    reference: Render(integrator: Path(max_depth: 5), spp: 8),
+)"#
+    );
+    write(dir.path(), "s.ron", &text);
+    let run = || {
+        let o = tress(&["study", "s.ron", "--out", "out"], dir.path());
+        assert!(o.status.success(), "{}", stderr(&o));
+        counts(&o)
+    };
+    let (made, _) = run();
+    assert!(made > 0);
+    assert_eq!(run().0, 0, "an unchanged study reuses every render");
+    write_env(50.0);
+    assert_eq!(
+        run().0,
+        made,
+        "a replaced environment map redoes every render"
+    );
+}
