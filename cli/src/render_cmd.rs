@@ -69,7 +69,7 @@ pub struct RenderArgs {
 #[derive(Args, Debug)]
 pub struct PreviewArgs {
     /// Exposure of the PNG preview, in stops.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = parse_exposure, allow_hyphen_values = true)]
     pub exposure: f32,
     /// Do not write the PNG preview.
     #[arg(long)]
@@ -83,6 +83,15 @@ impl PreviewArgs {
             image_io::write_png(exr.with_extension("png"), image, self.exposure)?;
         }
         Ok(())
+    }
+}
+
+/// Checked before rendering: a NaN or overflowing gain made the PNG fail after the EXR was
+/// written.
+fn parse_exposure(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if v.abs() <= 100.0 => Ok(v),
+        _ => Err(format!("'{s}' is not an exposure in stops within ±100")),
     }
 }
 

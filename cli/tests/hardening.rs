@@ -504,6 +504,9 @@ fn bad_arguments_give_clear_errors() {
     run(&["--time-limit", "-1"], &["--time-limit", "seconds"]);
     run(&["--time-limit", "NaN"], &["--time-limit", "seconds"]);
     run(&["--time-limit", "1e300"], &["--time-limit", "more than"]);
+    // Refused before rendering: they wrote the EXR, then failed on the PNG.
+    run(&["--exposure", "NaN"], &["--exposure", "stops"]);
+    run(&["--exposure", "inf"], &["--exposure", "stops"]);
     run(&["--crop", "5,5,5,9"], &["scene.ron", "crop window"]);
     run(&["--crop", "1,2,3"], &["--crop", "x0,y0,x1,y1"]);
     run(&["--integrator", "Path(max_depth: -1)"], &["max_depth"]);
