@@ -383,6 +383,14 @@ fn build_light(l: &LightDesc, scene_path: &Path) -> Result<Light> {
                 bail!("angular_radius = {angular_radius} must lie in [0, 90) degrees");
             }
             let half = angular_radius.to_radians();
+            // A disc narrower than f32 can tell from its axis (1 − cos half below 1e-6, about
+            // 0.08°) is a point: sampled as a cone, its cos_max rounds to 1 and it rendered black
+            // (or, at 1e-30°, with infinite radiance).
+            let half = if 1.0 - (half as f64).cos() < 1e-6 {
+                0.0
+            } else {
+                half
+            };
             // Uniform disc radiance delivering `irradiance` at normal incidence:
             // E = L · π sin²(half) (the cosine-weighted solid angle of the disc).
             let radiance = if half > 0.0 {

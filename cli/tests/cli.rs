@@ -314,3 +314,37 @@ fn calibrate_fits_the_density_factors_and_writes_them() {
         stderr(&o)
     );
 }
+
+/// A sun disc narrower than f32 can resolve is a point: with 1e-5°…0.01° (and 1e-30°) the image
+/// was black or infinite; now it matches the delta light, and a wide disc stays close to it.
+#[test]
+fn tiny_sun_discs_render_like_a_point_sun() {
+    let mean_with = |radius: &str| {
+        let text = SCENE
+            .replace("angular_radius: 0.5", &format!("angular_radius: {radius}"))
+            .replace("lights: [Sky(), ", "lights: [");
+        let (dir, _) = scene_dir(&text);
+        let o = tress(
+            &[
+                "render",
+                "scene.ron",
+                "--spp",
+                "16",
+                "--out",
+                "o.exr",
+                "--quiet",
+            ],
+            dir.path(),
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let (image, _) = tress_core::image_io::read_exr(dir.path().join("o.exr")).unwrap();
+        image.mean()
+    };
+    let point = mean_with("0");
+    assert!(point > 0.0 && point.is_finite());
+    for radius in ["1e-30", "1e-5", "0.001", "0.01"] {
+        assert_eq!(mean_with(radius), point, "angular_radius {radius}");
+    }
+    let disc = mean_with("0.5");
+    assert!((disc - point).abs() < 0.05 * point, "{disc} vs {point}");
+}
