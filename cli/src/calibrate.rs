@@ -9,6 +9,7 @@
 //! channels' means over the hair pixels against the path tracer's. A fifth render checks the
 //! fitted values.
 
+use crate::diff::REL_EPSILON;
 use crate::render_cmd::{parse_crop, progress_bar};
 use crate::{atomic_write, integrators::IntegratorDesc, scene_desc};
 use anyhow::{bail, Context, Result};
@@ -78,7 +79,7 @@ fn masked_mean(img: &Image, mask: &[bool]) -> [f64; 3] {
     sum.map(|s| s / n)
 }
 
-/// relMSE over the masked pixels (ε = 1e-2, as `tress diff`).
+/// relMSE over the masked pixels, with `tress diff`'s ε.
 fn masked_relmse(img: &Image, reference: &Image, mask: &[bool]) -> f64 {
     let mut sum = 0.0;
     let mut n = 0usize;
@@ -91,7 +92,7 @@ fn masked_relmse(img: &Image, reference: &Image, mask: &[bool]) -> f64 {
     {
         for (a, r) in a.to_array().into_iter().zip(r.to_array()) {
             let (a, r) = (a as f64, r as f64);
-            sum += (a - r) * (a - r) / (r * r + 1e-2);
+            sum += (a - r) * (a - r) / (r * r + REL_EPSILON);
             n += 1;
         }
     }

@@ -756,6 +756,15 @@ fn extreme_hair_extents_under_dual_scattering_give_clear_errors() {
                 walks: 64))";
     let ball =
         r#"Hair(source: Procedural(style: Ball, strands: 300, radius: 0.01), material: "hair")"#;
+    let render = [
+        "render",
+        "scene.ron",
+        "--integrator",
+        dual,
+        "--out",
+        "o.exr",
+        "--quiet",
+    ];
     for (options, expect) in [
         ("transform: (scale: 1e30)", "spans 1.97"),
         ("transform: (scale: 1e-30)", "spans 1.97"),
@@ -767,15 +776,7 @@ fn extreme_hair_extents_under_dual_scattering_give_clear_errors() {
         let (dir, _) = scene_dir(&SCENE.replace(ball, &object));
         assert_fails_in(
             dir.path(),
-            &[
-                "render",
-                "scene.ron",
-                "--integrator",
-                dual,
-                "--out",
-                "o.exr",
-                "--quiet",
-            ],
+            &render,
             &[
                 "scene.ron: density grid: the hair",
                 expect,
@@ -785,18 +786,7 @@ fn extreme_hair_extents_under_dual_scattering_give_clear_errors() {
     }
     let long = ball.replace("radius: 0.01", "radius: 0.01, length: 1e30");
     let (dir, _) = scene_dir(&SCENE.replace(ball, &long));
-    let o = tress(
-        &[
-            "render",
-            "scene.ron",
-            "--integrator",
-            dual,
-            "--out",
-            "o.exr",
-            "--quiet",
-        ],
-        dir.path(),
-    );
+    let o = tress(&render, dir.path());
     assert!(
         o.status.success() && !stderr(&o).contains("panicked"),
         "{}",
