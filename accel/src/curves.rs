@@ -19,12 +19,30 @@ pub enum CurveBasis {
     BSpline,
 }
 
+/// The surface Embree draws a fiber as.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum CurveShape {
+    /// Ribbons of the fiber's width that face every ray (Embree flat curves), hit at the depth
+    /// of the axis. Fastest; what hair renderers built on Embree use, and enough for fiber
+    /// models, which take only `h` from the hit.
+    #[default]
+    Flat,
+    /// Tubes (Embree round curves: a sphere swept along the curve), hit on their surface: the
+    /// geometry of pbrt-v4's cylinder curves, Mitsuba 3's and Cycles' thick curves. `h` is
+    /// the same impact parameter as on a ribbon; the hit point lies up to a radius nearer the
+    /// ray origin.
+    Round,
+}
+
 impl CurveBasis {
-    pub(crate) fn geometry_kind(self) -> GeometryKind {
-        match self {
-            CurveBasis::Linear => GeometryKind::FLAT_LINEAR_CURVE,
-            CurveBasis::CatmullRom => GeometryKind::FLAT_CATMULL_ROM_CURVE,
-            CurveBasis::BSpline => GeometryKind::FLAT_BSPLINE_CURVE,
+    pub(crate) fn geometry_kind(self, shape: CurveShape) -> GeometryKind {
+        match (shape, self) {
+            (CurveShape::Flat, CurveBasis::Linear) => GeometryKind::FLAT_LINEAR_CURVE,
+            (CurveShape::Flat, CurveBasis::CatmullRom) => GeometryKind::FLAT_CATMULL_ROM_CURVE,
+            (CurveShape::Flat, CurveBasis::BSpline) => GeometryKind::FLAT_BSPLINE_CURVE,
+            (CurveShape::Round, CurveBasis::Linear) => GeometryKind::ROUND_LINEAR_CURVE,
+            (CurveShape::Round, CurveBasis::CatmullRom) => GeometryKind::ROUND_CATMULL_ROM_CURVE,
+            (CurveShape::Round, CurveBasis::BSpline) => GeometryKind::ROUND_BSPLINE_CURVE,
         }
     }
 

@@ -25,12 +25,15 @@
 //! sparse voxel grid answering [`tress_core::FiberDensity`] (the expected number of fibers a
 //! ray crosses); [`EmbreeAccel::count_fibers_crossed`] is its brute-force reference.
 //!
-//! # Fibers: flat curves, the local frame and `h`
+//! # Fibers: flat or round curves, the local frame and `h`
 //!
-//! Hair is drawn with Embree's *flat* curves: ribbons of the fiber's width that always face the
-//! ray. Embree reports a hit at the depth of the curve axis point nearest the ray, offset
-//! sideways (perpendicular to the ray) by at most the radius. The radius is interpolated along
-//! each segment with the same basis as the positions ([`CurveBasis`]).
+//! Hair is drawn by default with Embree's *flat* curves: ribbons of the fiber's width that
+//! always face the ray. Embree reports a hit at the depth of the curve axis point nearest the
+//! ray, offset sideways (perpendicular to the ray) by at most the radius. With
+//! [`CurveShape::Round`] the fibers are tubes and the hit lies on the tube's surface, up to a
+//! radius nearer the ray origin; its offset from the axis across the ray, and so `h`, is the
+//! same. The radius is interpolated along each segment with the same basis as the positions
+//! ([`CurveBasis`]).
 //!
 //! A fiber hit ([`tress_core::HitKind::Fiber`]) carries:
 //! - `tangent`: the unit derivative of the curve at the hit's curve parameter, pointing root →
@@ -65,9 +68,11 @@
 //! inside the union of the capsules of segments `s..=k` from its origin until it enters capsule
 //! `k` — then the ray never left the fiber and the "hit" is the ribbon seen from inside. Hits
 //! reached through free space (a curl of the same strand, another strand, a mesh) are kept.
-//! Capsules are padded by 0.1% of the radius plus float rounding of the origin, so borderline
-//! cases count as inside. This runs in Embree filter functions; the excluded primitive travels
-//! in the intersection context, so occlusion queries get the same rule at no extra cost.
+//! Tubes need the same rule: a ray leaving a tube's surface inward (transmission) meets the
+//! tube's far wall and its neighbours' walls from inside. Capsules are padded by 0.1% of the radius plus float rounding of the origin, so borderline
+//! cases count as inside. This runs in an Embree context filter carried only by queries that
+//! exclude a primitive (the excluded primitive travels in the intersection context), so
+//! occlusion queries get the same rule, and camera rays pay no callback at all.
 
 mod curves;
 pub mod cyhair;
@@ -83,7 +88,7 @@ pub mod source;
 mod test_util;
 pub mod tfx;
 
-pub use curves::CurveBasis;
+pub use curves::{CurveBasis, CurveShape};
 pub use cyhair::HairFile;
 pub use density::{DensityGrid, DensityInfo, DensitySettings};
 pub use error::{Error, Result};

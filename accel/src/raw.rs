@@ -1,18 +1,20 @@
 //! Raw Embree queries over an [`EmbreeAccel`]'s scene, for `tress bench`: the same BVH and
-//! filter functions as [`Accel`](tress_core::Accel) queries, but no hit construction (no
+//! context filter as [`Accel`](tress_core::Accel) queries, but no hit construction (no
 //! tangent, `h`, `v` or material), so their throughput is the baseline the renderer is
 //! measured against.
 //!
 //! Single rays run either with tress's self-intersection rule ([`Exclusion::Tress`], what
 //! [`Accel::intersect`](tress_core::Accel::intersect) pays for) or without it
-//! ([`Exclusion::Off`]: the filter functions return at once, so a ray leaving a fiber may hit
-//! it or its neighbours from inside). 8-wide packets always run without it: the excluded
-//! primitive travels in the intersection context, which a packet's lanes share.
+//! ([`Exclusion::Off`]: no filter callback at all, so a ray leaving a fiber may hit it or its
+//! neighbours from inside). 8-wide packets always run without it: the excluded primitive
+//! travels in the intersection context, which a packet's lanes share. A scene built with
+//! [`SceneBuilder::without_filters`](crate::SceneBuilder::without_filters) has no filter
+//! support at all: the baseline of Embree alone.
 //!
 //! This module is a child of `scene` (see the `#[path]` there) because it builds the private
-//! intersection context the filter functions read.
+//! intersection context the filter reads.
 
-use super::{EmbreeAccel, Exclude, NO_ID};
+use super::{EmbreeAccel, Exclude};
 use embree3::{Hit8, IntersectContextExt, Ray8, RayHit, RayHit8, ValidMask, ValidMaskN};
 use tress_core::accel::PrimId;
 use tress_core::math::Ray;
@@ -28,9 +30,9 @@ pub struct RawRay {
 /// Whether a raw query applies tress's self-intersection rule to `ray.exclude`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Exclusion {
-    /// The capsule rule of the filter functions, exactly as in `Accel` queries.
+    /// The capsule rule of the context filter, exactly as in `Accel` queries.
     Tress,
-    /// None: the filter functions return at once; `ray.exclude` is ignored.
+    /// None: no filter callback; `ray.exclude` is ignored.
     Off,
 }
 
@@ -42,21 +44,11 @@ pub const PACKET: usize = 8;
 #[repr(C, align(32))]
 struct Valid8(ValidMaskN<PACKET>);
 
-fn context(ray: &Ray, exclusion: Exclusion) -> IntersectContextExt<Exclude> {
+fn context(accel: &EmbreeAccel, ray: &Ray, exclusion: Exclusion) -> IntersectContextExt<Exclude> {
     match exclusion {
-        Exclusion::Tress => EmbreeAccel::context(ray),
-        Exclusion::Off => unfiltered(),
+        Exclusion::Tress => accel.context(ray),
+        Exclusion::Off => accel.unfiltered_context(),
     }
-}
-
-/// A context the filter functions return from at once.
-fn unfiltered() -> IntersectContextExt<Exclude> {
-    IntersectContextExt::incoherent(Exclude {
-        geom: NO_ID,
-        prim: NO_ID,
-        hits: std::ptr::null_mut(),
-        skip_hair: false,
-    })
 }
 
 fn embree_ray(r: &RawRay) -> embree3::Ray {
@@ -91,7 +83,7 @@ fn packet(rays: &[RawRay]) -> (Ray8, Valid8) {
 impl EmbreeAccel {
     /// One `rtcIntersect1`: the primitive hit and its distance.
     pub fn raw_intersect(&self, r: &RawRay, exclusion: Exclusion) -> Option<(PrimId, f32)> {
-        let mut ctx = context(&r.ray, exclusion);
+        let mut ctx = context(self, &r.ray, exclusion);
         let mut rh = RayHit::from(embree_ray(r));
         self.scene.intersect(&mut ctx, &mut rh);
         rh.hit.is_valid().then_some((
@@ -105,7 +97,7 @@ impl EmbreeAccel {
 
     /// One `rtcOccluded1`.
     pub fn raw_occluded(&self, r: &RawRay, exclusion: Exclusion) -> bool {
-        let mut ctx = context(&r.ray, exclusion);
+        let mut ctx = context(self, &r.ray, exclusion);
         self.scene.occluded(&mut ctx, &mut embree_ray(r))
     }
 
@@ -120,7 +112,7 @@ impl EmbreeAccel {
             ray,
             hit: Hit8::new(),
         };
-        let mut ctx = unfiltered();
+        let mut ctx = self.unfiltered_context();
         self.scene.intersect8(&mut ctx, &mut rh, &valid.0);
         std::array::from_fn(|i| {
             (i < rays.len() && rh.hit.geomID[i] != u32::MAX).then_some(rh.ray.tfar[i])
@@ -134,7 +126,7 @@ impl EmbreeAccel {
     /// If `rays` holds more than [`PACKET`] rays.
     pub fn raw_occluded8(&self, rays: &[RawRay]) -> [bool; PACKET] {
         let (mut ray, valid) = packet(rays);
-        let mut ctx = unfiltered();
+        let mut ctx = self.unfiltered_context();
         self.scene.occluded8(&mut ctx, &mut ray, &valid.0);
         // Embree marks a blocked lane by setting its tfar to -inf.
         std::array::from_fn(|i| i < rays.len() && ray.tfar[i] == f32::NEG_INFINITY)

@@ -2,15 +2,16 @@
 //! ray queries with [`tress_core::Hit`]s. See the crate docs for the fiber frame, the sign of
 //! `h` and the self-intersection rule.
 
-use crate::curves::{Capsule, CurveBasis};
+use crate::curves::{Capsule, CurveBasis, CurveShape};
 use crate::error::{Error, Result};
 use crate::fp_mode;
 use crate::geometry::{HairGeometry, Transform};
 use crate::mesh::TriangleMesh;
 use crate::source::HairOptions;
+use embree3::sys::RTCFilterFunctionNArguments;
 use embree3::{
-    BufferUsage, Device, DeviceProperty, Format, GeometryBuilder, GeometryKind, HitN,
-    IntersectContext, IntersectContextExt, RayHit, RayN, Scene, SoAHit, SoARay, ValidityN,
+    BufferUsage, Device, DeviceProperty, Format, GeometryBuilder, GeometryKind,
+    IntersectContextExt, RayHit, Scene, SceneFlags,
 };
 use glam::Vec4;
 use std::borrow::Cow;
@@ -23,7 +24,7 @@ use tress_core::math::{Aabb, Ray, Vec3};
 
 const NO_ID: u32 = u32::MAX;
 
-/// What a query excludes, carried to the filter functions in the intersection context.
+/// What a query excludes, carried to [`context_filter`] in the intersection context.
 #[derive(Clone, Copy, Debug)]
 struct Exclude {
     geom: u32,
@@ -34,6 +35,8 @@ struct Exclude {
     hits: *mut Vec<(PrimId, f32)>,
     /// Set by [`Accel::occluded_by_surfaces`]: fibers are transparent to the query.
     skip_hair: bool,
+    /// The scene's geometries, indexed by Embree geometry id: each carries its own rule.
+    geoms: *const [GeomData],
 }
 
 /// Everything needed to turn a curve hit into a fiber hit and to filter self-intersections.
@@ -157,6 +160,20 @@ enum GeomData {
     Spheres { materials: Vec<u32> },
 }
 
+impl GeomData {
+    /// Whether a candidate hit on primitive `prim` of this geometry (id `geom`) is kept by a
+    /// query excluding `ex`: fibers apply the self-intersection rule, meshes and spheres skip
+    /// only the primitive the ray leaves.
+    fn keep(&self, ex: &Exclude, geom: u32, prim: u32, org: Vec3, dir: Vec3) -> bool {
+        match self {
+            GeomData::Hair(c) => {
+                !ex.skip_hair && (geom != ex.geom || c.keep(ex.prim, prim, org, dir))
+            }
+            GeomData::Mesh { .. } | GeomData::Spheres { .. } => geom != ex.geom || prim != ex.prim,
+        }
+    }
+}
+
 /// What an object added to the scene is.
 #[derive(Clone, Debug, PartialEq)]
 pub enum ObjectKind {
@@ -168,6 +185,7 @@ pub enum ObjectKind {
         /// Input points of the kept strands.
         points: usize,
         basis: CurveBasis,
+        curve: CurveShape,
     },
     Mesh {
         triangles: usize,
@@ -235,9 +253,10 @@ impl fmt::Display for AccelInfo {
                     segments,
                     points,
                     basis,
+                    curve,
                 } => write!(
                     f,
-                    "hair, {strands} strands, {segments} segments, {points} points, {basis:?}"
+                    "hair, {strands} strands, {segments} segments, {points} points, {basis:?}, {curve:?}"
                 )?,
                 ObjectKind::Mesh {
                     triangles,
@@ -264,6 +283,7 @@ pub struct SceneBuilder {
     objects: Vec<ObjectInfo>,
     spheres: Vec<(Vec4, u32)>,
     embree_bytes: Arc<AtomicIsize>,
+    filters: bool,
 }
 
 impl SceneBuilder {
@@ -291,9 +311,10 @@ impl SceneBuilder {
             counter.fetch_add(bytes, Ordering::Relaxed);
             true
         });
-        let scene = device
+        let mut scene = device
             .create_scene()
             .map_err(|e| Error::Embree(format!("cannot create scene: {e}")))?;
+        scene.set_flags(SceneFlags::CONTEXT_FILTER_FUNCTION);
         Ok(SceneBuilder {
             device,
             scene,
@@ -301,7 +322,17 @@ impl SceneBuilder {
             objects: Vec::new(),
             spheres: Vec::new(),
             embree_bytes,
+            filters: true,
         })
+    }
+
+    /// A scene without filter support, for measuring Embree's own speed (`tress bench`): its
+    /// queries ignore `ray.exclude`, so a ray leaving a fiber may hit that fiber again, and
+    /// [`EmbreeAccel::count_fibers_crossed`] sees only the first fiber. Not for rendering.
+    pub fn without_filters(mut self) -> Self {
+        self.scene.set_flags(SceneFlags::NONE);
+        self.filters = false;
+        self
     }
 
     fn check_device(&self, object: &str) -> Result<()> {
@@ -319,7 +350,8 @@ impl SceneBuilder {
     }
 
     /// Adds a hair object: validates it, subsamples and transforms it per `options`, converts
-    /// the polylines to the chosen basis and attaches flat curves with material `material`.
+    /// the polylines to the chosen basis and attaches flat or round curves with material
+    /// `material`.
     pub fn add_hair(
         mut self,
         hair: &HairGeometry,
@@ -427,7 +459,7 @@ impl SceneBuilder {
         let name = &hair.name;
         let mut geometry = self
             .device
-            .create_geometry(basis.geometry_kind())
+            .create_geometry(basis.geometry_kind(options.curve))
             .map_err(|e| embree_error(name, "cannot create curves", e))?;
         geometry
             .set_new_buffer::<[f32; 4]>(BufferUsage::VERTEX, 0, Format::FLOAT4, 16, cps.len())
@@ -441,10 +473,6 @@ impl SceneBuilder {
             .copy_from_slice(&seg_first_cp);
         drop((cps, seg_first_cp));
         let data = Arc::new(data);
-        let filter_data = Arc::clone(&data);
-        install_filters(&mut geometry, move |ex: &Exclude, geom, prim, org, dir| {
-            !ex.skip_hair && (geom != ex.geom || filter_data.keep(ex.prim, prim, org, dir))
-        });
         let info = ObjectInfo {
             name: name.clone(),
             kind: ObjectKind::Hair {
@@ -452,6 +480,7 @@ impl SceneBuilder {
                 segments: data.segs.len(),
                 points,
                 basis,
+                curve: options.curve,
             },
             material,
             bounds,
@@ -506,7 +535,6 @@ impl SceneBuilder {
             )
             .map_err(|e| embree_error(name, "cannot allocate triangles", e))?
             .copy_from_slice(&mesh.triangles);
-        install_filters(&mut geometry, exclude_only);
         let info = ObjectInfo {
             name: name.clone(),
             kind: ObjectKind::Mesh {
@@ -572,7 +600,6 @@ impl SceneBuilder {
                 .iter_mut()
                 .zip(&self.spheres)
                 .for_each(|(dst, (s, _))| *dst = s.to_array());
-            install_filters(&mut geometry, exclude_only);
             let materials = self.spheres.iter().map(|&(_, m)| m).collect();
             self.attach(geometry, GeomData::Spheres { materials });
         }
@@ -625,59 +652,44 @@ impl SceneBuilder {
             _device: self.device,
             geoms: self.geoms,
             info,
+            filters: self.filters,
         })
     }
 }
 
-/// The filter of meshes and spheres: only the primitive the ray leaves is skipped.
-fn exclude_only(ex: &Exclude, geom: u32, prim: u32, _org: Vec3, _dir: Vec3) -> bool {
-    geom != ex.geom || prim != ex.prim
-}
-
-/// Installs `keep` as the intersect and occluded filter of a geometry.
-fn install_filters<F>(geometry: &mut GeometryBuilder<'static>, keep: F)
-where
-    F: Fn(&Exclude, u32, u32, Vec3, Vec3) -> bool + Send + Sync + 'static,
-{
-    let keep = Arc::new(keep);
-    let keep2 = Arc::clone(&keep);
-    geometry.set_intersect_filter_function::<_, ()>(move |rays, hits, valid, ctx, _| {
-        apply_filter(&*keep, rays, hits, valid, ctx)
-    });
-    geometry.set_occluded_filter_function::<_, ()>(move |rays, hits, valid, ctx, _| {
-        apply_filter(&*keep2, rays, hits, valid, ctx)
-    });
-}
-
-fn apply_filter<F>(
-    keep: &F,
-    rays: RayN<'_>,
-    hits: HitN<'_>,
-    mut valid: ValidityN<'_>,
-    ctx: &mut IntersectContext,
-) where
-    F: Fn(&Exclude, u32, u32, Vec3, Vec3) -> bool,
-{
-    // SAFETY: the scenes built here are private to `EmbreeAccel`, whose every query passes an
-    // `IntersectContextExt<Exclude>`.
-    let ex = unsafe { *ctx.ext::<Exclude>() };
-    if ex.geom == NO_ID && ex.hits.is_null() && !ex.skip_hair {
-        return;
-    }
-    for i in 0..rays.len() {
-        if valid[i] == 0 {
+/// Embree's context filter (scene flag `CONTEXT_FILTER_FUNCTION`), the second filter stage
+/// after per-geometry filters, of which tress installs none. Only queries that exclude
+/// something carry it ([`EmbreeAccel::context`]): camera rays and rays leaving lights pay no
+/// callback per candidate hit, and occlusion rays that need no rule stop at Embree's first hit.
+///
+/// # Safety
+/// Embree calls it with the arguments of a query whose context is an
+/// `IntersectContextExt<Exclude>` built by [`EmbreeAccel::context`] for a live scene.
+unsafe extern "C" fn context_filter(args: *const RTCFilterFunctionNArguments) {
+    let args = &*args;
+    let ex = &(*(args.context as *const IntersectContextExt<Exclude>)).ext;
+    let geoms = &*ex.geoms;
+    let n = args.N as usize;
+    // Embree's SoA layouts of `RTCRayN` and `RTCHitN` (rtcore_ray.h): field k of lane i is
+    // element k·N + i.
+    let ray = args.ray as *const f32;
+    let hit = args.hit as *const u32;
+    for i in 0..n {
+        let valid = args.valid.add(i);
+        if *valid == 0 {
             continue;
         }
-        let org = Vec3::from(rays.org(i));
-        let dir = Vec3::from(rays.dir(i));
-        let (geom, prim) = (hits.geom_id(i), hits.prim_id(i));
-        if !keep(&ex, geom, prim, org, dir) {
-            valid[i] = 0;
+        let ray_field = |k: usize| *ray.add(k * n + i);
+        let org = Vec3::new(ray_field(0), ray_field(1), ray_field(2));
+        let dir = Vec3::new(ray_field(4), ray_field(5), ray_field(6));
+        let (prim, geom) = (*hit.add(5 * n + i), *hit.add(6 * n + i));
+        if !geoms[geom as usize].keep(ex, geom, prim, org, dir) {
+            *valid = 0;
         } else if !ex.hits.is_null() {
-            // SAFETY: set only by `count_fibers_crossed`, whose vector outlives the (synchronous)
-            // query and is not otherwise touched during it.
-            unsafe { (*ex.hits).push((PrimId { geom, prim }, rays.tfar(i))) };
-            valid[i] = 0;
+            // Set only by `count_fibers_crossed`, whose vector outlives the (synchronous) query
+            // and is not otherwise touched during it. Field 8 is the candidate's distance.
+            (*ex.hits).push((PrimId { geom, prim }, ray_field(8)));
+            *valid = 0;
         }
     }
 }
@@ -690,6 +702,9 @@ pub struct EmbreeAccel {
     _device: Device,
     geoms: Vec<GeomData>,
     info: AccelInfo,
+    /// Whether the scene supports the context filter; without it `ray.exclude` is ignored
+    /// (see [`SceneBuilder::without_filters`]).
+    filters: bool,
 }
 
 impl fmt::Debug for EmbreeAccel {
@@ -706,22 +721,34 @@ impl EmbreeAccel {
         &self.info
     }
 
-    fn context(ray: &Ray) -> IntersectContextExt<Exclude> {
-        let ex = ray.exclude.map_or(
-            Exclude {
-                geom: NO_ID,
-                prim: NO_ID,
-                hits: std::ptr::null_mut(),
-                skip_hair: false,
-            },
-            |p| Exclude {
-                geom: p.geom,
-                prim: p.prim,
-                hits: std::ptr::null_mut(),
-                skip_hair: false,
-            },
-        );
-        IntersectContextExt::incoherent(ex)
+    /// The context of a query along `ray`: it carries [`context_filter`] only when the ray
+    /// excludes a primitive.
+    fn context(&self, ray: &Ray) -> IntersectContextExt<Exclude> {
+        let (geom, prim) = ray.exclude.map_or((NO_ID, NO_ID), |p| (p.geom, p.prim));
+        let mut ctx = self.unfiltered_context();
+        ctx.ext.geom = geom;
+        ctx.ext.prim = prim;
+        if ray.exclude.is_some() {
+            self.set_filter(&mut ctx);
+        }
+        ctx
+    }
+
+    /// A context with nothing to exclude and no filter: Embree's own traversal alone.
+    fn unfiltered_context(&self) -> IntersectContextExt<Exclude> {
+        IntersectContextExt::incoherent(Exclude {
+            geom: NO_ID,
+            prim: NO_ID,
+            hits: std::ptr::null_mut(),
+            skip_hair: false,
+            geoms: self.geoms.as_slice(),
+        })
+    }
+
+    fn set_filter(&self, ctx: &mut IntersectContextExt<Exclude>) {
+        if self.filters {
+            ctx.ctx.filter = Some(context_filter);
+        }
     }
 
     fn embree_ray(ray: &Ray) -> embree3::Ray {
@@ -779,8 +806,9 @@ impl EmbreeAccel {
     /// ray.
     pub fn count_fibers_crossed(&self, ray: &Ray) -> u32 {
         let mut hits: Vec<(PrimId, f32)> = Vec::new();
-        let mut ctx = Self::context(ray);
+        let mut ctx = self.context(ray);
         ctx.ext.hits = &mut hits;
+        self.set_filter(&mut ctx);
         let mut r = Self::embree_ray(ray);
         self.scene.occluded(&mut ctx, &mut r);
         // Embree may report a primitive more than once (spatial splits, curve subdivision).
@@ -807,7 +835,7 @@ impl EmbreeAccel {
 
 impl Accel for EmbreeAccel {
     fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        let mut ctx = Self::context(ray);
+        let mut ctx = self.context(ray);
         let mut rh = RayHit::from(Self::embree_ray(ray));
         self.scene.intersect(&mut ctx, &mut rh);
         if !rh.hit.is_valid() {
@@ -839,7 +867,7 @@ impl Accel for EmbreeAccel {
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        let mut ctx = Self::context(ray);
+        let mut ctx = self.context(ray);
         let mut r = Self::embree_ray(ray);
         self.scene.occluded(&mut ctx, &mut r)
     }
@@ -848,8 +876,9 @@ impl Accel for EmbreeAccel {
         if !self.has_surfaces() {
             return false;
         }
-        let mut ctx = Self::context(ray);
+        let mut ctx = self.context(ray);
         ctx.ext.skip_hair = true;
+        self.set_filter(&mut ctx);
         let mut r = Self::embree_ray(ray);
         self.scene.occluded(&mut ctx, &mut r)
     }

@@ -11,6 +11,25 @@ fn with_basis(basis: CurveBasis) -> HairOptions {
     }
 }
 
+/// Every basis in both shapes.
+fn all_curves() -> Vec<HairOptions> {
+    [CurveShape::Flat, CurveShape::Round]
+        .into_iter()
+        .flat_map(|curve| {
+            [
+                CurveBasis::Linear,
+                CurveBasis::CatmullRom,
+                CurveBasis::BSpline,
+            ]
+            .map(|basis| HairOptions {
+                basis,
+                curve,
+                ..Default::default()
+            })
+        })
+        .collect()
+}
+
 fn fiber(hit: &Hit) -> (Vec3, f32, f32, u32, f32) {
     match hit.kind {
         HitKind::Fiber {
@@ -33,11 +52,8 @@ fn accel_is_send_and_sync() {
 #[test]
 fn single_fiber_hit_reports_t_tangent_h_and_v() {
     let r = 0.1;
-    for basis in [
-        CurveBasis::Linear,
-        CurveBasis::CatmullRom,
-        CurveBasis::BSpline,
-    ] {
+    for options in all_curves() {
+        let curve = options.curve;
         for reversed in [false, true] {
             let (a, b) = (Vec3::new(-1.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0));
             let pts = if reversed {
@@ -47,7 +63,7 @@ fn single_fiber_hit_reports_t_tangent_h_and_v() {
             };
             let accel = SceneBuilder::new()
                 .unwrap()
-                .add_hair(&hair(&[pts], r), &with_basis(basis), 5)
+                .add_hair(&hair(&[pts], r), &options, 5)
                 .unwrap()
                 .build()
                 .unwrap();
@@ -59,19 +75,26 @@ fn single_fiber_hit_reports_t_tangent_h_and_v() {
                     let (tangent, h, radius, strand, v) = fiber(&hit);
                     let sign = if reversed { -1.0 } else { 1.0 };
                     // The ribbon faces the ray through the axis: t is the distance to the axis.
-                    assert!((hit.t - 5.0).abs() < 1e-3, "{basis:?} t = {}", hit.t);
-                    assert!((hit.p - target).length() < 1e-3);
+                    // The tube is hit on its surface, (r² − y0²)^½ before the axis plane z = 0.
+                    let want_t = match curve {
+                        CurveShape::Flat => 5.0,
+                        CurveShape::Round => 5.0 - (r * r - y0 * y0).sqrt() / dir.z.abs(),
+                    };
+                    assert!((hit.t - want_t).abs() < 1e-3, "{options:?} t = {}", hit.t);
+                    assert!((hit.p - ray.at(want_t)).length() < 1e-3);
                     assert!((tangent - sign * Vec3::X).length() < 1e-4, "{tangent}");
+                    // The same impact parameter on the ribbon and on the tube.
                     assert!(
                         (h - sign * y0 / r).abs() < 2e-3,
-                        "{basis:?} reversed={reversed} y0={y0}: h = {h}"
+                        "{options:?} reversed={reversed} y0={y0}: h = {h}"
                     );
                     assert!((radius - r).abs() < 1e-6);
                     assert_eq!((strand, hit.material), (0, 5));
-                    let want_v = if reversed { 0.35 } else { 0.65 };
-                    assert!((v - want_v).abs() < 1e-3, "v = {v}");
+                    let along = (hit.p.x + 1.0) / 2.0;
+                    let want_v = if reversed { 1.0 - along } else { along };
+                    assert!((v - want_v).abs() < 1e-3, "{options:?} v = {v}");
                     assert!(accel.occluded(&ray));
-                    assert!(!accel.occluded(&ray.with_t_max(4.9)));
+                    assert!(!accel.occluded(&ray.with_t_max(0.99 * hit.t)));
                 }
             }
             let miss = Ray::new(Vec3::new(0.3, 0.12, 5.0), -Vec3::Z);
@@ -210,14 +233,11 @@ fn rays_leaving_a_fiber_do_not_hit_it_again_but_hit_a_neighbour() {
     let a = line(Vec3::new(-2.0, 0.0, 0.0), Vec3::new(2.0, 0.0, 0.0), 9);
     let b = line(Vec3::new(-2.0, 0.2, 0.0), Vec3::new(2.0, 0.2, 0.0), 9);
     let mut rng = Pcg32::new(1, 2);
-    for basis in [
-        CurveBasis::Linear,
-        CurveBasis::CatmullRom,
-        CurveBasis::BSpline,
-    ] {
+    for options in all_curves() {
+        let basis = (options.basis, options.curve);
         let accel = SceneBuilder::new()
             .unwrap()
-            .add_hair(&hair(&[a.clone(), b.clone()], r), &with_basis(basis), 0)
+            .add_hair(&hair(&[a.clone(), b.clone()], r), &options, 0)
             .unwrap()
             .build()
             .unwrap();
@@ -256,8 +276,14 @@ fn rays_leaving_a_fiber_do_not_hit_it_again_but_hit_a_neighbour() {
             let ray = Ray::leaving(hit.p, (q - hit.p) / dist, hit.prim);
             let h2 = accel.intersect(&ray).expect("the neighbour strand is hit");
             assert_eq!(fiber(&h2).3, 1, "{basis:?}");
+            // A ribbon is hit at the axis; a tube on its wall, r / sin θ before the axis for a
+            // ray at θ to the strand.
+            let before = match options.curve {
+                CurveShape::Flat => 0.0,
+                CurveShape::Round => r / ray.dir.cross(Vec3::X).length(),
+            };
             assert!(
-                (h2.t - dist).abs() < 2e-3 * dist,
+                h2.t <= dist * (1.0 + 2e-3) && h2.t >= dist * (1.0 - 2e-3) - before,
                 "{basis:?}: t {} vs {dist}",
                 h2.t
             );

@@ -1,7 +1,7 @@
 //! Where a hair object comes from, as written in a scene file, and the per-object options
 //! applied when it is added to the scene.
 
-use crate::curves::CurveBasis;
+use crate::curves::{CurveBasis, CurveShape};
 use crate::cyhair::HairFile;
 use crate::error::{format_error, Result};
 use crate::geometry::{HairGeometry, Transform};
@@ -78,7 +78,7 @@ impl HairSource {
 /// How a hair object is turned into Embree curves (every field has a default).
 ///
 /// ```ron
-/// (basis: CatmullRom, radius_scale: 1.5, tip_scale: 0.3,
+/// (basis: CatmullRom, curve: Round, radius_scale: 1.5, tip_scale: 0.3,
 ///  transform: (scale: 0.1, rotate: Euler((0, 90, 0)), translate: (0, 1, 0)),
 ///  strand_fraction: 0.1, strand_seed: 7)
 /// ```
@@ -86,6 +86,8 @@ impl HairSource {
 #[serde(deny_unknown_fields, default)]
 pub struct HairOptions {
     pub basis: CurveBasis,
+    /// Ray-facing ribbons (`Flat`, the default) or tubes (`Round`).
+    pub curve: CurveShape,
     /// Multiplies every radius.
     pub radius_scale: f32,
     /// Root-to-tip taper: the radius is multiplied by `1 + (tip_scale − 1)·v` with v = 0 at the
@@ -103,6 +105,7 @@ impl Default for HairOptions {
     fn default() -> Self {
         HairOptions {
             basis: CurveBasis::Linear,
+            curve: CurveShape::Flat,
             radius_scale: 1.0,
             tip_scale: 1.0,
             transform: Transform::default(),

@@ -5,12 +5,16 @@
 //! - build: load, BVH and density-grid times, peak RSS (VmHWM, reset per model) and bytes per
 //!   segment;
 //! - raw: Embree throughput for camera rays, rays bouncing off hair hit points in random
-//!   directions, and shadow rays toward random directions, as single rays without and with
-//!   tress's self-intersection rule, as 8-wide packets, and as full `Accel` queries (with hit
-//!   construction), on one thread and on N;
+//!   directions, and shadow rays toward random directions, as single rays on a twin scene of
+//!   the same curves built without filter support (`plain`: Embree alone, the baseline), on
+//!   tress's scene without and with its self-intersection rule, as 8-wide packets, and as full
+//!   `Accel` queries (with hit construction), on one thread and on N;
 //! - integrator: samples/s and rays/s of every registered integrator rendering the model under
-//!   the built-in sky, the mix of camera, bounce and shadow rays it traced, and its ray rate
-//!   divided by the raw rate of the same mix (raw rates weighted by the mix);
+//!   the built-in sky, the mix of camera, bounce and shadow rays it traced, its ray rate
+//!   divided by the raw rate of the same mix (raw rates weighted by the mix), and divided by
+//!   the rate of its own recorded rays replayed in each raw mode;
+//! - round: the models of the path tracer's ray-rate target again with round curves (tubes),
+//!   raw and path only;
 //! - scaling: time per sample of the large procedural model over the small one — at the same
 //!   fiber radius (10× the optical thickness) and thinned to equal coverage (radius/√10, the
 //!   same picture with 10× the primitives) — and the N-thread speedup;
@@ -37,8 +41,8 @@ use std::sync::Arc;
 use std::time::Instant;
 use tress_accel::raw::{Exclusion, RawRay, PACKET};
 use tress_accel::{
-    DensityGrid, EmbreeAccel, HairFile, HairGeometry, HairOptions, HairStyle, ProceduralHair,
-    SceneBuilder,
+    CurveShape, DensityGrid, EmbreeAccel, HairFile, HairGeometry, HairOptions, HairStyle,
+    ProceduralHair, SceneBuilder,
 };
 use tress_core::film::FilmSettings;
 use tress_core::light::{EnvironmentMap, Light};
@@ -254,10 +258,20 @@ const HUGE_STRANDS: u32 = 1_000_000;
 const CHUNK: usize = 1024;
 
 /// Where a model's hair comes from.
+#[derive(Clone)]
 enum Source {
     /// Procedural wavy hair: strands, fiber radius.
     Procedural(u32, f32),
     File(PathBuf),
+}
+
+/// Whether the path tracer's ray-rate target applies: the large procedural model (100k strands
+/// at the common radius) and the hair file.
+fn ray_target(source: &Source, plan: &Plan) -> bool {
+    match *source {
+        Source::Procedural(n, r) => n == plan.strands[1] && n == 100_000 && r == RADIUS,
+        Source::File(_) => true,
+    }
 }
 
 /// Fiber radius of the procedural models (the procedural default).
@@ -277,9 +291,12 @@ fn thin_label(strands: u32) -> String {
 struct ModelSpec {
     name: String,
     source: Source,
-    /// Raw measurements and every integrator; otherwise (the huge model) the path tracer on a
-    /// small film only.
+    /// Raw measurements and the integrators' renders; otherwise (the huge model) the path
+    /// tracer on a small film only.
     full: bool,
+    /// Every integrator, or only the path tracer (the round-curve variants).
+    all_integrators: bool,
+    curve: CurveShape,
 }
 
 fn strand_label(n: u32) -> String {
@@ -345,6 +362,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
             name: strand_label(n),
             source: Source::Procedural(n, RADIUS),
             full: true,
+            all_integrators: true,
+            curve: CurveShape::Flat,
         })
         .collect();
     // Strand count alone, without the 10× optical thickness the fixed radius also brings.
@@ -353,6 +372,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
         name: thin_label(large),
         source: Source::Procedural(large, equal_coverage_radius(large, small)),
         full: true,
+        all_integrators: true,
+        curve: CurveShape::Flat,
     });
     let file_name = args
         .hair_file
@@ -363,6 +384,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
             name: file_name,
             source: Source::File(args.hair_file.clone()),
             full: true,
+            all_integrators: true,
+            curve: CurveShape::Flat,
         });
     } else {
         table.note(
@@ -377,8 +400,23 @@ pub fn run(args: BenchArgs) -> Result<()> {
             name: strand_label(HUGE_STRANDS),
             source: Source::Procedural(HUGE_STRANDS, RADIUS),
             full: false,
+            all_integrators: false,
+            curve: CurveShape::Flat,
         });
     }
+    // The models of the ray-rate target again as tubes, for the path tracer.
+    let round: Vec<ModelSpec> = models
+        .iter()
+        .filter(|m| ray_target(&m.source, &plan))
+        .map(|m| ModelSpec {
+            name: format!("{} round", m.name),
+            source: m.source.clone(),
+            full: true,
+            all_integrators: false,
+            curve: CurveShape::Round,
+        })
+        .collect();
+    models.extend(round);
 
     let mut per_sample: Vec<Timing> = Vec::new();
     for spec in &models {
@@ -529,12 +567,24 @@ fn bench_model(
     let hair = load(spec)?;
     let load_time = t0.elapsed();
     let t1 = Instant::now();
-    let accel = big_pool.install(|| {
-        SceneBuilder::new()?
-            .add_hair(&hair, &HairOptions::default(), 0)?
-            .build()
-    })?;
+    let options = HairOptions {
+        curve: spec.curve,
+        ..Default::default()
+    };
+    let accel = big_pool.install(|| SceneBuilder::new()?.add_hair(&hair, &options, 0)?.build())?;
     let bvh_time = t1.elapsed();
+    // The baseline: the same curves, basis and build quality with no filter support.
+    let plain = spec
+        .full
+        .then(|| {
+            big_pool.install(|| {
+                SceneBuilder::new()?
+                    .without_filters()
+                    .add_hair(&hair, &options, 0)?
+                    .build()
+            })
+        })
+        .transpose()?;
     drop(hair);
     let grid_settings = IntegratorDesc::DualUniform(DualSettings::default())
         .density_grid()
@@ -623,12 +673,17 @@ fn bench_model(
         crop: None,
     };
     let accel = Arc::new(accel);
-    let raw = if spec.full {
-        eprintln!("bench: {name}: raw Embree");
-        let rays = RaySets::new(&accel, &camera, &film, plan.rays)?;
-        Some(bench_raw(name, &accel, &rays, pools, table))
-    } else {
-        None
+    let accels = plain.map(|plain| Accels {
+        tress: Arc::clone(&accel),
+        plain,
+    });
+    let raw = match &accels {
+        Some(accels) => {
+            eprintln!("bench: {name}: raw Embree");
+            let rays = RaySets::new(&accel, &camera, &film, plan.rays)?;
+            Some(bench_raw(name, accels, &rays, pools, table))
+        }
+        None => None,
     };
 
     let recording = Arc::new(AtomicBool::new(false));
@@ -642,7 +697,7 @@ fn bench_model(
         lights: vec![Light::Environment(EnvironmentMap::builtin_sky(0.0, 1.0)?)],
         density: Some(Box::new(grid)),
     };
-    let descs: Vec<IntegratorDesc> = if spec.full {
+    let descs: Vec<IntegratorDesc> = if spec.all_integrators {
         let dual = DualSettings {
             tables: plan.tables.clone(),
             ..Default::default()
@@ -696,14 +751,15 @@ fn bench_model(
             });
             let replay = recorded
                 .as_ref()
-                .map(|rays| replay(&accel, rays, pool, desc.name(), plan.runs));
+                .zip(accels.as_ref())
+                .map(|(rays, accels)| replay(accels, rays, pool, desc.name(), plan.runs));
             report_render(
                 table,
                 RenderReport {
                     model: name,
                     integrator: desc.name(),
                     threads: n,
-                    large,
+                    ray_target: ray_target(&spec.source, plan),
                 },
                 &r,
                 raw.as_ref(),
@@ -801,7 +857,10 @@ impl RaySets {
 /// The ways a ray is traced in the raw section.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 enum Mode {
-    /// `rtcIntersect1`/`rtcOccluded1`, the filter functions returning at once.
+    /// `rtcIntersect1`/`rtcOccluded1` on a twin scene of the same curves built without filter
+    /// support: Embree alone, the baseline.
+    Plain,
+    /// `rtcIntersect1`/`rtcOccluded1` on tress's scene, with no filter callback.
     Embree1,
     /// The same with tress's self-intersection rule.
     Embree1Excl,
@@ -814,6 +873,7 @@ enum Mode {
 impl Mode {
     fn name(self) -> &'static str {
         match self {
+            Mode::Plain => "plain",
             Mode::Embree1 => "embree1",
             Mode::Embree1Excl => "embree1-excl",
             Mode::Embree8 => "embree8",
@@ -872,7 +932,7 @@ impl RawRates {
 
 fn bench_raw(
     model: &str,
-    accel: &EmbreeAccel,
+    accels: &Accels,
     rays: &RaySets,
     pools: &[(usize, ThreadPool)],
     table: &mut Table,
@@ -886,12 +946,18 @@ fn bench_raw(
                 Kind::Shadow => &rays.shadow,
             };
             let modes: &[Mode] = if kind == Kind::Camera {
-                &[Mode::Embree1, Mode::Embree8, Mode::Accel]
+                &[Mode::Plain, Mode::Embree1, Mode::Embree8, Mode::Accel]
             } else {
-                &[Mode::Embree1, Mode::Embree1Excl, Mode::Embree8, Mode::Accel]
+                &[
+                    Mode::Plain,
+                    Mode::Embree1,
+                    Mode::Embree1Excl,
+                    Mode::Embree8,
+                    Mode::Accel,
+                ]
             };
             for &mode in modes {
-                let chunk_hits = |c: &[RawRay]| trace_chunk(accel, kind, mode, c);
+                let chunk_hits = |c: &[RawRay]| trace_chunk(accels, kind, mode, c);
                 // Warm-up: wakes the pool's threads and touches the top of the BVH.
                 let warm = &set[..set.len().min(threads * CHUNK)];
                 black_box(pool.install(|| warm.par_chunks(CHUNK).map(chunk_hits).sum::<u64>()));
@@ -922,9 +988,20 @@ fn bench_raw(
     RawRates(rates)
 }
 
+/// tress's scene and its twin without filter support.
+struct Accels {
+    tress: Arc<EmbreeAccel>,
+    plain: EmbreeAccel,
+}
+
 /// Traces a chunk of rays; returns how many hit (or are blocked).
-fn trace_chunk(accel: &EmbreeAccel, kind: Kind, mode: Mode, rays: &[RawRay]) -> u64 {
+fn trace_chunk(accels: &Accels, kind: Kind, mode: Mode, rays: &[RawRay]) -> u64 {
     let closest = kind != Kind::Shadow;
+    let accel = if mode == Mode::Plain {
+        &accels.plain
+    } else {
+        &*accels.tress
+    };
     let single = |exclusion| -> u64 {
         rays.iter()
             .map(|r| {
@@ -937,7 +1014,7 @@ fn trace_chunk(accel: &EmbreeAccel, kind: Kind, mode: Mode, rays: &[RawRay]) -> 
             .sum()
     };
     match mode {
-        Mode::Embree1 => single(Exclusion::Off),
+        Mode::Plain | Mode::Embree1 => single(Exclusion::Off),
         Mode::Embree1Excl => single(Exclusion::Tress),
         Mode::Embree8 => rays
             .chunks(PACKET)
@@ -1115,27 +1192,32 @@ struct Replay {
 
 /// Traces the recorded rays again, raw, in chunks of the recorded order.
 fn replay(
-    accel: &EmbreeAccel,
+    accels: &Accels,
     rays: &[(usize, Ray)],
     pool: &ThreadPool,
     integrator: &str,
     runs: usize,
 ) -> Vec<Replay> {
     eprintln!("bench:   replaying {} rays of {integrator}", rays.len());
-    [Mode::Embree1, Mode::Embree1Excl, Mode::Accel]
+    [Mode::Plain, Mode::Embree1, Mode::Embree1Excl, Mode::Accel]
         .into_iter()
         .map(|mode| {
+            let accel = if mode == Mode::Plain {
+                &accels.plain
+            } else {
+                &*accels.tress
+            };
+            let exclusion = if mode == Mode::Embree1Excl {
+                Exclusion::Tress
+            } else {
+                Exclusion::Off
+            };
             let chunk = |c: &[(usize, Ray)]| -> u64 {
                 c.iter()
                     .map(|(kind, ray)| {
                         let r = RawRay {
                             ray: *ray,
                             t_near: 0.0,
-                        };
-                        let exclusion = if mode == Mode::Embree1 {
-                            Exclusion::Off
-                        } else {
-                            Exclusion::Tress
                         };
                         u64::from(match (mode, *kind) {
                             (Mode::Accel, SHADOW) => accel.occluded(ray),
@@ -1166,8 +1248,9 @@ struct RenderReport<'a> {
     model: &'a str,
     integrator: &'static str,
     threads: usize,
-    /// The model the targets are set for.
-    large: bool,
+    /// Whether the path tracer's ray-rate target applies (the large procedural model and the
+    /// hair file).
+    ray_target: bool,
 }
 
 fn report_render(
@@ -1219,9 +1302,9 @@ fn report_render(
         );
     }
     // The target compares the path tracer with raw Embree tracing the same rays.
-    let path_target = at.large && at.integrator == "path" && at.threads == 2;
+    let path_target = at.ray_target && at.integrator == "path";
     let with_target = |note: String, ratio: f64, mode: Mode| {
-        if path_target && mode == Mode::Embree1 {
+        if path_target && mode == Mode::Plain {
             format!("{note}; {}", target("≥ 0.75", ratio >= 0.75))
         } else {
             note
@@ -1230,6 +1313,7 @@ fn report_render(
     // The measure: the raw rates of the synthetic ray sets, weighted by this mix.
     if let Some(raw) = raw {
         for (mode, what) in [
+            (Mode::Plain, "Embree without filter support"),
             (Mode::Embree1, "raw Embree"),
             (Mode::Embree1Excl, "raw Embree with the exclusion rule"),
         ] {

@@ -11,9 +11,19 @@ use tress_core::{Bcsdf, Camera, Material, Scene};
 /// A ball of `strands` fibers of radius 0.01 around the origin (radius 1), seen from +z, with
 /// `bcsdf` and the given lights.
 pub fn hair_ball_scene(bcsdf: Arc<dyn Bcsdf>, strands: u32, lights: Vec<Light>) -> Scene {
-    let hair = hair_ball(strands);
+    hair_scene(&hair_ball(strands), &HairOptions::default(), bcsdf, lights)
+}
+
+/// `hair` drawn as `options` say, with `bcsdf` and the given lights, seen from (0, 0, 4)
+/// looking at the origin with a 35° field of view.
+pub fn hair_scene(
+    hair: &tress_accel::HairGeometry,
+    options: &HairOptions,
+    bcsdf: Arc<dyn Bcsdf>,
+    lights: Vec<Light>,
+) -> Scene {
     let accel = SceneBuilder::new()
-        .and_then(|b| b.add_hair(&hair, &HairOptions::default(), 0))
+        .and_then(|b| b.add_hair(hair, options, 0))
         .and_then(|b| b.build())
         .expect("embree scene");
     Scene {
