@@ -5,14 +5,18 @@
 //! the sampling distribution assigns to it: sampling, `pdf` and `radiance` share one grid and
 //! there is no half-texel shift between them (the bug of pbrt-v3#62).
 //!
-//! Sampling draws (u, v) from a [`Distribution2D`] over luminance × sin θ (sin θ averaged over
-//! the texel's row) and maps it to the sphere; the solid-angle density is
-//! pdf(ω) = pdf_uv(u, v) / (2π² sin θ), since dω = sin θ dθ dφ = 2π² sin θ du dv.
+//! Sampling picks a texel ∝ luminance × sin θ (sin θ averaged over the texel's row) from one
+//! alias table over all texels, places (u, v) uniformly in it and maps it to the sphere; the
+//! solid-angle density is pdf(ω) = pdf_uv(u, v) / (2π² sin θ), since
+//! dω = sin θ dθ dφ = 2π² sin θ du dv. Each texel keeps its radiance and pdf_uv side by side,
+//! so a light sample reads two table entries (the alias entry and the texel), where a marginal
+//! and conditional distribution read four to five scattered ones: with a 1k map beside the
+//! BVH these are cache misses, and they were the largest item of the path tracer's profile.
 
 use crate::image_io::{read_rgb, ImageError};
 use crate::light::LightSample;
 use crate::math::{luminance, Rgb, Vec2, Vec3};
-use crate::sampling::Distribution2D;
+use crate::sampling::Distribution1D;
 use std::f32::consts::{FRAC_1_PI, PI, TAU};
 use std::path::Path;
 
@@ -21,11 +25,21 @@ use std::path::Path;
 pub struct EnvironmentMap {
     width: usize,
     height: usize,
-    /// Row-major texels, top row (zenith) first, already multiplied by the scale.
-    texels: Vec<Rgb>,
+    /// Row-major texels, top row (zenith) first.
+    texels: Vec<Texel>,
     /// Rotation about +y in radians.
     rotation: f32,
-    distribution: Distribution2D,
+    /// Over the texels, row-major.
+    distribution: Distribution1D,
+}
+
+/// What a lookup needs of a texel, in one place.
+#[derive(Clone, Copy, Debug)]
+struct Texel {
+    /// Already multiplied by the scale.
+    radiance: Rgb,
+    /// Density of sampling (u, v) in this texel, w.r.t. area in [0, 1)².
+    pdf_uv: f32,
 }
 
 impl EnvironmentMap {
@@ -183,11 +197,20 @@ impl EnvironmentMap {
                     .map(|&p| luminance(p) * mean_sin),
             );
         }
+        let distribution = Distribution1D::new(&func);
+        let texels = pixels
+            .iter()
+            .enumerate()
+            .map(|(k, &radiance)| Texel {
+                radiance,
+                pdf_uv: distribution.pdf_cell(k),
+            })
+            .collect();
         Ok(EnvironmentMap {
             width: w,
             height: h,
-            distribution: Distribution2D::new(&func, w, h),
-            texels: pixels,
+            distribution,
+            texels,
             rotation: rotation_deg.to_radians(),
         })
     }
@@ -211,12 +234,13 @@ impl EnvironmentMap {
 
     /// Radiance arriving from direction `dir` (nearest texel).
     pub fn radiance(&self, dir: Vec3) -> Rgb {
-        self.texel_at(self.uv_of(dir).0)
+        self.texel_at(self.uv_of(dir).0).radiance
     }
 
-    /// Same cell arithmetic as `Distribution2D::pdf`, so lookup and pdf agree on the texel.
+    /// The texel whose cell holds `uv`: the one cell arithmetic of lookups, densities and
+    /// sampling.
     #[inline]
-    fn texel_at(&self, uv: Vec2) -> Rgb {
+    fn texel_at(&self, uv: Vec2) -> Texel {
         let i = ((uv.x * self.width as f32) as usize).min(self.width - 1);
         let j = ((uv.y * self.height as f32) as usize).min(self.height - 1);
         self.texels[j * self.width + i]
@@ -226,47 +250,59 @@ impl EnvironmentMap {
     /// the map needs for its MIS weight.
     pub fn radiance_pdf(&self, dir: Vec3) -> (Rgb, f32) {
         let (uv, sin_theta) = self.uv_of(dir);
-        (self.texel_at(uv), self.pdf_at(uv, sin_theta))
+        let texel = self.texel_at(uv);
+        (texel.radiance, solid_angle_pdf(texel, sin_theta))
     }
 
     /// Solid-angle density with which [`EnvironmentMap::sample`] returns `wi`.
     pub fn pdf(&self, wi: Vec3) -> f32 {
-        let (uv, sin_theta) = self.uv_of(wi);
-        self.pdf_at(uv, sin_theta)
-    }
-
-    #[inline]
-    fn pdf_at(&self, uv: Vec2, sin_theta: f32) -> f32 {
-        if sin_theta <= 0.0 {
-            return 0.0;
-        }
-        self.distribution.pdf(uv) / (2.0 * PI * PI * sin_theta)
+        self.radiance_pdf(wi).1
     }
 
     /// A direction toward the environment, importance sampled ∝ luminance, from two uniform
     /// numbers. `None` only for the measure-zero poles.
     pub fn sample(&self, u: Vec2) -> Option<LightSample> {
-        let (uv, map_pdf) = self.distribution.sample_continuous(u);
-        if map_pdf <= 0.0 {
-            return None;
-        }
+        // u.x picks the alias entry, u.y the texel of the entry; what is left of u.y places
+        // the point in the texel (its top 12 bits the row offset, the others the column
+        // offset) and what is left of u.x refines the row offset.
+        let (k, rest_entry, rest_choice) = self.distribution.sample_cell_2d(u.x, u.y);
+        let (i, j) = (k % self.width, k / self.width);
+        let split = rest_choice * JITTER_STEPS;
+        let row_step = split.floor().min(JITTER_STEPS - 1.0);
+        let (dv, du) = ((row_step + rest_entry) / JITTER_STEPS, split - row_step);
+        let uv = Vec2::new(
+            (i as f32 + du) / self.width as f32,
+            (j as f32 + dv) / self.height as f32,
+        );
         let wi = map_direction(0.5 * PI - uv.y * PI, (uv.x - 0.5) * TAU - self.rotation);
         // Density and radiance are re-derived from `wi` (once, for both) so that they equal
         // `pdf(wi)` and `radiance(wi)` bit for bit, also where rounding moves `wi` across a
         // texel edge.
-        let (uv, sin_theta) = self.uv_of(wi);
-        let pdf = self.pdf_at(uv, sin_theta);
+        let (radiance, pdf) = self.radiance_pdf(wi);
         if !(pdf > 0.0 && pdf.is_finite()) {
             return None;
         }
         Some(LightSample {
             wi,
-            radiance: self.texel_at(uv),
+            radiance,
             pdf,
             distance: f32::INFINITY,
             is_delta: false,
         })
     }
+}
+
+/// Steps of the row offset inside a texel taken from the top bits of what is left of the
+/// second sampling number (the other bits give the column offset).
+const JITTER_STEPS: f32 = 4096.0;
+
+/// Solid-angle density of a direction in `texel` at polar angle sin θ (0 at the poles).
+#[inline]
+fn solid_angle_pdf(texel: Texel, sin_theta: f32) -> f32 {
+    if sin_theta <= 0.0 {
+        return 0.0;
+    }
+    texel.pdf_uv / (2.0 * PI * PI * sin_theta)
 }
 
 /// World direction at `elevation` above the horizon and azimuth `phi` = atan2(x, −z).
@@ -679,6 +715,6 @@ mod tests {
         let mut px = vec![Rgb::ONE; 8];
         px[0] = Rgb::new(-1.0, 2.0, 0.5);
         let env = EnvironmentMap::from_pixels(4, 2, px, 0.0, 1.0).unwrap();
-        assert!(env.texels[0] == Rgb::new(0.0, 2.0, 0.5));
+        assert!(env.texels[0].radiance == Rgb::new(0.0, 2.0, 0.5));
     }
 }

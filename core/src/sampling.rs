@@ -119,15 +119,7 @@ impl Distribution1D {
     /// uniformly in the chosen cell (about 24 − log₂ n bits of resolution).
     pub fn sample_continuous(&self, u: f32) -> (f32, f32, usize) {
         let n = self.func.len();
-        let scaled = u.clamp(0.0, 1.0) * n as f32;
-        let entry = (scaled as usize).min(n - 1);
-        let rest = (scaled - entry as f32).clamp(0.0, 1.0);
-        let (keep, other) = self.alias[entry];
-        let (i, du) = if rest < keep {
-            (entry, rest / keep)
-        } else {
-            (other as usize, (rest - keep) / (1.0 - keep))
-        };
+        let (i, du) = self.sample_cell(u);
         // Keep x inside cell i where rounding of i + du would reach the next cell.
         let x = ((i as f32 + du.clamp(0.0, 1.0)) / n as f32)
             .clamp(i as f32 / n as f32, 1.0 - f32::EPSILON);
@@ -137,6 +129,40 @@ impl Distribution1D {
             x
         };
         (x, self.pdf_cell(i), i)
+    }
+
+    /// A cell drawn ∝ its value, and what is left of `u` as a uniform number in [0, 1] (about
+    /// 24 − log₂ n bits, fewer where the entry's choice is lopsided), from one table entry.
+    pub fn sample_cell(&self, u: f32) -> (usize, f32) {
+        let n = self.func.len();
+        let scaled = u.clamp(0.0, 1.0) * n as f32;
+        let entry = (scaled as usize).min(n - 1);
+        let rest = (scaled - entry as f32).clamp(0.0, 1.0);
+        self.choose(entry, rest)
+    }
+
+    /// [`Self::sample_cell`] for large tables: `u_entry` picks the table entry alone and
+    /// `u_choice`, with all its bits, chooses between the entry's cell and its alias (one
+    /// number would leave the choice 24 − log₂ n bits: 5 on a 1k × 512 map, which skews every
+    /// cell's probability to a multiple of 1/32). Returns the cell, what is left of
+    /// `u_entry` and what is left of `u_choice`, both uniform in [0, 1].
+    pub fn sample_cell_2d(&self, u_entry: f32, u_choice: f32) -> (usize, f32, f32) {
+        let n = self.func.len();
+        let scaled = u_entry.clamp(0.0, 1.0) * n as f32;
+        let entry = (scaled as usize).min(n - 1);
+        let (cell, rest) = self.choose(entry, u_choice.clamp(0.0, 1.0));
+        (cell, (scaled - entry as f32).clamp(0.0, 1.0), rest)
+    }
+
+    /// Entry `entry`'s cell or its alias, by `u` ∈ [0, 1]; and `u` rescaled to [0, 1].
+    fn choose(&self, entry: usize, u: f32) -> (usize, f32) {
+        let (keep, other) = self.alias[entry];
+        let (i, du) = if u < keep {
+            (entry, u / keep)
+        } else {
+            (other as usize, (u - keep) / (1.0 - keep))
+        };
+        (i, du.clamp(0.0, 1.0))
     }
 
     /// Density (w.r.t. x ∈ [0,1)) of cell `i`.
@@ -185,42 +211,6 @@ fn alias_table(weights: &[f32]) -> Vec<(f32, u32)> {
         }
     }
     table
-}
-
-/// A piecewise-constant density on [0,1)² (rows are v, columns u): marginal in v, conditional in u.
-#[derive(Clone, Debug)]
-pub struct Distribution2D {
-    conditional: Vec<Distribution1D>,
-    marginal: Distribution1D,
-}
-
-impl Distribution2D {
-    /// `func[v * nu + u]`.
-    pub fn new(func: &[f32], nu: usize, nv: usize) -> Self {
-        assert_eq!(func.len(), nu * nv, "Distribution2D: size mismatch");
-        let conditional: Vec<Distribution1D> = (0..nv)
-            .map(|v| Distribution1D::new(&func[v * nu..(v + 1) * nu]))
-            .collect();
-        let marginal =
-            Distribution1D::new(&conditional.iter().map(|c| c.integral()).collect::<Vec<_>>());
-        Distribution2D {
-            conditional,
-            marginal,
-        }
-    }
-
-    /// Returns ((u, v) ∈ [0,1)², density w.r.t. area in [0,1)²).
-    pub fn sample_continuous(&self, u: Vec2) -> (Vec2, f32) {
-        let (v, pdf_v, iv) = self.marginal.sample_continuous(u.y);
-        let (x, pdf_u, _) = self.conditional[iv].sample_continuous(u.x);
-        (Vec2::new(x, v), pdf_v * pdf_u)
-    }
-
-    pub fn pdf(&self, p: Vec2) -> f32 {
-        let nv = self.conditional.len();
-        let iv = ((p.y * nv as f32) as usize).min(nv - 1);
-        self.marginal.pdf_cell(iv) * self.conditional[iv].pdf(p.x)
-    }
 }
 
 #[cfg(test)]
@@ -299,23 +289,6 @@ mod tests {
         assert_eq!(d.integral(), 0.0);
         let (x, pdf, _) = d.sample_continuous(0.999_999_9);
         assert!(x < 1.0 && pdf == 1.0);
-    }
-
-    #[test]
-    fn distribution2d_pdf_integrates_to_one() {
-        let f: Vec<f32> = (0..12).map(|i| (i % 5) as f32 + 0.5).collect();
-        let d = Distribution2D::new(&f, 4, 3);
-        let n = 64;
-        let mut sum = 0.0;
-        for j in 0..n {
-            for i in 0..n {
-                sum += d.pdf(Vec2::new(
-                    (i as f32 + 0.5) / n as f32,
-                    (j as f32 + 0.5) / n as f32,
-                ));
-            }
-        }
-        assert!((sum / (n * n) as f32 - 1.0).abs() < 1e-4);
     }
 
     #[test]
