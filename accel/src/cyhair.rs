@@ -45,10 +45,11 @@ impl HairFile {
 
     /// Reads and validates the file.
     pub fn read(&self) -> Result<HairGeometry> {
-        let bytes = std::fs::read(&self.path).map_err(|source| crate::Error::Io {
-            path: self.path.clone(),
-            source,
-        })?;
+        let bytes =
+            tress_core::files::read_regular(&self.path).map_err(|source| crate::Error::Io {
+                path: self.path.clone(),
+                source,
+            })?;
         let mut hair = parse(&bytes, &self.path)?;
         if self.z_up {
             hair.z_up_to_y_up();

@@ -17,7 +17,7 @@ impl TriangleMesh {
     /// Loads every object of an OBJ file as one mesh (faces triangulated as fans, points and
     /// lines ignored, materials ignored), and validates it.
     pub fn load_obj(path: &Path) -> Result<TriangleMesh> {
-        let bytes = std::fs::read(path).map_err(|source| Error::Io {
+        let bytes = tress_core::files::read_regular(path).map_err(|source| Error::Io {
             path: path.to_owned(),
             source,
         })?;

@@ -50,10 +50,11 @@ impl TfxFile {
                 reason: format!("must be finite and positive, got {}", self.radius),
             });
         }
-        let bytes = std::fs::read(&self.path).map_err(|source| crate::Error::Io {
-            path: self.path.clone(),
-            source,
-        })?;
+        let bytes =
+            tress_core::files::read_regular(&self.path).map_err(|source| crate::Error::Io {
+                path: self.path.clone(),
+                source,
+            })?;
         parse(&bytes, &self.path, self.radius)
     }
 }

@@ -187,7 +187,7 @@ fn furnace(a: FurnaceArgs) -> Result<()> {
 
 fn eval(a: EvalArgs) -> Result<()> {
     let bcsdf = build_model(&a.model)?;
-    let text = std::fs::read_to_string(&a.input)
+    let text = tress_core::files::read_regular_text(&a.input)
         .with_context(|| format!("cannot read {}", a.input.display()))?;
     let mut out = String::from(if a.with_cosine {
         "f_cos_r,f_cos_g,f_cos_b,pdf\n"

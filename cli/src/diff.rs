@@ -264,6 +264,16 @@ pub fn run(args: DiffArgs) -> Result<()> {
     let both = || format!("{} vs {}", args.a.display(), args.b.display());
     check_compatible(&a, &b).map_err(|e| anyhow::anyhow!("{}: {e}", both()))?;
     let rect = resolve_region(&a, args.region).map_err(|e| anyhow::anyhow!("{}: {e}", both()))?;
+    // One NaN makes every metric NaN: say where instead of printing NaN with success.
+    for (image, path) in [(&a, &args.a), (&b, &args.b)] {
+        let bad = image.pixels.iter().filter(|p| !p.is_finite()).count();
+        if bad > 0 {
+            bail!(
+                "{}: {bad} pixels are NaN or infinite; the error metrics would be NaN",
+                path.display()
+            );
+        }
+    }
     let m = metrics(&a, &b, rect);
 
     println!("A: {}", args.a.display());

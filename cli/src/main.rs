@@ -6,6 +6,7 @@ mod calibrate;
 mod cost;
 mod diff;
 mod farm;
+mod interrupt;
 mod merge;
 mod plot;
 mod render_cmd;
@@ -16,6 +17,7 @@ use tress_cli::{integrators, ron_options, scene_desc};
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
+use std::io::IsTerminal;
 use std::path::PathBuf;
 
 /// tress — a physically based hair renderer.
@@ -59,10 +61,21 @@ fn main() {
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
         )
         .with_writer(std::io::stderr)
+        // Colours and timestamps are for people at a terminal; logs and CI get plain lines.
+        .with_ansi(std::io::stderr().is_terminal())
+        .without_time()
         .init();
     if let Err(e) = run(cli) {
-        eprintln!("error: {e:#}");
-        std::process::exit(1);
+        let code = match e.downcast_ref::<interrupt::Interrupted>() {
+            Some(stopped) => stopped.exit_code,
+            None => {
+                eprintln!("error: {e:#}");
+                1
+            }
+        };
+        // Nothing may outlive the error's destructor (a temporary file it owns).
+        drop(e);
+        std::process::exit(code);
     }
 }
 
@@ -93,7 +106,10 @@ pub fn atomic_write(path: &std::path::Path, bytes: &[u8]) -> Result<()> {
         .with_context(|| format!("cannot write in {}", dir.display()))?;
     tmp.write_all(bytes)
         .with_context(|| format!("writing {}", path.display()))?;
+    // The bare io::Error: a kept PersistError would hold (and so leave behind) the temporary
+    // file until the error is dropped, and would print the io error twice.
     tmp.persist(path)
+        .map_err(|e| e.error)
         .with_context(|| format!("cannot create {}", path.display()))?;
     Ok(())
 }

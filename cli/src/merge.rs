@@ -388,6 +388,21 @@ pub fn run(args: MergeArgs) -> Result<()> {
             args.out.display()
         );
     }
+    // The pieces are read before the output is written, but an input replaced by the merge is
+    // lost: refuse rather than overwrite one.
+    if let Ok(out) = args.out.canonicalize() {
+        if let Some(p) = args
+            .pieces
+            .iter()
+            .find(|p| p.canonicalize().is_ok_and(|p| p == out))
+        {
+            bail!(
+                "{}: the output is one of the pieces ({}); merging would overwrite it",
+                args.out.display(),
+                p.display()
+            );
+        }
+    }
     let pieces = args
         .pieces
         .iter()

@@ -525,7 +525,9 @@ fn write_bitmap(
         root.present()
             .map_err(|e| anyhow!("drawing {}: {e}", path.display()))?;
     }
+    // The bare io::Error: the PersistError would keep the temporary file alive with it.
     tmp.persist(path)
+        .map_err(|e| e.error)
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }

@@ -6,6 +6,7 @@
 //! stop and write the samples finished so far.
 
 use crate::integrators::IntegratorDesc;
+use crate::interrupt::Interrupt;
 use crate::merge::{self, Identity};
 use crate::scene_desc::{self, SceneDesc};
 use anyhow::{bail, Context, Result};
@@ -13,14 +14,9 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tress_core::image_io;
 use tress_core::render::{self, RenderStats, SampleSums};
-
-/// Exit status after Ctrl-C, as shells report a command ended by SIGINT.
-const INTERRUPTED_EXIT: i32 = 130;
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
@@ -206,7 +202,13 @@ impl Outputs<'_> {
             ("tress:rays", stats.rays.to_string()),
         ];
         merge::write_render(&self.out, sums, &self.identity, &attributes)?;
-        self.args.preview.write(&self.out, &sums.image())
+        // Both outputs or neither: an EXR without its preview would look like a success.
+        self.args
+            .preview
+            .write(&self.out, &sums.image())
+            .inspect_err(|_| {
+                let _ = std::fs::remove_file(&self.out);
+            })
     }
 }
 
@@ -225,6 +227,12 @@ pub fn render(args: RenderArgs) -> Result<()> {
             "--out {}: the output must be an .exr file (a .png preview is written beside it)",
             out.display()
         );
+    }
+    // Refused before rendering, not after: a directory in the way of either output.
+    for path in [out.clone(), out.with_extension("png")] {
+        if path.is_dir() {
+            bail!("--out {}: {} is a directory", out.display(), path.display());
+        }
     }
     let threads = args.threads.unwrap_or(0);
     let pool = rayon::ThreadPoolBuilder::new()
@@ -266,21 +274,8 @@ pub fn render(args: RenderArgs) -> Result<()> {
         },
     };
 
-    // Ctrl-C: the first stops the render at the next pixel and writes what is finished; a second
-    // one quits at once.
-    let cancel = Arc::new(AtomicBool::new(false));
-    let flag = Arc::clone(&cancel);
-    ctrlc::set_handler(move || {
-        if flag.swap(true, Ordering::SeqCst) {
-            eprintln!("interrupted again: quitting without writing");
-            std::process::exit(INTERRUPTED_EXIT);
-        }
-        eprintln!(
-            "interrupt: stopping and writing the samples finished so far (Ctrl-C again to quit \
-             at once)"
-        );
-    })
-    .context("installing the Ctrl-C handler")?;
+    let interrupt = Interrupt::install()?;
+    let cancel = interrupt.cancel_flag();
 
     let [x0, y0, x1, y1] = desc.film.window();
     let target = desc.film.spp as u64;
@@ -301,7 +296,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
                 integrator.as_ref(),
                 &desc.film,
                 first + reached..first + next,
-                &cancel,
+                cancel,
                 &progress,
             )
         });
@@ -328,7 +323,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
         eprintln!(
             "interrupted before the first sample of every pixel was finished: nothing written"
         );
-        std::process::exit(INTERRUPTED_EXIT);
+        return Err(interrupt.interrupted().into());
     }
     outputs.write(&done, &stats, status)?;
     let png = out.with_extension("png");
@@ -369,7 +364,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
         );
     }
     if status == Status::Interrupted {
-        std::process::exit(INTERRUPTED_EXIT);
+        return Err(interrupt.interrupted().into());
     }
     Ok(())
 }

@@ -167,7 +167,7 @@ pub struct BuiltScene {
 
 /// Reads and parses a scene file; errors name the file, line and column.
 pub fn load(path: &Path) -> Result<SceneDesc> {
-    let text = std::fs::read_to_string(path)
+    let text = tress_core::files::read_regular_text(path)
         .with_context(|| format!("cannot read scene file {}", path.display()))?;
     parse(&text).map_err(|e| anyhow!("{}:{e}", path.display()))
 }
@@ -224,12 +224,18 @@ pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
             ))
         );
     }
-    if (c.look_at - c.look_from).length() == 0.0
-        || (c.look_at - c.look_from).cross(c.up).length() < 1e-6
+    // Relative tests, in f64: a view direction of length 1e-30 is as good as any (its square
+    // underflows f32).
+    let view = c.look_at.as_dvec3() - c.look_from.as_dvec3();
+    if view.length() == 0.0 {
+        bail!("{}", here("camera.look_at must differ from look_from"));
+    }
+    if c.up.as_dvec3().length() == 0.0
+        || view.normalize().cross(c.up.as_dvec3().normalize()).length() < 1e-6
     {
         bail!(
             "{}",
-            here("camera.look_at must differ from look_from and not be parallel to up")
+            here("camera.up must be non-zero and not parallel to the view direction")
         );
     }
     if !(c.lens_radius >= 0.0 && c.lens_radius <= MAX_COORDINATE) {
@@ -398,6 +404,12 @@ fn build_light(l: &LightDesc, scene_path: &Path) -> Result<Light> {
             } else {
                 *irradiance
             };
+            if !radiance.is_finite() {
+                bail!(
+                    "irradiance {irradiance} from a disc of {angular_radius}° is a radiance of \
+                     {radiance}, beyond f32: lower the irradiance or widen the disc"
+                );
+            }
             Light::Distant {
                 direction: direction.normalize(),
                 radiance,

@@ -177,7 +177,7 @@ pub struct Quick {
 
 /// Reads and parses a study file; errors name the file, line and column.
 pub fn load(path: &Path) -> Result<Study> {
-    let text = std::fs::read_to_string(path)
+    let text = tress_core::files::read_regular_text(path)
         .with_context(|| format!("cannot read study file {}", path.display()))?;
     crate::ron_options()
         .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)

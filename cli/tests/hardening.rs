@@ -298,7 +298,7 @@ fn bad_scenes_give_clear_errors() {
     assert_bad_scene(&SCENE[..SCENE.len() / 2], &["scene.ron:"]);
     assert_bad_scene("", &["scene.ron:1:"]);
     // (text of SCENE, its replacement, what the message must say)
-    let edits: [(&str, &str, &[&str]); 37] = [
+    let edits: [(&str, &str, &[&str]); 39] = [
         (
             r#""grey": Diffuse"#,
             r#""hair": Diffuse(albedo: (0.5, 0.5, 0.5)), "grey": Diffuse"#,
@@ -403,6 +403,17 @@ fn bad_scenes_give_clear_errors() {
             &["irradiance"],
         ),
         ("Sky()", "Sky(scale: -1)", &["scale"]),
+        // Finite values that overflow once scaled or converted (the image came out black).
+        (
+            "Sky()",
+            "Sky(scale: 1e37)",
+            &["built-in sky", "overflows f32"],
+        ),
+        (
+            "irradiance: (2, 2, 2)",
+            "irradiance: (3e38, 3e38, 3e38)",
+            &["irradiance", "beyond f32"],
+        ),
         ("Sky()", "Constant(radiance: (1, 1, -1))", &["radiance"]),
         ("strands: 300", "strands: 0", &["strands"]),
         (
@@ -470,6 +481,17 @@ fn unreadable_and_unsupported_images_give_clear_errors() {
     )
     .unwrap();
     assert_fails_in(d, &render, &["sky.hdr", "Radiance HDR"]);
+    // A well-formed map stored bottom-up or mirrored: the orientation is named.
+    std::fs::write(
+        d.join("sky.hdr"),
+        b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n+Y 2 -X 2\n\x80\x80\x80\x81\x80\x80\x80\x81\x80\x80\x80\x81\x80\x80\x80\x81",
+    )
+    .unwrap();
+    assert_fails_in(
+        d,
+        &render,
+        &["sky.hdr", "`+Y 2 -X 2`", "-Y height +X width"],
+    );
     // The scene file itself: not UTF-8, a folder.
     std::fs::write(d.join("scene.ron"), [0xff, 0xfe, 0x00, 0x28]).unwrap();
     assert_fails_in(d, &render, &["scene.ron"]);
@@ -680,11 +702,10 @@ fn sample_range_passes_merge_into_the_single_render() {
     );
 }
 
-/// Sends SIGINT to a render in progress: it stops promptly, writes the image of the waves it
-/// finished, says so, and exits with status 130.
+/// Sends `signal` to a render in progress: it stops promptly, writes the image of the waves it
+/// finished, says so, and exits with 128 + the signal's number, as shells report it.
 #[cfg(unix)]
-#[test]
-fn ctrl_c_writes_the_finished_samples_and_exits_cleanly() {
+fn signal_writes_the_finished_samples_and_exits_cleanly(signal: &str, exit_code: i32) {
     use std::process::{Command, Stdio};
     let (dir, _) = scene_dir(&SCENE.replace("width: 24, height: 20", "width: 8, height: 8"));
     let d = dir.path();
@@ -710,7 +731,7 @@ fn ctrl_c_writes_the_finished_samples_and_exits_cleanly() {
         std::thread::sleep(Duration::from_millis(5));
     }
     let kill = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
+        .args([&format!("-{signal}"), &child.id().to_string()])
         .status()
         .unwrap();
     assert!(kill.success());
@@ -724,12 +745,12 @@ fn ctrl_c_writes_the_finished_samples_and_exits_cleanly() {
     };
     let mut err = String::new();
     std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
-    assert_eq!(status.code(), Some(130), "{err}");
+    assert_eq!(status.code(), Some(exit_code), "SIG{signal}: {err}");
     assert!(
         err.contains("interrupted") && err.contains("wrote slow.exr"),
         "{err}"
     );
-    assert!(!err.contains("panicked"), "{err}");
+    assert!(!err.contains("panicked") && !err.contains("error"), "{err}");
     assert_eq!(
         attribute(&out, "tress:status").as_deref(),
         Some("interrupted")
@@ -745,6 +766,91 @@ fn ctrl_c_writes_the_finished_samples_and_exits_cleanly() {
     // What was written is exactly the render of the samples it reports.
     render_ok(&["--spp", &spp, "--out", "same.exr", "--quiet"], d);
     assert_eq!(pixels(&out), pixels(&d.join("same.exr")));
+}
+
+#[cfg(unix)]
+#[test]
+fn ctrl_c_writes_the_finished_samples_and_exits_cleanly() {
+    signal_writes_the_finished_samples_and_exits_cleanly("INT", 130);
+}
+
+/// Render farms stop jobs with SIGTERM: it must behave as Ctrl-C does.
+#[cfg(unix)]
+#[test]
+fn sigterm_writes_the_finished_samples_and_exits_cleanly() {
+    signal_writes_the_finished_samples_and_exits_cleanly("TERM", 143);
+}
+
+/// Outputs whose final rename fails (the path is a directory): a clear error that says so
+/// once, and no temporary file left beside it.
+#[test]
+fn outputs_onto_directories_fail_cleanly_without_temporary_files() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    render_ok(&["--out", "a.exr", "--quiet"], d);
+    std::fs::create_dir(d.join("taken.exr")).unwrap();
+    std::fs::create_dir(d.join("taken.png")).unwrap();
+    std::fs::create_dir(d.join("png_taken.png")).unwrap();
+    // Render refuses before rendering (the EXR, or the PNG beside it, is a directory); the
+    // others fail at the rename.
+    let cases: [(&[&str], &str); 5] = [
+        (
+            &["render", "scene.ron", "--out", "taken.exr", "--quiet"],
+            "is a directory",
+        ),
+        (
+            &["render", "scene.ron", "--out", "png_taken.exr", "--quiet"],
+            "is a directory",
+        ),
+        (&["merge", "taken.exr", "a.exr"], "Is a directory"),
+        (
+            &["diff", "a.exr", "a.exr", "--map", "taken.png"],
+            "Is a directory",
+        ),
+        (
+            &["bcsdf", "plot", "--model", "Chiang()", "--out", "taken.png"],
+            "Is a directory",
+        ),
+    ];
+    for (args, cause) in cases {
+        let before = files_in(d);
+        let o = tress(args, d);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.contains("taken."), "{args:?}: {err}");
+        assert_eq!(
+            err.matches(cause).count(),
+            1,
+            "{args:?}: the cause once: {err}"
+        );
+        assert!(!err.contains("panicked"), "{err}");
+        assert_eq!(files_in(d), before, "{args:?}: files left behind");
+    }
+}
+
+/// Warnings carry no colour codes or timestamps when stderr is not a terminal (logs, CI).
+#[test]
+fn warnings_are_plain_text_off_a_terminal() {
+    let (dir, _) = scene_dir(&SCENE.replace(
+        "Procedural(style: Ball, strands: 300, radius: 0.01)",
+        "File(\"tail.hair\")",
+    ));
+    let d = dir.path();
+    let mut bytes = write_hair(b"HAIR", 3, &nine_points(), Some(&[1, 3, 2]), None, 0.01);
+    bytes.extend_from_slice(&[0; 7]);
+    std::fs::write(d.join("tail.hair"), bytes).unwrap();
+    let o = tress(&["info", "scene.ron"], d);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    let line = err
+        .lines()
+        .find(|l| l.contains("7 trailing bytes"))
+        .unwrap_or_else(|| panic!("no warning: {err}"));
+    assert!(!err.contains('\x1b'), "colour codes: {err:?}");
+    assert!(
+        line.starts_with(" WARN") || line.starts_with("WARN"),
+        "{line:?}"
+    );
 }
 
 /// Hair at extreme scales or with absurd fiber widths under dual scattering: the density grid
@@ -792,4 +898,111 @@ fn extreme_hair_extents_under_dual_scattering_give_clear_errors() {
         "{}",
         stderr(&o)
     );
+}
+
+/// `tress diff` on an image holding NaN fails naming the file (it printed NaN metrics with
+/// success); `tress merge` refuses to overwrite one of its own pieces.
+#[test]
+fn diff_of_nan_images_and_merge_onto_a_piece_are_refused() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    let mut img = tress_core::Image::new(4, 3);
+    img.pixels
+        .iter_mut()
+        .for_each(|p| *p = tress_core::Rgb::splat(0.5));
+    tress_core::image_io::write_exr(d.join("fine.exr"), &img, &[]).unwrap();
+    img.pixels[5] = tress_core::Rgb::new(f32::NAN, 0.5, 0.5);
+    tress_core::image_io::write_exr(d.join("nan.exr"), &img, &[]).unwrap();
+    for args in [
+        ["diff", "nan.exr", "fine.exr"],
+        ["diff", "fine.exr", "nan.exr"],
+    ] {
+        assert_fails_in(d, &args, &["nan.exr", "1 pixels are NaN or infinite"]);
+    }
+    render_ok(&["--out", "piece.exr", "--quiet"], d);
+    assert_fails_in(
+        d,
+        &["merge", "piece.exr", "piece.exr"],
+        &["piece.exr", "one of the pieces"],
+    );
+    assert_fails_in(
+        d,
+        &["merge", "./piece.exr", "piece.exr"],
+        &["one of the pieces"],
+    );
+}
+
+/// Special files given as inputs are refused by name: a symlink to /dev/zero as a hair file
+/// grew the process to 13.6 GB.
+#[cfg(unix)]
+#[test]
+fn special_files_as_inputs_are_refused() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    for name in ["zero.hair", "zero.tfx", "zero.obj", "zero.hdr", "zero.ron"] {
+        std::os::unix::fs::symlink("/dev/zero", d.join(name)).unwrap();
+    }
+    for name in ["zero.hair", "zero.tfx"] {
+        assert_bad_hair(
+            d,
+            &format!("File(\"{name}\")"),
+            &[name, "not a regular file"],
+        );
+    }
+    let scene = |from: &str, to: &str| {
+        assert!(SCENE.contains(from));
+        std::fs::write(d.join("scene.ron"), SCENE.replace(from, to)).unwrap();
+    };
+    scene(
+        "Sphere(center: (0, -2, 0), radius: 1, material: \"grey\")",
+        "Mesh(file: \"zero.obj\", material: \"grey\")",
+    );
+    assert_fails_in(
+        d,
+        &["info", "scene.ron"],
+        &["zero.obj", "not a regular file"],
+    );
+    scene("Sky()", "Environment(file: \"zero.hdr\")");
+    assert_fails_in(
+        d,
+        &["info", "scene.ron"],
+        &["zero.hdr", "not a regular file"],
+    );
+    assert_fails_in(
+        d,
+        &["info", "zero.ron"],
+        &["zero.ron", "not a regular file"],
+    );
+}
+
+/// A camera 1e-30 from what it looks at is valid (the check was absolute, and the f32 view
+/// vector's square underflowed); coinciding points and an up parallel to the view are not.
+#[test]
+fn camera_checks_are_relative() {
+    let (dir, _) = scene_dir(&SCENE.replace("look_from: (0, 0, 4)", "look_from: (0, 0, 1e-30)"));
+    let d = dir.path();
+    let err = render_ok(&["--out", "tiny.exr", "--quiet"], d);
+    assert!(!err.contains("NaN"), "{err}");
+    let (image, _) = tress_core::image_io::read_exr(d.join("tiny.exr")).unwrap();
+    assert!(image.pixels.iter().all(|p| p.is_finite()));
+    assert!(image.mean() > 0.0);
+    for (from, to, expect) in [
+        (
+            "look_at: (0, 0, 0)",
+            "look_at: (0, 0, 4)",
+            "must differ from look_from",
+        ),
+        (
+            "look_at: (0, 0, 0)",
+            "look_at: (0, 0, 0), up: (0, 0, 1)",
+            "not parallel",
+        ),
+        (
+            "look_at: (0, 0, 0)",
+            "look_at: (0, 0, 0), up: (0, 0, 0)",
+            "non-zero",
+        ),
+    ] {
+        assert_bad_scene(&SCENE.replace(from, to), &[expect]);
+    }
 }

@@ -26,8 +26,10 @@ impl Camera {
         lens_radius: f32,
         focus_distance: Option<f32>,
     ) -> Self {
-        let forward = (look_at - look_from).normalize();
-        let right = forward.cross(up).normalize();
+        // In f64: the view vector may be tiny (1e-30), and its square underflows f32.
+        let view = look_at.as_dvec3() - look_from.as_dvec3();
+        let forward = view.normalize().as_vec3();
+        let right = forward.cross(up.normalize()).normalize();
         let true_up = right.cross(forward);
         Camera {
             origin: look_from,
@@ -36,7 +38,7 @@ impl Camera {
             up: true_up,
             tan_half_fov: (fov_y_deg.to_radians() * 0.5).tan(),
             lens_radius,
-            focus_distance: focus_distance.unwrap_or((look_at - look_from).length()),
+            focus_distance: focus_distance.unwrap_or(view.length() as f32),
         }
     }
 

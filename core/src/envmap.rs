@@ -181,7 +181,16 @@ impl EnvironmentMap {
                 clamped += 1;
                 *p = p.max(Rgb::ZERO);
             }
-            *p *= scale;
+            let scaled = *p * scale;
+            // Finite texels can overflow once scaled (3e38 × 10): refuse, or the image is black.
+            if !scaled.is_finite() {
+                return Err(invalid(format!(
+                    "pixel ({}, {}) = {p} times scale {scale} overflows f32",
+                    k % w,
+                    k / w
+                )));
+            }
+            *p = scaled;
         }
         if clamped > 0 {
             tracing::warn!("{origin}: clamped {clamped} pixels with negative components to 0");

@@ -15,7 +15,7 @@ use exr::meta::header::Header;
 use exr::prelude as ex;
 use exr::prelude::{AttributeValue, Compression, ReadChannels, ReadLayers, Text, WritableImage};
 use std::fs::File;
-use std::io::{BufReader, BufWriter, Write};
+use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 
 /// What can go wrong reading or writing an image.
@@ -404,6 +404,17 @@ fn read_hdr(path: &Path) -> Result<(u32, u32, Vec<Rgb>), ImageError> {
 }
 
 fn hdr_error(path: &Path, e: image::ImageError) -> ImageError {
+    if let Some(line) = hdr_nonstandard_orientation(path) {
+        return ImageError::Corrupt {
+            path: path.to_owned(),
+            format: "Radiance HDR",
+            reason: format!(
+                "the resolution line `{line}` gives an orientation tress does not read; only \
+                 the standard `-Y height +X width` (rows top to bottom, left to right) is \
+                 supported: convert the map (e.g. re-save it from an image editor)"
+            ),
+        };
+    }
     match e {
         image::ImageError::IoError(source)
             if source.kind() != std::io::ErrorKind::UnexpectedEof =>
@@ -420,6 +431,29 @@ fn hdr_error(path: &Path, e: image::ImageError) -> ImageError {
             reason: e.to_string(),
         },
     }
+}
+
+/// The resolution line of a Radiance file when it is well formed but not the standard
+/// `-Y h +X w` (e.g. `+Y 512 -X 1024`), which the decoder reports only as a bad header.
+fn hdr_nonstandard_orientation(path: &Path) -> Option<String> {
+    let mut head = Vec::new();
+    File::open(path)
+        .ok()?
+        .take(64 * 1024)
+        .read_to_end(&mut head)
+        .ok()?;
+    let end = head.windows(2).position(|w| w == b"\n\n")? + 2;
+    let line = head[end..].split(|&b| b == b'\n').next()?;
+    let line = std::str::from_utf8(line).ok()?.trim();
+    let words: Vec<&str> = line.split_whitespace().collect();
+    let axis = |w: &str| matches!(w, "-Y" | "+Y" | "-X" | "+X");
+    let numbers = |w: &str| w.parse::<u32>().is_ok();
+    let well_formed = words.len() == 4
+        && axis(words[0])
+        && numbers(words[1])
+        && axis(words[2])
+        && numbers(words[3]);
+    (well_formed && !(words[0] == "-Y" && words[2] == "+X")).then(|| line.to_owned())
 }
 
 fn exr_read_error(path: &Path, e: exr::error::Error) -> ImageError {
@@ -483,9 +517,18 @@ fn extension(path: &Path) -> String {
         .unwrap_or_default()
 }
 
+/// The file exists and is a regular file (a device such as /dev/zero would be read forever).
 fn check_exists(path: &Path) -> Result<(), ImageError> {
     match std::fs::metadata(path) {
-        Ok(_) => Ok(()),
+        Ok(m) if m.is_file() => Ok(()),
+        Ok(_) => Err(ImageError::Io {
+            path: path.to_owned(),
+            action: "read",
+            source: std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "not a regular file (a directory, device or pipe)",
+            ),
+        }),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(ImageError::NotFound {
             path: path.to_owned(),
         }),

@@ -8,6 +8,7 @@ pub mod accel;
 pub mod bcsdf;
 pub mod camera;
 pub mod envmap;
+pub mod files;
 pub mod film;
 pub mod image_io;
 pub mod integrator;
