@@ -471,6 +471,25 @@ impl DensityGrid {
             auto_resolution(bounds, total_length, finest, &curves)
         });
         let lattice = Lattice::new(bounds, resolution);
+        // The grid is sparse, but hair may fill its bounds: refuse a lattice whose bricks,
+        // all occupied, would not fit the memory limit (1024³ with orientations is 28 GiB).
+        let dense_gib = lattice.dims.iter().map(|&n| n as f64).product::<f64>()
+            * (stride * std::mem::size_of::<f32>()) as f64
+            / (1u64 << 30) as f64;
+        let limit_gib = tress_core::film::memory_limit_gib();
+        if dense_gib > limit_gib {
+            let [nx, ny, nz] = lattice.dims;
+            return Err(Error::InvalidOption {
+                object: "density grid".into(),
+                field: "grid_resolution",
+                reason: format!(
+                    "{resolution} gives {nx}×{ny}×{nz} voxels, up to {dense_gib:.1} GiB where the \
+                     hair fills them, over the {limit_gib} GiB limit: lower it (None chooses \
+                     one from the hair) or set {} to more GiB",
+                    tress_core::film::MEMORY_LIMIT_VAR
+                ),
+            });
+        }
         let top_dims = lattice.dims.map(|n| (n + BRICK_MASK) >> BRICK_SHIFT);
         let mut grid = DensityGrid {
             lattice,

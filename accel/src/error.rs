@@ -15,12 +15,13 @@ pub enum Error {
     /// The file was read but its contents are not a valid file of the expected format.
     #[error("{}: {reason}", .path.display())]
     Format { path: PathBuf, reason: String },
-    /// `tobj` could not load the OBJ file.
-    #[error("{}: cannot load OBJ: {source}", .path.display())]
+    /// The OBJ file could not be loaded: `line` (1-based) is the line at fault where tress
+    /// finds it.
+    #[error("{}{}: cannot load OBJ: {reason}", .path.display(), .line.map_or(String::new(), |l| format!(":{l}")))]
     Obj {
         path: PathBuf,
-        #[source]
-        source: tobj::LoadError,
+        line: Option<usize>,
+        reason: String,
     },
     /// The geometry of an object (a file's contents or a generated object) is unusable.
     #[error("{object}: {reason}")]

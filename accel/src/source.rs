@@ -10,14 +10,17 @@ use crate::tfx::TfxFile;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-/// The source of a hair object. In RON (externally tagged):
+/// The source of a hair object, as scene files write it:
 ///
 /// ```ron
-/// File("hair/straight.hair")                      // format from the extension, default options
-/// Hair((path: "hair/straight.hair", z_up: true))  // Cem Yuksel .hair
-/// Tfx((path: "hair/sintel_hair.tfx", radius: 0.01))
-/// Procedural((style: Wavy(amplitude: 0.05, frequency: 3.0), strands: 2000))
+/// File("hair/straight.hair")                    // format from the extension, default options
+/// Hair(path: "hair/straight.hair", z_up: true)  // Cem Yuksel .hair
+/// Tfx(path: "hair/sintel_hair.tfx", radius: 0.01)
+/// Procedural(style: Wavy(amplitude: 0.05, frequency: 3.0), strands: 2000)
 /// ```
+///
+/// (Scene files let newtype variants omit their inner parentheses; plain RON needs
+/// `Hair((path: …))`. The `tress_cli` tests parse these examples.)
 ///
 /// Paths are used as given; resolve relative paths before loading ([`HairSource::path_mut`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -79,7 +82,7 @@ impl HairSource {
 ///
 /// ```ron
 /// (basis: CatmullRom, curve: Round, radius_scale: 1.5, tip_scale: 0.3,
-///  transform: (scale: 0.1, rotate: Euler((0, 90, 0)), translate: (0, 1, 0)),
+///  transform: (scale: 0.1, rotate: Euler(0, 90, 0), translate: (0, 1, 0)),
 ///  strand_fraction: 0.1, strand_seed: 7)
 /// ```
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -50,7 +50,6 @@ use tress_core::math::{Aabb, Ray, Vec2, Vec3};
 use tress_core::rng::Pcg32;
 use tress_core::sampling::sample_uniform_sphere;
 use tress_core::{Accel, Bcsdf, Camera, Hit, Integrator, Material, Scene};
-use tress_dual_uniform::DualSettings;
 use tress_materials::dual_scattering::{DualScatteringCache, DualScatteringSettings};
 use tress_materials::HairModel;
 
@@ -216,7 +215,10 @@ struct Plan {
     /// Timed repetitions of every integrator render and replay; the fastest counts, since
     /// interference from other processes only ever slows a run down.
     runs: usize,
+    /// Resolution of the dual-scattering tables whose build time is measured.
     tables: DualScatteringSettings,
+    /// Every registered integrator: with test settings for `--quick`, defaults otherwise.
+    integrators: Vec<IntegratorDesc>,
 }
 
 impl Plan {
@@ -236,6 +238,7 @@ impl Plan {
                     walks: 1024,
                     ..Default::default()
                 },
+                integrators: IntegratorDesc::all_for_tests(),
             }
         } else {
             Plan {
@@ -245,6 +248,7 @@ impl Plan {
                 bcsdf_calls: 400_000,
                 runs: 3,
                 tables: DualScatteringSettings::default(),
+                integrators: IntegratorDesc::all(),
             }
         }
     }
@@ -574,9 +578,12 @@ fn bench_model(
     let accel = big_pool.install(|| SceneBuilder::new()?.add_hair(&hair, &options, 0)?.build())?;
     let bvh_time = t1.elapsed();
     drop(hair);
-    let grid_settings = IntegratorDesc::DualUniform(DualSettings::default())
-        .density_grid()
-        .expect("dual scattering needs a grid");
+    // The grid of the first integrator that reads one (its cost is part of the build).
+    let grid_settings = plan
+        .integrators
+        .iter()
+        .find_map(IntegratorDesc::density_grid)
+        .unwrap_or_default();
     let t2 = Instant::now();
     let grid = big_pool.install(|| DensityGrid::build(&accel, &grid_settings))?;
     let grid_time = t2.elapsed();
@@ -699,18 +706,15 @@ fn bench_model(
         lights: vec![Light::Environment(EnvironmentMap::builtin_sky(0.0, 1.0)?)],
         density: Some(Box::new(grid)),
     };
+    // The ray-rate target and the huge and round models concern the path tracer.
     let descs: Vec<IntegratorDesc> = if spec.all_integrators {
-        let dual = DualSettings {
-            tables: plan.tables.clone(),
-            ..Default::default()
-        };
-        vec![
-            IntegratorDesc::Path(Default::default()),
-            IntegratorDesc::DualUniform(dual.clone()),
-            IntegratorDesc::DualMis(dual),
-        ]
+        plan.integrators.clone()
     } else {
-        vec![IntegratorDesc::Path(Default::default())]
+        plan.integrators
+            .iter()
+            .filter(|d| d.name() == "path")
+            .cloned()
+            .collect()
     };
     let render_pools: Vec<&(usize, ThreadPool)> = if spec.full {
         pools.iter().collect()

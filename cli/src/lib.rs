@@ -17,6 +17,41 @@ pub fn ron_options() -> ron::Options {
 mod tests {
     use serde::de::DeserializeOwned;
 
+    /// The ```` ```ron ```` blocks of a source file's doc comments.
+    fn ron_blocks(source: &str) -> Vec<Vec<String>> {
+        let mut blocks = Vec::new();
+        let mut current: Option<Vec<String>> = None;
+        for line in source.lines() {
+            let Some(doc) = line.trim_start().strip_prefix("///") else {
+                continue;
+            };
+            let doc = doc.strip_prefix(' ').unwrap_or(doc);
+            match (&mut current, doc.trim()) {
+                (None, "```ron") => current = Some(Vec::new()),
+                (Some(_), "```") => blocks.extend(current.take()),
+                (Some(block), _) => block.push(doc.split("//").next().unwrap().to_owned()),
+                (None, _) => {}
+            }
+        }
+        blocks
+    }
+
+    #[test]
+    fn the_documented_hair_source_and_option_forms_parse_as_scene_files_write_them() {
+        let blocks = ron_blocks(include_str!("../../accel/src/source.rs"));
+        assert_eq!(blocks.len(), 2, "{blocks:?}");
+        for line in blocks[0].iter().filter(|l| !l.trim().is_empty()) {
+            crate::ron_options()
+                .from_str::<tress_accel::HairSource>(line)
+                .unwrap_or_else(|e| panic!("{line}: {e}"));
+        }
+        let options = blocks[1].join("\n");
+        let parsed: tress_accel::HairOptions = crate::ron_options()
+            .from_str(&options)
+            .unwrap_or_else(|e| panic!("{options}: {e}"));
+        assert_eq!(parsed.curve, tress_accel::CurveShape::Round);
+    }
+
     /// The variant names of `T`, from the error a variant that does not exist gives.
     fn variants<T: DeserializeOwned + std::fmt::Debug>() -> Vec<String> {
         let err = crate::ron_options()

@@ -200,15 +200,30 @@ impl Outputs<'_> {
                 format!("{:.3}", stats.wall.as_secs_f64()),
             ),
             ("tress:rays", stats.rays.to_string()),
+            // Samples that came out NaN or infinite and were left out of the sums.
+            ("tress:dropped_samples", stats.nonfinite_samples.to_string()),
         ];
+        // Renders writing the same outputs at once take turns, so that the EXR and the PNG
+        // left behind come from one render (an advisory lock on their folder, released on
+        // drop; other programs are not held up).
+        let folder = match self.out.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        let turn = std::fs::File::open(folder)
+            .and_then(|f| f.lock().map(|()| f))
+            .with_context(|| format!("locking {} for writing", folder.display()))?;
         merge::write_render(&self.out, sums, &self.identity, &attributes)?;
         // Both outputs or neither: an EXR without its preview would look like a success.
-        self.args
+        let written = self
+            .args
             .preview
             .write(&self.out, &sums.image())
             .inspect_err(|_| {
                 let _ = std::fs::remove_file(&self.out);
-            })
+            });
+        drop(turn);
+        written
     }
 }
 
@@ -253,11 +268,13 @@ pub fn render(args: RenderArgs) -> Result<()> {
             desc.integrator.name()
         )
     })?;
-    if verbose && !matches!(desc.integrator, IntegratorDesc::Path(_)) {
+    // Worth a line when the integrator precomputed something (dual-scattering tables).
+    let setup = t_integrator.elapsed();
+    if verbose && setup >= Duration::from_millis(50) {
         eprintln!(
-            "{} set up in {:.2} s (dual-scattering tables)",
+            "{} set up in {:.2} s",
             desc.integrator.name(),
-            t_integrator.elapsed().as_secs_f64()
+            setup.as_secs_f64()
         );
     }
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -358,9 +375,19 @@ pub fn render(args: RenderArgs) -> Result<()> {
         eprintln!("wrote {wrote}");
     }
     if stats.nonfinite_samples > 0 {
+        let share = stats.nonfinite_samples as f64 / stats.samples.max(1) as f64;
+        // A few dropped samples are noise; more than one in 10⁴ biases the image visibly.
+        let loud = if share > 1e-4 {
+            "WARNING: the image is biased darker where they fell; "
+        } else {
+            ""
+        };
         eprintln!(
-            "warning: {} samples were NaN or infinite and were dropped",
-            stats.nonfinite_samples
+            "warning: {} of {} samples ({:.3} %) were NaN or infinite and were dropped; \
+             {loud}the EXR records the count (tress:dropped_samples)",
+            stats.nonfinite_samples,
+            stats.samples,
+            100.0 * share
         );
     }
     if status == Status::Interrupted {

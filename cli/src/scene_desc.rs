@@ -181,12 +181,38 @@ pub fn parse(text: &str) -> std::result::Result<SceneDesc, String> {
             let p = e.span.start;
             let mut msg = format!("{}:{}: {}", p.line, p.col, e.code);
             if let Some(line) = text.lines().nth(p.line.saturating_sub(1)) {
-                let caret = " ".repeat(line.chars().take(p.col.saturating_sub(1)).count());
-                msg.push_str(&format!("\n    {line}\n    {caret}^"));
+                let (shown, caret) = excerpt(line, p.col.saturating_sub(1));
+                msg.push_str(&format!("\n    {shown}\n    {}^", " ".repeat(caret)));
             }
             msg
         })
 }
+
+/// At most [`EXCERPT_CHARS`] characters of `line` around character `col`, with `…` where it
+/// is cut, and the caret's column in that excerpt: a one-line file of 400 KB printed whole.
+fn excerpt(line: &str, col: usize) -> (String, usize) {
+    let chars: Vec<char> = line.chars().collect();
+    if chars.len() <= EXCERPT_CHARS {
+        return (line.to_owned(), col.min(chars.len()));
+    }
+    let col = col.min(chars.len());
+    let start = col.saturating_sub(EXCERPT_CHARS / 2);
+    let end = (start + EXCERPT_CHARS).min(chars.len());
+    let start = end.saturating_sub(EXCERPT_CHARS);
+    let mut shown: String = chars[start..end].iter().collect();
+    let mut caret = col - start;
+    if start > 0 {
+        shown.insert(0, '…');
+        caret += 1;
+    }
+    if end < chars.len() {
+        shown.push('…');
+    }
+    (shown, caret)
+}
+
+/// Longest excerpt of a scene line shown under a parse error.
+const EXCERPT_CHARS: usize = 120;
 
 /// Resolves `p` against the folder holding the scene file.
 pub fn resolve(scene_path: &Path, p: &Path) -> PathBuf {
@@ -327,6 +353,14 @@ pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
             ));
             Some(Box::new(grid))
         }
+        // Say what is missing, rather than the integrator finding no grid.
+        Some(_) if materials.iter().any(|m| matches!(m, Material::Hair(_))) => bail!(
+            "{}: integrator {} shades hair from a density grid of the scene's hair objects, \
+             but the scene has hair materials and no hair object: add a `Hair(source: …)` \
+             object, or render it with `path`",
+            scene_path.display(),
+            desc.integrator.name()
+        ),
         _ => None,
     };
     Ok(BuiltScene {

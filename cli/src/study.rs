@@ -252,6 +252,17 @@ fn str_hash(s: &str) -> u64 {
     bytes_hash(s.as_bytes())
 }
 
+/// The hash of an image's pixel values (bits), recorded in cached renders.
+fn pixels_hash(image: &tress_core::Image) -> String {
+    let bytes: Vec<u8> = image
+        .pixels
+        .iter()
+        .flat_map(|p| p.to_array())
+        .flat_map(f32::to_le_bytes)
+        .collect();
+    format!("{:016x}", bytes_hash(&bytes))
+}
+
 /// [`str_hash`] of any bytes (files' contents for the cache key).
 fn bytes_hash(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
@@ -699,6 +710,10 @@ impl SceneRunner<'_> {
         if attribute(&attrs, "tress:study_key") != Some(key) {
             return Cached::Stale("made with other settings".into());
         }
+        // An image edited after the render (attributes kept) must not pass for the render.
+        if attribute(&attrs, "tress:pixels_hash") != Some(pixels_hash(&image).as_str()) {
+            return Cached::Stale("its pixels changed since it was rendered".into());
+        }
         let film = &self.scene.desc.film;
         if (
             image.full_width,
@@ -802,6 +817,7 @@ impl SceneRunner<'_> {
             ("tress:render_cpu_s", time_s.to_string()),
             ("tress:rays", stats.rays.to_string()),
             ("tress:study_key", key),
+            ("tress:pixels_hash", pixels_hash(&output.image)),
         ];
         if let Some(dir) = job.exr.parent() {
             std::fs::create_dir_all(dir)

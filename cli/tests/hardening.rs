@@ -1006,3 +1006,105 @@ fn camera_checks_are_relative() {
         assert_bad_scene(&SCENE.replace(from, to), &[expect]);
     }
 }
+
+/// Two renders writing the same outputs at once leave the EXR and the PNG of one of them, not
+/// one of each (they take turns on a lock of the output folder). Eight races of two renders
+/// with different seeds; after each, the PNG must be the preview of the EXR.
+#[test]
+fn concurrent_renders_to_one_output_leave_a_consistent_pair() {
+    use std::process::Command;
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    for round in 0..8 {
+        let children: Vec<_> = [1, 2]
+            .map(|seed| {
+                Command::new(env!("CARGO_BIN_EXE_tress"))
+                    .args(["render", "scene.ron", "--out", "same.exr", "--quiet"])
+                    .args(["--seed", &(10 * round + seed).to_string()])
+                    .current_dir(d)
+                    .spawn()
+                    .unwrap()
+            })
+            .into_iter()
+            .collect();
+        for mut c in children {
+            assert!(c.wait().unwrap().success());
+        }
+        let (image, attributes) = tress_core::image_io::read_exr(d.join("same.exr")).unwrap();
+        assert!(attributes
+            .iter()
+            .any(|(k, v)| k == "tress:dropped_samples" && v == "0"));
+        tress_core::image_io::write_png(d.join("check.png"), &image, 0.0).unwrap();
+        assert_eq!(
+            std::fs::read(d.join("same.png")).unwrap(),
+            std::fs::read(d.join("check.png")).unwrap(),
+            "round {round}: the PNG is not the EXR's preview"
+        );
+    }
+    assert_eq!(
+        files_in(d),
+        ["check.png", "same.exr", "same.png", "scene.ron"],
+        "temporary files left"
+    );
+}
+
+/// Dual-scattering settings beyond what is sane, and scenes it cannot shade, are refused before
+/// any long build, saying what is wrong once and how to go on.
+#[test]
+fn dual_scattering_settings_and_scenes_are_checked_up_front() {
+    let dual = |settings: &str| SCENE.replace("Path(max_depth: 20)", settings);
+    // theta_nodes: 4096 built for 78 s without a word.
+    let t0 = Instant::now();
+    assert_bad_scene(
+        &dual("DualMis(tables: (theta_nodes: 4096))"),
+        &["tables", "× the default", "TRESS_ALLOW_SLOW_TABLES"],
+    );
+    assert!(t0.elapsed() < Duration::from_secs(20), "{:?}", t0.elapsed());
+    // 1024³ voxels with orientations could take 28 GiB.
+    assert_bad_scene(
+        &dual("DualMis(grid_resolution: Some(1024))"),
+        &["grid_resolution", "GiB", "TRESS_MEMORY_LIMIT_GIB"],
+    );
+    // A hair material but no hair object: say so (it said "the scene has no density grid").
+    let no_hair = dual("DualUniform()").replace(
+        "Hair(source: Procedural(style: Ball, strands: 300, radius: 0.01), material: \"hair\"),",
+        "",
+    );
+    assert_bad_scene(&no_hair, &["no hair object", "`path`"]);
+    // The cause once ("d_f = 1.5: must lie in [0, 1]: d_f = 1.5: …" before).
+    let (dir, _) = scene_dir(&dual("DualMis(d_f: Some(1.5))"));
+    let o = tress(
+        &["render", "scene.ron", "--out", "o.exr", "--quiet"],
+        dir.path(),
+    );
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert_eq!(err.matches("d_f = 1.5").count(), 1, "{err}");
+}
+
+/// A parse error on a 400 KB line shows an excerpt around the error, not the line.
+#[test]
+fn parse_errors_show_an_excerpt_of_long_lines() {
+    let long = format!("({}bogus: 1)", " ".repeat(400_000));
+    let (dir, _) = scene_dir(&long);
+    let o = tress(&["info", "scene.ron"], dir.path());
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{}", &err[..err.len().min(500)]);
+    assert!(err.len() < 1000, "{} bytes of message", err.len());
+    assert!(
+        err.contains("scene.ron:1:") && err.contains('…') && err.contains('^'),
+        "{err}"
+    );
+    let caret = err.lines().last().unwrap();
+    let shown = err.lines().nth_back(1).unwrap();
+    // The caret sits under the offending identifier.
+    let col = caret.chars().count() - 1;
+    assert!(
+        shown
+            .chars()
+            .skip(col)
+            .collect::<String>()
+            .starts_with("bogus"),
+        "{shown}\n{caret}"
+    );
+}

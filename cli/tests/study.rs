@@ -641,4 +641,33 @@ fn the_cache_follows_the_contents_of_referenced_files() {
         made,
         "a replaced environment map redoes every render"
     );
+    // A cached render whose pixels were edited, its attributes kept, is rendered again.
+    let mut exrs = Vec::new();
+    let mut stack = vec![dir.path().join("out")];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p.extension().is_some_and(|x| x == "exr") {
+                exrs.push(p);
+            }
+        }
+    }
+    exrs.sort();
+    let edited = exrs
+        .iter()
+        .find(|p| {
+            image_io::read_exr(p)
+                .unwrap()
+                .1
+                .iter()
+                .any(|(k, _)| k == "tress:pixels_hash")
+        })
+        .expect("a cached render");
+    let (mut img, attrs) = image_io::read_exr(edited).unwrap();
+    img.pixels[0] *= 2.0;
+    let attrs: Vec<(&str, String)> = attrs.iter().map(|(k, v)| (k.as_str(), v.clone())).collect();
+    image_io::write_exr(edited, &img, &attrs).unwrap();
+    assert_eq!(run().0, 1, "the edited render, and only it, is redone");
 }

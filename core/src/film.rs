@@ -28,6 +28,17 @@ pub const MEMORY_LIMIT_VAR: &str = "TRESS_MEMORY_LIMIT_GIB";
 /// [`MEMORY_LIMIT_VAR`]).
 pub const DEFAULT_MEMORY_LIMIT_GIB: f64 = 16.0;
 
+/// The memory a render may plan for, in GiB: [`MEMORY_LIMIT_VAR`] when set to a positive
+/// number, else [`DEFAULT_MEMORY_LIMIT_GIB`]. Films, density grids and tables are checked
+/// against it before they are allocated.
+pub fn memory_limit_gib() -> f64 {
+    std::env::var(MEMORY_LIMIT_VAR)
+        .ok()
+        .and_then(|v| v.parse::<f64>().ok())
+        .filter(|g| *g > 0.0)
+        .unwrap_or(DEFAULT_MEMORY_LIMIT_GIB)
+}
+
 impl FilmSettings {
     /// The pixel window actually rendered, `[x0, y0, x1, y1)`.
     pub fn window(&self) -> [u32; 4] {
@@ -63,11 +74,7 @@ impl FilmSettings {
     /// [`Self::validate`], and that the render fits the memory limit ([`MEMORY_LIMIT_VAR`]).
     pub fn validate_for_render(&self) -> Result<(), String> {
         self.validate()?;
-        let limit_gib = std::env::var(MEMORY_LIMIT_VAR)
-            .ok()
-            .and_then(|v| v.parse::<f64>().ok())
-            .filter(|g| *g > 0.0)
-            .unwrap_or(DEFAULT_MEMORY_LIMIT_GIB);
+        let limit_gib = memory_limit_gib();
         let need_gib = self.memory_bytes() as f64 / (1u64 << 30) as f64;
         if need_gib > limit_gib {
             let [x0, y0, x1, y1] = self.window();

@@ -14,6 +14,37 @@ pub trait Integrator: Send + Sync + std::fmt::Debug {
     fn li(&self, ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb;
 }
 
+/// An integrator as the registry lists it (the `integrators!` table of the `tress` CLI): how
+/// its settings are written, what it needs of the scene, how it is built and how the
+/// cross-crate tests hold it. Each integrator crate implements this once, on a type of its own,
+/// so that adding an integrator is its crate plus one registry line.
+pub trait IntegratorKind {
+    /// The settings as scene files write them, e.g. `Path(max_depth: 64)`.
+    type Settings: Clone
+        + Default
+        + PartialEq
+        + std::fmt::Debug
+        + serde::Serialize
+        + serde::de::DeserializeOwned;
+    /// The command-line name (`path`, `dual-mis`): lower case, words joined by `-`.
+    const NAME: &'static str;
+    /// Whether the images converge to the exact solution of the scene (white-furnace tests hold
+    /// it to 1 %) rather than to an approximation (held to not creating energy).
+    const UNBIASED: bool;
+    /// The fiber-density grid the integrator reads: `None` when it needs none, `Some(None)` at
+    /// the resolution chosen from the hair, `Some(Some(n))` at `n` voxels along the longest side.
+    fn density_grid(settings: &Self::Settings) -> Option<Option<u32>>;
+    /// Builds the integrator for `scene`; its precomputations happen here.
+    fn build(settings: &Self::Settings, scene: &Scene) -> Result<Box<dyn Integrator>, BuildError>;
+    /// Settings that exercise everything but run quickly, for the cross-crate tests.
+    fn test_settings() -> Self::Settings {
+        Self::Settings::default()
+    }
+}
+
+/// Why an integrator could not be built for a scene (the integrator's own error).
+pub type BuildError = Box<dyn std::error::Error + Send + Sync>;
+
 /// Next-event estimation at `sp` toward `light`, chosen with probability `select_pdf`: what
 /// it adds to a path of weight `throughput`, MIS-weighted (power heuristic) against sampling
 /// the scattering function, which cannot find delta lights (their weight is 1). Zero when the

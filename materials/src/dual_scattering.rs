@@ -177,9 +177,43 @@ impl DualScatteringSettings {
                 "must be even (the half-space boundaries must fall between nodes)",
             ));
         }
+        let work = self.work_over_default();
+        if work > MAX_TABLE_WORK && std::env::var_os(ALLOW_SLOW_TABLES_VAR).is_none() {
+            return Err(ParamError::new(
+                "tables",
+                format!(
+                    "(theta_nodes: {}, h_nodes: {}, theta_quad: {}, phi_quad: {}, walks: {})",
+                    self.theta_nodes, self.h_nodes, self.theta_quad, self.phi_quad, self.walks
+                ),
+                format!(
+                    "{work:.0}× the default tables' work, about {:.0} s per hair material on \
+                     2 cores (over the {MAX_TABLE_WORK}× limit): lower them, or set \
+                     {ALLOW_SLOW_TABLES_VAR}=1 to build them anyway",
+                    work * DEFAULT_BUILD_SECONDS
+                ),
+            ));
+        }
         Ok(())
     }
+
+    /// The build's work relative to the defaults: quadrature nodes (θ × h × θ' × φ') plus the
+    /// random walks (θ × walks; a walk costs about as much as 60 quadrature nodes).
+    fn work_over_default(&self) -> f64 {
+        let work = |s: &Self| {
+            (s.theta_nodes * s.h_nodes * s.theta_quad * s.phi_quad) as f64
+                + 60.0 * s.theta_nodes as f64 * f64::from(s.walks)
+        };
+        work(self) / work(&Self::default())
+    }
 }
+
+/// Table settings beyond this many times the default tables' work are refused (a build of
+/// `theta_nodes: 4096` ran for minutes without a word) unless [`ALLOW_SLOW_TABLES_VAR`] is set.
+pub const MAX_TABLE_WORK: f64 = 16.0;
+/// Set (to anything) to build tables beyond [`MAX_TABLE_WORK`].
+pub const ALLOW_SLOW_TABLES_VAR: &str = "TRESS_ALLOW_SLOW_TABLES";
+/// Build time of the default tables on the 2-core development machine (for the estimate).
+const DEFAULT_BUILD_SECONDS: f64 = 1.3;
 
 /// The density factors d_f (forward) and d_b (backward), in [0, 1]: the paper's free
 /// parameters, or scales of the measured terms (see [`DensityFactors::for_model`]).
@@ -211,12 +245,19 @@ impl DensityFactors {
 /// Why the tables could not be built.
 #[derive(Debug, Clone, thiserror::Error, PartialEq)]
 pub enum DualScatteringError {
+    // The cause is in the message, not also a `source`: chains printed with `{:#}` said it twice.
     #[error("dual-scattering settings: {0}")]
-    Param(#[from] ParamError),
+    Param(ParamError),
     #[error(
         "the BCSDF returned a non-finite value (lobe {lobe}, light inclination θ = {theta} rad)"
     )]
     NonFinite { lobe: &'static str, theta: f32 },
+}
+
+impl From<ParamError> for DualScatteringError {
+    fn from(e: ParamError) -> Self {
+        DualScatteringError::Param(e)
+    }
 }
 
 /// The global (lobe-summed) quantities at one light inclination θ, per RGB channel.

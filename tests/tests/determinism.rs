@@ -2,19 +2,18 @@
 //! crop window or the run.
 
 use std::sync::Arc;
+use tress_cli::integrators::IntegratorDesc;
 use tress_core::light::{EnvironmentMap, Light};
 use tress_core::render::render;
-use tress_core::{Integrator, Scene};
-use tress_dual_mis::{DualMis, MisDirections};
-use tress_dual_uniform::{DualSettings, DualUniform, UniformDirections};
+use tress_core::Scene;
 use tress_materials::pigment::Pigment;
 use tress_materials::HairModel;
-use tress_path::{PathSettings, PathTracer};
 use tress_tests::{film, hair_ball, hair_ball_scene, with_density_grid};
 
 /// Dark hair under a sky so dim (scale 1e-36) that most radiance values are denormal floats, so
 /// any thread computing in another floating-point mode (flush-to-zero) shows in the bits; with
-/// the density grid the dual-scattering integrators need.
+/// the density grid the dual-scattering integrators need (built for every integrator, so that
+/// none depends on whether it is there).
 fn scene() -> Scene {
     let model = HairModel::Chiang(tress_materials::chiang::Params {
         pigment: Pigment::Melanin {
@@ -30,29 +29,9 @@ fn scene() -> Scene {
     with_density_grid(scene, &hair_ball(1500))
 }
 
-type BuildIntegrator = fn(&Scene) -> Box<dyn Integrator>;
-
-fn integrators() -> [(&'static str, BuildIntegrator); 3] {
-    fn ds() -> DualSettings {
-        DualSettings {
-            tables: tress_materials::dual_scattering::DualScatteringSettings {
-                theta_nodes: 16,
-                ..Default::default()
-            },
-            ..Default::default()
-        }
-    }
-    [
-        ("path", |_| {
-            Box::new(PathTracer::new(PathSettings::default()))
-        }),
-        ("dual-uniform", |s| {
-            Box::new(DualUniform::new(ds(), s, UniformDirections).unwrap())
-        }),
-        ("dual-mis", |s| {
-            Box::new(DualMis::new(ds(), s, MisDirections).unwrap())
-        }),
-    ]
+/// Every registered integrator, with its quick test settings.
+fn integrators() -> Vec<IntegratorDesc> {
+    IntegratorDesc::all_for_tests()
 }
 
 /// Builds the scene and the integrator on a fresh pool of `threads` workers — as the CLI does,
@@ -60,7 +39,7 @@ fn integrators() -> [(&'static str, BuildIntegrator); 3] {
 /// there.
 fn render_with(
     threads: usize,
-    integrator: BuildIntegrator,
+    integrator: &IntegratorDesc,
     film: &tress_core::film::FilmSettings,
 ) -> tress_core::Image {
     let pool = rayon::ThreadPoolBuilder::new()
@@ -69,7 +48,7 @@ fn render_with(
         .unwrap();
     pool.install(|| {
         let scene = scene();
-        let integrator = integrator(&scene);
+        let integrator = integrator.build(&scene).unwrap();
         render(&scene, integrator.as_ref(), film, &|_| {}).image
     })
 }
@@ -88,7 +67,8 @@ fn assert_bit_identical(a: &tress_core::Image, b: &tress_core::Image, what: &str
 #[test]
 fn image_is_identical_for_any_thread_count_and_run() {
     let f = film(40, 40, 4, 5);
-    for (name, integrator) in integrators() {
+    for integrator in &integrators() {
+        let name = integrator.name();
         let one = render_with(1, integrator, &f);
         assert!(one.mean() > 0.0, "{name}: black image");
         for (threads, run) in [(2, 1), (2, 2), (3, 1)] {
@@ -104,7 +84,8 @@ fn image_is_identical_for_any_thread_count_and_run() {
 
 #[test]
 fn crop_window_equals_the_same_window_of_the_full_render() {
-    for (name, integrator) in integrators() {
+    for integrator in &integrators() {
+        let name = integrator.name();
         let full = render_with(2, integrator, &film(40, 40, 4, 5));
         let mut cropped_film = film(40, 40, 4, 5);
         cropped_film.crop = Some([7, 13, 29, 31]);
@@ -126,7 +107,8 @@ fn crop_window_equals_the_same_window_of_the_full_render() {
 
 #[test]
 fn a_different_seed_gives_a_different_image() {
-    for (name, integrator) in integrators() {
+    for integrator in &integrators() {
+        let name = integrator.name();
         let a = render_with(2, integrator, &film(24, 24, 2, 1));
         let b = render_with(2, integrator, &film(24, 24, 2, 2));
         assert_ne!(a.pixels, b.pixels, "{name}");

@@ -6,8 +6,9 @@
 //!
 //! RON: `DualMis(d_f: Some(0.9), d_b: None)` (settings as for `DualUniform`)
 
+use tress_core::integrator::BuildError;
 use tress_core::sampling::power_heuristic;
-use tress_core::{Rgb, Sampler, Scene};
+use tress_core::{Integrator, IntegratorKind, Rgb, Sampler, Scene};
 use tress_dual_scattering::{DirectionSampling, DualScattering, HairPoint};
 
 pub use tress_dual_scattering::{DualError, DualSettings};
@@ -18,6 +19,24 @@ pub struct MisDirections;
 
 /// The `dual-mis` integrator.
 pub type DualMis = DualScattering<MisDirections>;
+
+impl IntegratorKind for MisDirections {
+    type Settings = DualSettings;
+    const NAME: &'static str = "dual-mis";
+    const UNBIASED: bool = false;
+
+    fn density_grid(settings: &DualSettings) -> Option<Option<u32>> {
+        settings.density_grid()
+    }
+
+    fn build(settings: &DualSettings, scene: &Scene) -> Result<Box<dyn Integrator>, BuildError> {
+        settings.build_with(scene, MisDirections)
+    }
+
+    fn test_settings() -> DualSettings {
+        DualSettings::for_tests()
+    }
+}
 
 impl DirectionSampling for MisDirections {
     fn estimate(&self, point: &HairPoint, scene: &Scene, sampler: &mut Sampler) -> Rgb {

@@ -69,10 +69,24 @@ impl Default for DualSettings {
 pub enum DualError {
     #[error("dual scattering needs the hair density grid, but the scene has none")]
     NoDensityGrid,
-    #[error("dual-scattering tables: {0}")]
-    Tables(#[from] DualScatteringError),
+    // Causes are in the messages, not also `source`s: chains printed with `{:#}` said them
+    // two or three times ("d_f = 1.5: must lie in [0, 1]: d_f = 1.5: …").
+    #[error("{0}")]
+    Tables(DualScatteringError),
     #[error("dual-scattering settings: {0}")]
-    Param(#[from] tress_materials::ParamError),
+    Param(tress_materials::ParamError),
+}
+
+impl From<DualScatteringError> for DualError {
+    fn from(e: DualScatteringError) -> Self {
+        DualError::Tables(e)
+    }
+}
+
+impl From<tress_materials::ParamError> for DualError {
+    fn from(e: tress_materials::ParamError) -> Self {
+        DualError::Param(e)
+    }
 }
 
 /// A hair point being shaded: everything a [`DirectionSampling`] needs.
@@ -228,6 +242,37 @@ impl<D: DirectionSampling> DualScattering<D> {
             }
         }
         radiance
+    }
+}
+
+impl DualSettings {
+    /// The density grid the estimator reads (for [`tress_core::IntegratorKind::density_grid`]).
+    pub fn density_grid(&self) -> Option<Option<u32>> {
+        Some(self.grid_resolution)
+    }
+
+    /// Coarse tables (16 θ nodes) that build in a fraction of a second, for tests.
+    pub fn for_tests() -> Self {
+        DualSettings {
+            tables: DualScatteringSettings {
+                theta_nodes: 16,
+                ..Default::default()
+            },
+            ..Default::default()
+        }
+    }
+
+    /// The estimator with `directions`, boxed (for [`tress_core::IntegratorKind::build`]).
+    pub fn build_with<D: DirectionSampling + 'static>(
+        &self,
+        scene: &Scene,
+        directions: D,
+    ) -> Result<Box<dyn Integrator>, tress_core::integrator::BuildError> {
+        Ok(Box::new(DualScattering::new(
+            self.clone(),
+            scene,
+            directions,
+        )?))
     }
 }
 

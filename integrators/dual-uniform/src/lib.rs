@@ -4,8 +4,9 @@
 //!
 //! RON: `DualUniform(d_f: None, d_b: None, grid_resolution: None)` (see [`DualSettings`]).
 
+use tress_core::integrator::BuildError;
 use tress_core::sampling::{sample_uniform_sphere, INV_4PI};
-use tress_core::{Rgb, Sampler, Scene};
+use tress_core::{Integrator, IntegratorKind, Rgb, Sampler, Scene};
 use tress_dual_scattering::{DirectionSampling, DualScattering, HairPoint};
 
 pub use tress_dual_scattering::{DualError, DualSettings};
@@ -23,3 +24,21 @@ impl DirectionSampling for UniformDirections {
 
 /// The `dual-uniform` integrator.
 pub type DualUniform = DualScattering<UniformDirections>;
+
+impl IntegratorKind for UniformDirections {
+    type Settings = DualSettings;
+    const NAME: &'static str = "dual-uniform";
+    const UNBIASED: bool = false;
+
+    fn density_grid(settings: &DualSettings) -> Option<Option<u32>> {
+        settings.density_grid()
+    }
+
+    fn build(settings: &DualSettings, scene: &Scene) -> Result<Box<dyn Integrator>, BuildError> {
+        settings.build_with(scene, UniformDirections)
+    }
+
+    fn test_settings() -> DualSettings {
+        DualSettings::for_tests()
+    }
+}

@@ -7,8 +7,9 @@
 //! RON: `Path(max_depth: 100, rr_depth: 5)`
 
 use serde::{Deserialize, Serialize};
+use tress_core::integrator::BuildError;
 use tress_core::integrator::{direct_light, escaped_light};
-use tress_core::{Integrator, Ray, Rgb, Sampler, Scene, ShadingPoint};
+use tress_core::{Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint};
 
 /// Path tracer settings.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -39,6 +40,29 @@ pub struct PathTracer {
 impl PathTracer {
     pub fn new(settings: PathSettings) -> Self {
         PathTracer { settings }
+    }
+}
+
+impl IntegratorKind for PathTracer {
+    type Settings = PathSettings;
+    const NAME: &'static str = "path";
+    const UNBIASED: bool = true;
+
+    fn density_grid(_: &PathSettings) -> Option<Option<u32>> {
+        None
+    }
+
+    fn build(settings: &PathSettings, _: &Scene) -> Result<Box<dyn Integrator>, BuildError> {
+        Ok(Box::new(PathTracer::new(settings.clone())))
+    }
+
+    /// Paths deep enough for white furnaces to balance (Russian roulette keeps them short
+    /// where they carry little).
+    fn test_settings() -> PathSettings {
+        PathSettings {
+            max_depth: 10_000,
+            ..Default::default()
+        }
     }
 }
 
