@@ -9,6 +9,7 @@
 
 use crate::error::{format_error, Result};
 use crate::geometry::{HairAttribute, HairGeometry};
+use crate::le_bytes::{f32_at, u32_at, vec3_at};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use tress_core::math::{Rgb, Vec3};
@@ -24,6 +25,7 @@ const FLAG_COLOR: u32 = 1 << 4;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct HairFile {
+    /// Path of the `.hair` file, used as given (resolve relative paths first).
     pub path: PathBuf,
     /// Rotate Z-up data to tress's Y-up world ((x, y, z) → (x, z, −y)). Cem Yuksel's published
     /// models are Z-up, so this defaults to true.
@@ -36,6 +38,7 @@ fn yes() -> bool {
 }
 
 impl HairFile {
+    /// The file at `path`, converted from Z-up (the default).
     pub fn new(path: impl Into<PathBuf>) -> Self {
         HairFile {
             path: path.into(),
@@ -68,18 +71,6 @@ struct Header {
     default_thickness: f32,
     default_transparency: f32,
     default_color: Rgb,
-}
-
-fn u32_at(b: &[u8], at: usize) -> u32 {
-    u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
-}
-
-fn f32_at(b: &[u8], at: usize) -> f32 {
-    f32::from_bits(u32_at(b, at))
-}
-
-fn vec3_at(b: &[u8], at: usize) -> Vec3 {
-    Vec3::new(f32_at(b, at), f32_at(b, at + 4), f32_at(b, at + 8))
 }
 
 /// Parses a whole `.hair` file held in memory; `path` is only used in errors.

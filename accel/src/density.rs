@@ -181,6 +181,7 @@ pub struct DensityInfo {
     pub dims: [u32; 3],
     /// Side of the cubic voxels (world units).
     pub voxel_size: f32,
+    /// Whether voxels store the fiber orientation ([`DensitySettings::direction`]).
     pub direction: bool,
     /// Occupied 8³ bricks.
     pub bricks: usize,

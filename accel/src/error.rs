@@ -8,29 +8,47 @@ pub enum Error {
     /// The file could not be opened or read.
     #[error("{}: {source}", .path.display())]
     Io {
+        /// The file concerned.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
     /// The file was read but its contents are not a valid file of the expected format.
     #[error("{}: {reason}", .path.display())]
-    Format { path: PathBuf, reason: String },
+    Format {
+        /// The file concerned.
+        path: PathBuf,
+        /// What is wrong, e.g. a truncated header or an unknown extension.
+        reason: String,
+    },
     /// The OBJ file could not be loaded: `line` (1-based) is the line at fault where tress
     /// finds it.
     #[error("{}{}: cannot load OBJ: {reason}", .path.display(), .line.map_or(String::new(), |l| format!(":{l}")))]
     Obj {
+        /// The OBJ file.
         path: PathBuf,
+        /// The 1-based line at fault, when tress can find it.
         line: Option<usize>,
+        /// The OBJ loader's message.
         reason: String,
     },
     /// The geometry of an object (a file's contents or a generated object) is unusable.
     #[error("{object}: {reason}")]
-    InvalidGeometry { object: String, reason: String },
+    InvalidGeometry {
+        /// Name of the object: its file or generator description.
+        object: String,
+        /// What makes it unusable.
+        reason: String,
+    },
     /// An option of an object is out of range.
     #[error("{object}: invalid `{field}`: {reason}")]
     InvalidOption {
+        /// Name of the object: its file, generator description or `sphere #n`.
         object: String,
+        /// The option at fault, e.g. `radius_scale`.
         field: &'static str,
+        /// The allowed range and the value given.
         reason: String,
     },
     /// Embree reported an error.

@@ -64,6 +64,7 @@ impl<T: Copy> HairAttribute<T> {
 pub struct HairGeometry {
     /// Where the hair came from (a file path or a generator description), used in errors.
     pub name: String,
+    /// Points of all strands, concatenated (see `strand_offsets`).
     pub points: Vec<Vec3>,
     /// Fiber radius at each point (world units).
     pub radii: Vec<f32>,
@@ -76,10 +77,12 @@ pub struct HairGeometry {
 }
 
 impl HairGeometry {
+    /// Number of strands.
     pub fn strand_count(&self) -> usize {
         self.strand_offsets.len().saturating_sub(1)
     }
 
+    /// Number of points over all strands.
     pub fn point_count(&self) -> usize {
         self.points.len()
     }
@@ -230,7 +233,12 @@ pub enum Rotation {
     /// Rotate about x, then y, then z (fixed world axes), by these angles in degrees.
     Euler(Vec3),
     /// Rotate by `degrees` about `axis` (any non-zero length), right-handed.
-    AxisAngle { axis: Vec3, degrees: f32 },
+    AxisAngle {
+        /// Rotation axis, finite and non-zero.
+        axis: Vec3,
+        /// Angle in degrees.
+        degrees: f32,
+    },
 }
 
 impl Default for Rotation {
@@ -245,8 +253,11 @@ impl Default for Rotation {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Transform {
+    /// Uniform scale factor, finite and positive (default 1); multiplies the radii too.
     pub scale: f32,
+    /// Rotation applied after the scale (default none).
     pub rotate: Rotation,
+    /// Offset added last, in world units (default 0).
     pub translate: Vec3,
 }
 

@@ -74,12 +74,15 @@
 //! exclude a primitive (the excluded primitive travels in the intersection context), so
 //! occlusion queries get the same rule, and camera rays pay no callback at all.
 
+#![warn(missing_docs)]
+
 mod curves;
 pub mod cyhair;
 pub mod density;
 mod error;
 mod fp_mode;
 pub mod geometry;
+mod le_bytes;
 pub mod mesh;
 pub mod procedural;
 mod scene;

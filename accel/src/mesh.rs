@@ -9,7 +9,9 @@ use tress_core::math::{Aabb, Vec3};
 pub struct TriangleMesh {
     /// Where the mesh came from, used in errors.
     pub name: String,
+    /// Vertex positions.
     pub positions: Vec<Vec3>,
+    /// Vertex indices of each triangle, into `positions`.
     pub triangles: Vec<[u32; 3]>,
 }
 
@@ -110,6 +112,7 @@ impl TriangleMesh {
         Ok(())
     }
 
+    /// Bounds of the vertex positions.
     pub fn bounds(&self) -> Aabb {
         let mut b = Aabb::EMPTY;
         for &p in &self.positions {

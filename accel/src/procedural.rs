@@ -32,10 +32,20 @@ pub enum HairStyle {
     Straight,
     /// Scalp strands with a sideways sinusoidal wave: `amplitude` in world units, `frequency`
     /// in waves per unit of height (the wave advances with height so neighbours wave together).
-    Wavy { amplitude: f32, frequency: f32 },
+    Wavy {
+        /// Wave amplitude, in world units (≥ 0).
+        amplitude: f32,
+        /// Waves per unit of height (≥ 0).
+        frequency: f32,
+    },
     /// Scalp strands with a helical curl: `amplitude` is the curl radius, `frequency` the turns
     /// per unit length (use several points per turn).
-    Curly { amplitude: f32, frequency: f32 },
+    Curly {
+        /// Curl radius, in world units (≥ 0).
+        amplitude: f32,
+        /// Turns per unit of strand length (≥ 0).
+        frequency: f32,
+    },
     /// A ball of fibers: each strand is a circular arc on a random great circle of a random
     /// shell inside the sphere, shells spread so the fiber density is uniform in volume.
     Ball,
@@ -45,9 +55,13 @@ pub enum HairStyle {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ProceduralHair {
+    /// Straight, wavy, curly or a ball (default straight).
     pub style: HairStyle,
+    /// Seed of the random layout; strand `i` depends only on the seed and `i` (default 0).
     pub seed: u64,
+    /// Number of strands, at least 1 (default 4000).
     pub strands: u32,
+    /// Points per strand, at least 2 (default 24).
     pub points_per_strand: u32,
     /// Fiber radius.
     pub radius: f32,

@@ -22,6 +22,7 @@ use tress_core::math::Ray;
 /// A ray for the raw queries: tress's ray and the distance the query starts at.
 #[derive(Clone, Copy, Debug)]
 pub struct RawRay {
+    /// The ray; its `exclude` is honoured only under [`Exclusion::Tress`].
     pub ray: Ray,
     /// Start of the query interval `(t_near, ray.t_max)`.
     pub t_near: f32,

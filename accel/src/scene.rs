@@ -177,6 +177,7 @@ impl GeomData {
 /// What an object added to the scene is.
 #[derive(Clone, Debug, PartialEq)]
 pub enum ObjectKind {
+    /// A hair object, drawn as Embree curves.
     Hair {
         /// Strands kept (after subsampling, with at least one non-degenerate segment).
         strands: usize,
@@ -184,15 +185,23 @@ pub enum ObjectKind {
         segments: usize,
         /// Input points of the kept strands.
         points: usize,
+        /// How the strands' polylines became curves.
         basis: CurveBasis,
+        /// Whether the curves are ribbons or tubes.
         curve: CurveShape,
     },
+    /// A triangle mesh.
     Mesh {
+        /// Number of triangles.
         triangles: usize,
+        /// Number of vertices.
         vertices: usize,
     },
+    /// A sphere.
     Sphere {
+        /// Centre, in world space.
         center: Vec3,
+        /// Radius, in world units.
         radius: f32,
     },
 }
@@ -200,8 +209,11 @@ pub enum ObjectKind {
 /// One object of the scene, for `tress info`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ObjectInfo {
+    /// Name used in messages: the object's file, generator description or `sphere #n`.
     pub name: String,
+    /// What the object is, with its size.
     pub kind: ObjectKind,
+    /// Index of its material in `Scene::materials`.
     pub material: u32,
     /// World bounds, padded by the fiber or sphere radius.
     pub bounds: Aabb,
@@ -210,12 +222,19 @@ pub struct ObjectInfo {
 /// Summary of a built scene.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AccelInfo {
+    /// Every object added, in order.
     pub objects: Vec<ObjectInfo>,
+    /// Strands over all hair objects.
     pub strands: usize,
+    /// Curve segments (Embree primitives) over all hair objects.
     pub segments: usize,
+    /// Input points over all hair objects.
     pub points: usize,
+    /// Triangles over all meshes.
     pub triangles: usize,
+    /// Number of spheres.
     pub spheres: usize,
+    /// Bounds of all objects, padded by the fiber and sphere radii.
     pub bounds: Aabb,
     /// Approximate memory: what Embree's device allocated (buffers and BVH) plus the data
     /// kept here for hit construction and filtering.

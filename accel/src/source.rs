@@ -28,8 +28,11 @@ use std::path::{Path, PathBuf};
 pub enum HairSource {
     /// A `.hair` or `.tfx` file (by extension, case-insensitive) with default reader options.
     File(PathBuf),
+    /// A Cem Yuksel `.hair` file with reader options (`z_up`).
     Hair(HairFile),
+    /// An AMD TressFX `.tfx` file with reader options (`radius`).
     Tfx(TfxFile),
+    /// Hair generated from a seed ([`ProceduralHair`]).
     Procedural(ProceduralHair),
 }
 
@@ -88,6 +91,7 @@ impl HairSource {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct HairOptions {
+    /// How polylines become curves: `Linear` (the default), `CatmullRom` or `BSpline`.
     pub basis: CurveBasis,
     /// Ray-facing ribbons (`Flat`, the default) or tubes (`Round`).
     pub curve: CurveShape,

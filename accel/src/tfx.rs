@@ -13,6 +13,7 @@
 
 use crate::error::{format_error, Result};
 use crate::geometry::{HairAttribute, HairGeometry};
+use crate::le_bytes::{f32_at, u32_at};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use tress_core::math::{Rgb, Vec3};
@@ -23,6 +24,7 @@ const HEADER_BYTES: usize = 160;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TfxFile {
+    /// Path of the `.tfx` file, used as given (resolve relative paths first).
     pub path: PathBuf,
     /// Fiber radius in file units (default 0.002, the TressFX samples' fiber radius).
     #[serde(default = "default_radius")]
@@ -34,6 +36,7 @@ fn default_radius() -> f32 {
 }
 
 impl TfxFile {
+    /// The file at `path` with the default fiber radius, 0.002.
     pub fn new(path: impl Into<PathBuf>) -> Self {
         TfxFile {
             path: path.into(),
@@ -57,14 +60,6 @@ impl TfxFile {
             })?;
         parse(&bytes, &self.path, self.radius)
     }
-}
-
-fn u32_at(b: &[u8], at: usize) -> u32 {
-    u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
-}
-
-fn f32_at(b: &[u8], at: usize) -> f32 {
-    f32::from_bits(u32_at(b, at))
 }
 
 fn parse(bytes: &[u8], path: &Path, radius: f32) -> Result<HairGeometry> {

@@ -10,7 +10,8 @@
 //! fitted values.
 
 use crate::diff::REL_EPSILON;
-use crate::render_cmd::{parse_crop, progress_bar};
+use crate::render_cmd::progress_bar;
+use crate::render_file::parse_crop;
 use crate::{atomic_write, integrators::IntegratorDesc, scene_desc};
 use anyhow::{bail, Context, Result};
 use clap::Args;

@@ -1,6 +1,5 @@
 //! Scene objects (hair, meshes, spheres) and building the Embree accelerator from them.
 
-use crate::scene_desc::{resolve, SceneDesc};
 use anyhow::{anyhow, Result};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -15,21 +14,31 @@ use tress_core::Material;
 pub enum ObjectDesc {
     /// Hair: `Hair(source: File("straight.hair"), material: "brown", options: (...))`.
     Hair {
+        /// Where the strands come from: a file or a generator.
         source: HairSource,
+        /// Name of a `Hair(...)` material in the scene's `materials`.
         material: String,
+        /// How the strands become curves, and their transform (defaults if omitted).
         #[serde(default)]
         options: HairOptions,
     },
     /// A triangle mesh from an OBJ file.
     Mesh {
+        /// The OBJ file, relative to the scene file's folder.
         file: PathBuf,
+        /// Name of a `Diffuse(...)` material in the scene's `materials`.
         material: String,
+        /// Scale, rotation and translation applied to the vertices (none if omitted).
         #[serde(default)]
         transform: Transform,
     },
+    /// A sphere.
     Sphere {
+        /// Centre, in world space.
         center: Vec3,
+        /// Radius, in scene units; finite and positive.
         radius: f32,
+        /// Name of a `Diffuse(...)` material in the scene's `materials`.
         material: String,
     },
 }
@@ -44,16 +53,25 @@ impl ObjectDesc {
     }
 }
 
+/// Resolves `p` against the folder holding the scene file.
+pub fn resolve(scene_path: &Path, p: &Path) -> PathBuf {
+    if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        scene_path.parent().unwrap_or(Path::new(".")).join(p)
+    }
+}
+
 /// Builds the accelerator for the scene's objects; returns it with a summary (`tress info`).
 pub fn build_accel(
-    desc: &SceneDesc,
+    objects: &[ObjectDesc],
     scene_path: &Path,
     material_index: &BTreeMap<String, u32>,
     materials: &[Material],
 ) -> Result<(EmbreeAccel, String)> {
     let here = |i: usize, what: String| anyhow!("{}: objects[{i}]: {what}", scene_path.display());
     let mut builder = SceneBuilder::new()?;
-    for (i, object) in desc.objects.iter().enumerate() {
+    for (i, object) in objects.iter().enumerate() {
         let name = object.material();
         let &material = material_index.get(name).ok_or_else(|| {
             let known: Vec<&str> = material_index.keys().map(String::as_str).collect();

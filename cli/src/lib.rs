@@ -2,6 +2,8 @@
 //! integrator registry. The binary uses it as is, so fuzz targets (`cli/fuzz`) and tests reach
 //! exactly the parser and validation the binary runs.
 
+#![warn(missing_docs)]
+
 pub mod geometry;
 pub mod integrators;
 pub mod scene_desc;

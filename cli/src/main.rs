@@ -10,6 +10,7 @@ mod interrupt;
 mod merge;
 mod plot;
 mod render_cmd;
+mod render_file;
 mod study;
 
 // The scene layer lives in the library target so that fuzz targets reach it too.

@@ -7,7 +7,7 @@
 
 use crate::integrators::IntegratorDesc;
 use crate::interrupt::Interrupt;
-use crate::merge::{self, Identity};
+use crate::render_file::{self, parse_crop, Identity, PreviewArgs};
 use crate::scene_desc::{self, SceneDesc};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -15,7 +15,6 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
-use tress_core::image_io;
 use tress_core::render::{self, RenderStats, SampleSums};
 
 #[derive(Args, Debug)]
@@ -59,51 +58,6 @@ pub struct RenderArgs {
     /// No progress bar and no summary.
     #[arg(long)]
     pub quiet: bool,
-}
-
-/// The tone-mapped PNG written beside an output EXR (render and merge).
-#[derive(Args, Debug)]
-pub struct PreviewArgs {
-    /// Exposure of the PNG preview, in stops.
-    #[arg(long, default_value_t = 0.0, value_parser = parse_exposure, allow_hyphen_values = true)]
-    pub exposure: f32,
-    /// Do not write the PNG preview.
-    #[arg(long)]
-    pub no_preview: bool,
-}
-
-impl PreviewArgs {
-    /// Writes the preview of `image` beside `exr` (same name, `.png`) unless disabled.
-    pub fn write(&self, exr: &Path, image: &tress_core::Image) -> Result<()> {
-        if !self.no_preview {
-            image_io::write_png(exr.with_extension("png"), image, self.exposure)?;
-        }
-        Ok(())
-    }
-}
-
-/// Checked before rendering: a NaN or overflowing gain made the PNG fail after the EXR was
-/// written.
-fn parse_exposure(s: &str) -> Result<f32, String> {
-    match s.trim().parse::<f32>() {
-        Ok(v) if v.abs() <= 100.0 => Ok(v),
-        _ => Err(format!("'{s}' is not an exposure in stops within ±100")),
-    }
-}
-
-pub fn parse_crop(s: &str) -> Result<[u32; 4], String> {
-    let parts: Vec<&str> = s.split(',').collect();
-    if parts.len() != 4 {
-        return Err(format!("expected x0,y0,x1,y1, got '{s}'"));
-    }
-    let mut out = [0u32; 4];
-    for (o, p) in out.iter_mut().zip(parts) {
-        *o = p
-            .trim()
-            .parse()
-            .map_err(|_| format!("'{p}' is not a non-negative integer"))?;
-    }
-    Ok(out)
 }
 
 fn parse_seconds(s: &str) -> Result<f64, String> {
@@ -213,7 +167,7 @@ impl Outputs<'_> {
         let turn = std::fs::File::open(folder)
             .and_then(|f| f.lock().map(|()| f))
             .with_context(|| format!("locking {} for writing", folder.display()))?;
-        merge::write_render(&self.out, sums, &self.identity, &attributes)?;
+        render_file::write_render(&self.out, sums, &self.identity, &attributes)?;
         // Both outputs or neither: an EXR without its preview would look like a success.
         let written = self
             .args

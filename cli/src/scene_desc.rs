@@ -4,6 +4,7 @@
 //! All enums are externally tagged (RON's native `Variant(...)` syntax), every struct denies
 //! unknown fields, and relative paths resolve against the scene file's folder.
 
+pub use crate::geometry::resolve;
 use crate::integrators::IntegratorDesc;
 use anyhow::{anyhow, bail, Context, Result};
 use glam::Vec3;
@@ -20,14 +21,19 @@ use tress_materials::HairModel;
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SceneDesc {
+    /// The view the image is taken from.
     pub camera: CameraDesc,
+    /// Resolution, samples per pixel, seed and crop window.
     pub film: FilmSettings,
+    /// How light transport is computed (default `Path` with its default settings).
     #[serde(default)]
     pub integrator: IntegratorDesc,
     /// Named materials, referred to by objects; a name given twice is an error.
     #[serde(deserialize_with = "unique_names")]
     pub materials: BTreeMap<String, MaterialDesc>,
+    /// Hair, meshes and spheres, each naming its material.
     pub objects: Vec<crate::geometry::ObjectDesc>,
+    /// The light sources.
     pub lights: Vec<LightDesc>,
 }
 
@@ -86,8 +92,11 @@ where
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraDesc {
+    /// Camera position, in world space.
     pub look_from: Vec3,
+    /// Point the camera looks at (the image centre).
     pub look_at: Vec3,
+    /// Direction that appears upwards in the image (default +y).
     #[serde(default = "default_up")]
     pub up: Vec3,
     /// Vertical field of view in degrees, in (0, 180).
@@ -113,8 +122,13 @@ fn default_fov() -> f32 {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub enum MaterialDesc {
+    /// A hair scattering model, for hair objects.
     Hair(HairModel),
-    Diffuse { albedo: Vec3 },
+    /// A Lambertian surface, for meshes and spheres.
+    Diffuse {
+        /// Reflectance per channel, in [0, 1].
+        albedo: Vec3,
+    },
 }
 
 /// A light source.
@@ -123,32 +137,47 @@ pub enum MaterialDesc {
 pub enum LightDesc {
     /// Equirectangular HDR environment (Radiance .hdr or OpenEXR).
     Environment {
+        /// The map, relative to the scene file's folder.
         file: PathBuf,
         /// Rotation about +y, degrees.
         #[serde(default)]
         rotation: f32,
+        /// Multiplies the map's radiance; finite and ≥ 0 (default 1).
         #[serde(default = "one")]
         scale: f32,
     },
     /// The built-in procedural sky with a sun (needs no files).
     Sky {
+        /// Rotation about +y, in degrees (default 0).
         #[serde(default)]
         rotation: f32,
+        /// Multiplies the sky's radiance; finite and ≥ 0 (default 1).
         #[serde(default = "one")]
         scale: f32,
     },
     /// Uniform radiance from all directions.
-    Constant { radiance: Vec3 },
+    Constant {
+        /// Radiance per channel, ≥ 0.
+        radiance: Vec3,
+    },
     /// A distant light (sun) shining along `direction`, delivering `irradiance` perpendicular to
     /// it, from a disc of angular radius `angular_radius` degrees (0: a delta light).
     Distant {
+        /// Direction the light travels (from the sun into the scene); any non-zero length.
         direction: Vec3,
+        /// Irradiance per channel on a surface facing the light, ≥ 0.
         irradiance: Vec3,
+        /// Angular radius of the sun's disc in degrees, in [0, 90) (default 0: a delta light).
         #[serde(default)]
         angular_radius: f32,
     },
     /// A point light of the given intensity (W/sr).
-    Point { position: Vec3, intensity: Vec3 },
+    Point {
+        /// Position of the light, in world space.
+        position: Vec3,
+        /// Radiant intensity per channel, in W/sr, ≥ 0.
+        intensity: Vec3,
+    },
 }
 
 /// Largest coordinate a camera or light may have: Embree aborts on ray origins beyond about
@@ -161,7 +190,9 @@ fn one() -> f32 {
 
 /// A scene built from its description, with a human-readable summary of what it holds.
 pub struct BuiltScene {
+    /// The renderable scene.
     pub scene: Scene,
+    /// What was built and how long it took, printed by `tress info` and by verbose renders.
     pub summary: String,
 }
 
@@ -213,15 +244,6 @@ fn excerpt(line: &str, col: usize) -> (String, usize) {
 
 /// Longest excerpt of a scene line shown under a parse error.
 const EXCERPT_CHARS: usize = 120;
-
-/// Resolves `p` against the folder holding the scene file.
-pub fn resolve(scene_path: &Path, p: &Path) -> PathBuf {
-    if p.is_absolute() {
-        p.to_path_buf()
-    } else {
-        scene_path.parent().unwrap_or(Path::new(".")).join(p)
-    }
-}
 
 fn finite3(v: Vec3) -> bool {
     v.is_finite()
@@ -332,7 +354,7 @@ pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
 
     let t1 = Instant::now();
     let (accel, geometry_summary) =
-        crate::geometry::build_accel(desc, scene_path, &material_index, &materials)?;
+        crate::geometry::build_accel(&desc.objects, scene_path, &material_index, &materials)?;
     let geometry_time = t1.elapsed();
     let mut summary = format!(
         "{geometry_summary}\nmaterials: {} built in {:.1} ms; lights: {}; geometry built in {:.2} s",

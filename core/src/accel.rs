@@ -6,7 +6,9 @@ use crate::math::{Aabb, Ray, Vec3};
 /// inside it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct PrimId {
+    /// Embree geometry id: one per hair object or mesh, one shared by all spheres.
     pub geom: u32,
+    /// Primitive index within that geometry.
     pub prim: u32,
 }
 
@@ -37,11 +39,15 @@ pub enum HitKind {
 /// A ray hit.
 #[derive(Clone, Copy, Debug)]
 pub struct Hit {
+    /// Distance along the ray to the hit (ray directions are unit).
     pub t: f32,
+    /// Hit point, in world space.
     pub p: Vec3,
+    /// The primitive hit; rays continuing from the hit exclude it ([`Ray::leaving`]).
     pub prim: PrimId,
     /// Index into `Scene::materials`.
     pub material: u32,
+    /// Fiber or surface, with the local geometry at the hit.
     pub kind: HitKind,
 }
 

@@ -23,9 +23,11 @@ use std::fmt::Debug;
 /// A direction sampled from a BCSDF, with its value (`eval` at `wi`) and solid-angle pdf.
 #[derive(Clone, Copy, Debug)]
 pub struct BcsdfSample {
+    /// Sampled incident direction, unit, in the local fiber frame.
     pub wi: Vec3,
     /// `eval(wo, wi)`: includes cos θ_i (see the module docs).
     pub f: Rgb,
+    /// Solid-angle density of `wi`.
     pub pdf: f32,
 }
 
@@ -86,11 +88,13 @@ impl FiberFrame {
         })
     }
 
+    /// World vector `v` in fiber-frame coordinates (x along the tangent).
     #[inline]
     pub fn to_local(&self, v: Vec3) -> Vec3 {
         self.0.to_local(v)
     }
 
+    /// Fiber-frame coordinates `v` back to a world vector.
     #[inline]
     pub fn to_world(&self, v: Vec3) -> Vec3 {
         self.0.to_world(v)

@@ -59,6 +59,7 @@ impl Camera {
         Ray::new(origin, (focus_point - origin).normalize())
     }
 
+    /// The camera's position (the lens centre), in world space.
     pub fn position(&self) -> Vec3 {
         self.origin
     }

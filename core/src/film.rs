@@ -7,10 +7,14 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct FilmSettings {
+    /// Film width in pixels, 1 to 65 536.
     pub width: u32,
+    /// Film height in pixels, 1 to 65 536.
     pub height: u32,
+    /// Samples per pixel, at least 1 (default 16).
     #[serde(default = "default_spp")]
     pub spp: u32,
+    /// Seed of every pixel sample's random stream; the same seed gives the same image (default 0).
     #[serde(default)]
     pub seed: u64,
     /// Pixel window `[x0, y0, x1, y1)` to render; `None` renders the whole film.
@@ -105,11 +109,17 @@ impl FilmSettings {
 /// `full_width` × `full_height` film (the window is the whole film unless cropped).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Image {
+    /// Window width in pixels.
     pub width: u32,
+    /// Window height in pixels.
     pub height: u32,
+    /// Left column of the window within the full film.
     pub x0: u32,
+    /// Top row of the window within the full film (rows run downwards).
     pub y0: u32,
+    /// Width of the whole film in pixels.
     pub full_width: u32,
+    /// Height of the whole film in pixels.
     pub full_height: u32,
     /// Row-major, `width * height` pixels.
     pub pixels: Vec<Rgb>,
@@ -149,6 +159,7 @@ impl Image {
         self.pixels[(y * self.width + x) as usize]
     }
 
+    /// Sets the pixel at window-relative coordinates.
     #[inline]
     pub fn set(&mut self, x: u32, y: u32, c: Rgb) {
         self.pixels[(y * self.width + x) as usize] = c;

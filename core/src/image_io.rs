@@ -21,46 +21,82 @@ use std::path::{Path, PathBuf};
 /// What can go wrong reading or writing an image.
 #[derive(Debug, thiserror::Error)]
 pub enum ImageError {
+    /// The file does not exist.
     #[error("{}: file not found", path.display())]
-    NotFound { path: PathBuf },
+    NotFound {
+        /// The missing file.
+        path: PathBuf,
+    },
+    /// Opening, reading, writing, syncing or renaming the file failed.
     #[error("{}: cannot {action}: {source}", path.display())]
     Io {
+        /// The file read or written.
         path: PathBuf,
+        /// What was attempted, e.g. `open` or `sync`.
         action: &'static str,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
+    /// The file's extension names no format this operation handles.
     #[error("{}: unsupported image format {extension:?} (expected {expected})", path.display())]
     UnsupportedFormat {
+        /// The file concerned.
         path: PathBuf,
+        /// The lower-case extension found, or `(none)`.
         extension: String,
+        /// The extensions accepted, e.g. `.hdr or .exr`.
         expected: &'static str,
     },
+    /// The file is not valid in its format: corrupt, truncated or with a header tress cannot read.
     #[error("{}: not a valid {format} file (corrupt or truncated): {reason}", path.display())]
     Corrupt {
+        /// The file concerned.
         path: PathBuf,
+        /// The format it was read as, e.g. `OpenEXR` or `Radiance HDR`.
         format: &'static str,
+        /// The decoder's description of the problem.
         reason: String,
     },
+    /// An EXR uses a compression the EXR reader cannot decode (e.g. DWAA).
     #[error(
         "{}: EXR compression {compression} is not supported by the EXR reader ({reason}); \
          re-save the file with ZIP, PIZ or no compression, or convert it to Radiance .hdr",
         path.display()
     )]
     UnsupportedCompression {
+        /// The file concerned.
         path: PathBuf,
+        /// The compression's name as OpenEXR tools print it.
         compression: String,
+        /// The reader's message.
         reason: String,
     },
+    /// A valid file whose content tress cannot use: no RGB layer, too large, or a data window
+    /// outside the display window.
     #[error("{}: unsupported image content: {reason}", path.display())]
-    UnsupportedContent { path: PathBuf, reason: String },
+    UnsupportedContent {
+        /// The file concerned.
+        path: PathBuf,
+        /// What tress cannot use, e.g. the channels found.
+        reason: String,
+    },
     /// Pixels or metadata that cannot be stored or used; `origin` names the file or the caller.
     #[error("{origin}: {reason}")]
-    InvalidData { origin: String, reason: String },
+    InvalidData {
+        /// The file or caller the data came from.
+        origin: String,
+        /// What is wrong with the data.
+        reason: String,
+    },
+    /// An environment-map setting is out of range (a non-finite rotation, a negative scale).
     #[error("environment map {name} must be {requirement}, got {value}")]
     InvalidParameter {
+        /// The setting, e.g. `scale`.
         name: &'static str,
+        /// What it must be, e.g. `finite and non-negative`.
         requirement: &'static str,
+        /// The value given.
         value: f32,
     },
 }

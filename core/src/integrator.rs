@@ -45,6 +45,22 @@ pub trait IntegratorKind {
 /// Why an integrator could not be built for a scene (the integrator's own error).
 pub type BuildError = Box<dyn std::error::Error + Send + Sync>;
 
+/// Continues a path at `sp` by sampling its scattering function: the next ray and the sample's
+/// density (for MIS at the next vertex), with `throughput` multiplied by f/pdf; `None` ends the
+/// path (no sample, or one that carries nothing).
+pub fn scatter(
+    sp: &ShadingPoint,
+    sampler: &mut Sampler,
+    throughput: &mut Rgb,
+) -> Option<(Ray, f32)> {
+    let s = sp.sample(sampler.next_4d())?;
+    if s.pdf <= 0.0 || s.f == Rgb::ZERO {
+        return None;
+    }
+    *throughput *= s.f / s.pdf;
+    Some((sp.spawn(s.wi), s.pdf))
+}
+
 /// Next-event estimation at `sp` toward `light`, chosen with probability `select_pdf`: what
 /// it adds to a path of weight `throughput`, MIS-weighted (power heuristic) against sampling
 /// the scattering function, which cannot find delta lights (their weight is 1). Zero when the

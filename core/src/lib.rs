@@ -4,6 +4,8 @@
 //! This crate depends on neither Embree nor RON: geometry comes in through [`Accel`], scene files
 //! are parsed by `tress-cli`.
 
+#![warn(missing_docs)]
+
 pub mod accel;
 pub mod bcsdf;
 pub mod camera;

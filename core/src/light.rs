@@ -34,17 +34,28 @@ pub enum Light {
     /// Image-based environment, importance sampled.
     Environment(EnvironmentMap),
     /// Uniform radiance from every direction.
-    Constant { radiance: Rgb },
+    Constant {
+        /// Radiance per channel, the same from every direction.
+        radiance: Rgb,
+    },
     /// A distant light (the sun): radiance `radiance` within a cone of half-angle
     /// `half_angle_rad` around `-direction`; a delta light when the angle is 0, in which case
     /// `radiance` is the irradiance it delivers perpendicular to its direction.
     Distant {
+        /// Direction the light travels, from the sun into the scene (normalised on use).
         direction: Vec3,
+        /// Radiance within the disc, or the perpendicular irradiance of a delta light.
         radiance: Rgb,
+        /// Angular radius of the sun's disc, in radians; 0 makes a delta light.
         half_angle_rad: f32,
     },
     /// A point light of intensity `intensity` (W/sr).
-    Point { position: Vec3, intensity: Rgb },
+    Point {
+        /// Position of the light, in world space.
+        position: Vec3,
+        /// Radiant intensity per channel, in W/sr.
+        intensity: Rgb,
+    },
 }
 
 impl Light {
@@ -132,7 +143,6 @@ impl Light {
         }
     }
 
-    /// Radiance along an escaping ray travelling in direction `dir` (arriving from `dir`).
     /// `(le(dir), pdf_li(dir))` in one call (the environment map locates its texel once).
     pub fn le_pdf(&self, dir: Vec3) -> (Rgb, f32) {
         match self {
@@ -141,6 +151,8 @@ impl Light {
         }
     }
 
+    /// Radiance arriving from direction `dir` (the way an escaping ray travels); zero for delta
+    /// lights, which only sampling reaches.
     pub fn le(&self, dir: Vec3) -> Rgb {
         match self {
             Light::Environment(env) => env.radiance(dir),

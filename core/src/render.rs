@@ -43,6 +43,7 @@ pub const TILE_SIZE: u32 = 16;
 /// What a render cost.
 #[derive(Clone, Debug, Default)]
 pub struct RenderStats {
+    /// Wall-clock time taken (summed over waves by [`RenderStats::add`]).
     pub wall: Duration,
     /// Camera samples taken.
     pub samples: u64,
@@ -53,10 +54,12 @@ pub struct RenderStats {
 }
 
 impl RenderStats {
+    /// Camera samples per second of wall-clock time.
     pub fn samples_per_second(&self) -> f64 {
         self.samples as f64 / self.wall.as_secs_f64().max(1e-9)
     }
 
+    /// Rays traced per second of wall-clock time.
     pub fn rays_per_second(&self) -> f64 {
         self.rays as f64 / self.wall.as_secs_f64().max(1e-9)
     }
@@ -73,14 +76,18 @@ impl RenderStats {
 /// A rendered image and its statistics.
 #[derive(Clone, Debug)]
 pub struct RenderOutput {
+    /// The rendered pixels of the film window.
     pub image: Image,
+    /// Time, samples and rays the render took.
     pub stats: RenderStats,
 }
 
 /// The exact per-pixel sums of a sample range, and what rendering them cost.
 #[derive(Clone, Debug)]
 pub struct SampleRender {
+    /// Per-pixel block sums of the sample range, mergeable with neighbouring ranges.
     pub sums: SampleSums,
+    /// Time, samples and rays rendering the range took.
     pub stats: RenderStats,
 }
 
@@ -122,10 +129,12 @@ pub struct BlockSums {
 }
 
 impl BlockSums {
+    /// No samples yet.
     pub fn new() -> Self {
         Self::default()
     }
 
+    /// Removes all blocks, keeping the allocation for the next pixel.
     pub fn clear(&mut self) {
         self.blocks.clear();
     }
@@ -211,10 +220,15 @@ fn mean_of(sums: impl Iterator<Item = [f64; 3]>, count: u64) -> Rgb {
 pub struct SampleSums {
     /// Pixel window `[x0, y0, x1, y1)`.
     pub window: [u32; 4],
+    /// Width of the whole film in pixels.
     pub full_width: u32,
+    /// Height of the whole film in pixels.
     pub full_height: u32,
+    /// Sample indices `[a, b)` summed.
     pub samples: Range<u64>,
+    /// The aligned blocks covering `samples` (its [`dyadic_cover`]), shared by all pixels.
     pub blocks: Vec<Range<u64>>,
+    /// RGB block sums in f64, `blocks.len()` per pixel, pixel by pixel.
     pub sums: Vec<[f64; 3]>,
 }
 
@@ -231,6 +245,7 @@ impl SampleSums {
         }
     }
 
+    /// Number of pixels in the window.
     pub fn pixel_count(&self) -> usize {
         let [x0, y0, x1, y1] = self.window;
         (x1 - x0) as usize * (y1 - y0) as usize

@@ -28,6 +28,7 @@ impl Pcg32 {
         rng
     }
 
+    /// Next uniformly distributed 32-bit word.
     #[inline]
     pub fn next_u32(&mut self) -> u32 {
         let old = self.state;
@@ -82,16 +83,19 @@ impl Sampler {
         }
     }
 
+    /// Next uniform number in [0, 1).
     #[inline]
     pub fn next_1d(&mut self) -> f32 {
         self.rng.next_f32()
     }
 
+    /// Next two uniform numbers, a point in [0, 1)².
     #[inline]
     pub fn next_2d(&mut self) -> Vec2 {
         Vec2::new(self.rng.next_f32(), self.rng.next_f32())
     }
 
+    /// Next four uniform numbers in [0, 1), as [`crate::Bcsdf::sample`] takes them.
     #[inline]
     pub fn next_4d(&mut self) -> [f32; 4] {
         [

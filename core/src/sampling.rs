@@ -3,6 +3,7 @@
 use crate::math::{Vec2, Vec3};
 use std::f32::consts::{FRAC_PI_4, PI};
 
+/// 1/(4π): the pdf of a uniform direction on the sphere.
 pub const INV_4PI: f32 = 1.0 / (4.0 * PI);
 
 /// Uniform direction on the unit sphere; pdf 1/(4π).
@@ -45,6 +46,7 @@ pub fn sample_uniform_cone(u: Vec2, cos_max: f32) -> Vec3 {
     Vec3::new(sin_t * c, sin_t * s, cos_t)
 }
 
+/// Solid-angle pdf of [`sample_uniform_cone`]: 1/(2π(1−cos_max)).
 #[inline]
 pub fn uniform_cone_pdf(cos_max: f32) -> f32 {
     1.0 / (2.0 * PI * (1.0 - cos_max))
@@ -101,10 +103,12 @@ impl Distribution1D {
         }
     }
 
+    /// Number of cells (at least 1: an empty input becomes one cell).
     pub fn len(&self) -> usize {
         self.func.len()
     }
 
+    /// Whether there are no cells; never true, since an empty input becomes one cell.
     pub fn is_empty(&self) -> bool {
         self.func.is_empty()
     }

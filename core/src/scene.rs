@@ -14,14 +14,21 @@ pub enum Material {
     /// A hair fiber scattering function.
     Hair(Arc<dyn Bcsdf>),
     /// A Lambertian surface (heads, occluders, floors).
-    Diffuse { albedo: Rgb },
+    Diffuse {
+        /// Reflectance per channel, in [0, 1].
+        albedo: Rgb,
+    },
 }
 
 /// Everything an integrator needs to shade.
 pub struct Scene {
+    /// The camera primary rays start from.
     pub camera: Camera,
+    /// Ray queries against all geometry; prefer the counting wrappers on `Scene`.
     pub accel: Box<dyn Accel>,
+    /// Materials, indexed by [`Hit::material`].
     pub materials: Vec<Material>,
+    /// All lights; next-event estimation picks one uniformly.
     pub lights: Vec<Light>,
     /// Hair density for the dual-scattering integrators; `None` when no integrator needs it.
     pub density: Option<Box<dyn FiberDensity>>,
@@ -61,6 +68,7 @@ impl Scene {
         self.accel.occluded_by_surfaces(ray)
     }
 
+    /// Bounds of all geometry.
     pub fn bounds(&self) -> Aabb {
         self.accel.bounds()
     }

@@ -11,13 +11,20 @@ use std::f32::consts::FRAC_1_PI;
 /// The scattering function at a shading point, with its local frame.
 #[derive(Clone, Copy, Debug)]
 pub enum Scattering<'a> {
+    /// A hair fiber with a hair material.
     Fiber {
+        /// The fiber's scattering model.
         bcsdf: &'a dyn Bcsdf,
+        /// Local fiber frame at the hit (x the tangent, z toward the viewer).
         frame: FiberFrame,
+        /// Offset across the fiber in [−1, 1] (see `tress_core::bcsdf`).
         h: f32,
     },
+    /// A surface with a diffuse material.
     Diffuse {
+        /// Diffuse reflectance per channel, in [0, 1].
         albedo: Rgb,
+        /// Frame whose z axis is the geometric normal, facing the incoming ray.
         frame: Frame,
     },
     /// A material that does not apply to the geometry it was put on; absorbs everything.
@@ -27,19 +34,24 @@ pub enum Scattering<'a> {
 /// A world-space direction sampled at a shading point.
 #[derive(Clone, Copy, Debug)]
 pub struct ScatterSample {
+    /// Sampled incident direction, unit, in world space.
     pub wi: Vec3,
     /// Scattering value including the cosine factor (see `tress_core::bcsdf`).
     pub f: Rgb,
+    /// Solid-angle density of `wi`.
     pub pdf: f32,
 }
 
 /// A hit point ready to shade.
 #[derive(Clone, Copy, Debug)]
 pub struct ShadingPoint<'a> {
+    /// Hit point, in world space.
     pub p: Vec3,
+    /// The primitive hit, excluded by rays leaving the point.
     pub prim: PrimId,
     /// Unit world direction toward where the light goes (back along the incoming ray).
     pub wo: Vec3,
+    /// How the point scatters, with its local frame.
     pub scattering: Scattering<'a>,
 }
 
@@ -70,6 +82,7 @@ impl<'a> ShadingPoint<'a> {
         }
     }
 
+    /// Whether the point is on a hair fiber with a hair material.
     pub fn is_fiber(&self) -> bool {
         matches!(self.scattering, Scattering::Fiber { .. })
     }

@@ -5,84 +5,12 @@ use crate::math::Vec3;
 use crate::rng::Sampler;
 use std::f64::consts::PI;
 
-/// ln Γ(x) for x > 0 (Lanczos, g = 7, n = 9; relative error ~1e-15).
-pub fn ln_gamma(x: f64) -> f64 {
-    const G: f64 = 7.0;
-    const C: [f64; 9] = [
-        0.999_999_999_999_809_9,
-        676.520_368_121_885_1,
-        -1_259.139_216_722_402_8,
-        771.323_428_777_653_1,
-        -176.615_029_162_140_6,
-        12.507_343_278_686_905,
-        -0.138_571_095_265_720_12,
-        9.984_369_578_019_572e-6,
-        1.505_632_735_149_311_6e-7,
-    ];
-    if x < 0.5 {
-        // Reflection formula.
-        return (PI / (PI * x).sin()).ln() - ln_gamma(1.0 - x);
-    }
-    let x = x - 1.0;
-    let mut a = C[0];
-    let t = x + G + 0.5;
-    for (i, c) in C.iter().enumerate().skip(1) {
-        a += c / (x + i as f64);
-    }
-    0.5 * (2.0 * PI).ln() + (x + 0.5) * t.ln() - t + a.ln()
-}
-
-/// Upper regularised incomplete gamma Q(a, x) = Γ(a, x)/Γ(a).
-pub fn gamma_q(a: f64, x: f64) -> f64 {
-    if x <= 0.0 {
-        return 1.0;
-    }
-    if x < a + 1.0 {
-        // Series for P(a, x).
-        let mut sum = 1.0 / a;
-        let mut term = sum;
-        let mut ap = a;
-        for _ in 0..10_000 {
-            ap += 1.0;
-            term *= x / ap;
-            sum += term;
-            if term.abs() < sum.abs() * 1e-15 {
-                break;
-            }
-        }
-        1.0 - sum * (-x + a * x.ln() - ln_gamma(a)).exp()
-    } else {
-        // Continued fraction for Q(a, x) (modified Lentz).
-        let tiny = 1e-300;
-        let mut b = x + 1.0 - a;
-        let mut c = 1.0 / tiny;
-        let mut d = 1.0 / b;
-        let mut h = d;
-        for i in 1..10_000 {
-            let an = -(i as f64) * (i as f64 - a);
-            b += 2.0;
-            d = an * d + b;
-            if d.abs() < tiny {
-                d = tiny;
-            }
-            c = b + an / c;
-            if c.abs() < tiny {
-                c = tiny;
-            }
-            d = 1.0 / d;
-            let del = d * c;
-            h *= del;
-            if (del - 1.0).abs() < 1e-15 {
-                break;
-            }
-        }
-        (-x + a * x.ln() - ln_gamma(a)).exp() * h
-    }
-}
-
 /// P(χ²_dof ≥ stat).
 pub fn chi2_survival(stat: f64, dof: f64) -> f64 {
-    gamma_q(0.5 * dof, 0.5 * stat)
+    if stat <= 0.0 {
+        return 1.0;
+    }
+    statrs::function::gamma::gamma_ur(0.5 * dof, 0.5 * stat)
 }
 
 /// Per-test significance level for `tests` independent tests at family level `alpha` (Šidák).
@@ -93,8 +21,12 @@ pub fn sidak_alpha(alpha: f64, tests: usize) -> f64 {
 /// Outcome of a χ² goodness-of-fit test.
 #[derive(Clone, Debug)]
 pub struct Chi2Outcome {
+    /// The χ² statistic, low-expectation cells pooled into one.
     pub statistic: f64,
+    /// Degrees of freedom: cells used minus one (at least 1).
     pub dof: usize,
+    /// Probability of a statistic this large if the sampler is right; 0 when samples fell in
+    /// empty cells.
     pub p_value: f64,
     /// Samples that fell in cells whose expected count is (numerically) zero.
     pub samples_in_empty_cells: u64,
@@ -149,11 +81,17 @@ pub fn chi2_test(observed: &[f64], expected: &[f64], min_expected: f64) -> Chi2O
 /// Cells are equal-area: `res_cos` bins in the cosine to `pole` and `res_phi` bins in azimuth.
 /// Each cell's expected count integrates the pdf over `sub`×`sub` midpoint sub-cells.
 pub struct SphereChi2 {
+    /// Axis the cosine bins are measured from (default +z).
     pub pole: Vec3,
+    /// Number of bins in the cosine to `pole` (default 50).
     pub res_cos: usize,
+    /// Number of bins in azimuth (default 100).
     pub res_phi: usize,
+    /// Midpoint sub-cells per side when integrating a cell's expected count (default 4).
     pub sub: usize,
+    /// Directions drawn (default 1 000 000).
     pub samples: usize,
+    /// Cells expecting fewer samples than this are pooled (default 5).
     pub min_expected: f64,
 }
 

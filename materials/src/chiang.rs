@@ -84,14 +84,19 @@ const LN_NEGLIGIBLE: f32 = -80.0;
 /// Smallest accepted β_m, β_n (module docs).
 pub const BETA_MIN: f32 = 1e-3;
 
+/// Parameters of [`Chiang`]; the defaults are pbrt-v4's (module docs).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct Params {
+    /// Longitudinal roughness β_m, in [10⁻³, 1] (default 0.3).
     pub beta_m: f32,
+    /// Azimuthal roughness β_n, in [10⁻³, 1] (default 0.3).
     pub beta_n: f32,
     /// Scale tilt in degrees.
     pub alpha: f32,
+    /// Index of refraction of the fiber, greater than 1 (default 1.55).
     pub eta: f32,
+    /// Absorption inside the fiber (default eumelanin 1.3).
     pub pigment: Pigment,
 }
 
@@ -107,6 +112,7 @@ impl Default for Params {
     }
 }
 
+/// The Chiang et al. 2016 BCSDF, with the constants its parameters determine.
 #[derive(Debug, Clone)]
 pub struct Chiang {
     eta: f32,
@@ -140,6 +146,7 @@ struct Geometry {
 }
 
 impl Chiang {
+    /// Validates `p` and precomputes the lobe variances, logistic scale and tilts.
     pub fn new(p: &Params) -> Result<Self, ParamError> {
         check_range("beta_m", p.beta_m, BETA_MIN, 1.0)?;
         check_range("beta_n", p.beta_n, BETA_MIN, 1.0)?;
@@ -402,6 +409,7 @@ fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
     0.5 * (r_perp * r_perp + r_par * r_par)
 }
 
+/// Parameter sets the statistical tests run on this model ([`crate::HairModel::test_instances`]).
 pub fn test_instances() -> Vec<TestInstance<Params>> {
     let white = |name: &str, beta_m, beta_n, alpha| TestInstance {
         name: name.into(),

@@ -58,7 +58,7 @@ use crate::pigment::Pigment;
 use crate::{check_range, ParamError, TestInstance};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
-use tress_core::math::{luminance, Rgb, Vec3};
+use tress_core::math::{erfc, luminance, Rgb, Vec3};
 use tress_core::{Bcsdf, BcsdfSample};
 
 /// Table rows: cos θ_o = j / (N_COS − 1).
@@ -78,14 +78,19 @@ const LOBE_RATIO: [f64; 3] = [1.0, 0.5, 2.0];
 const I0_SWITCH: f64 = 3.75;
 const CELL: f32 = std::f32::consts::TAU / N_PHI as f32;
 
+/// Parameters of [`DEon`] (module docs).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct Params {
+    /// r_m in [0, 1]: longitudinal lobe width β_R = r_m·π/2 (default 0.1).
     pub longitudinal_roughness: f32,
+    /// r_n in [0, 1]: azimuthal lobe width β_R = r_n·π/2 (default 0.3).
     pub azimuthal_roughness: f32,
     /// Degrees.
     pub alpha: f32,
+    /// Index of refraction, in [1.01, 3] (default 1.55).
     pub eta: f32,
+    /// Absorption inside the fiber (default eumelanin 1.3).
     pub pigment: Pigment,
 }
 
@@ -209,32 +214,6 @@ fn fresnel(cos_i: f64, eta: f64) -> f64 {
     let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
     let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
     0.5 * (rs * rs + rp * rp)
-}
-
-/// erfc(x) with relative error < 1.2e-7 everywhere (Chebyshev fit of e^{x²} erfc, Numerical
-/// Recipes' `erfcc` coefficients).
-fn erfc(x: f64) -> f64 {
-    let z = x.abs();
-    let t = 1.0 / (1.0 + 0.5 * z);
-    const C: [f64; 10] = [
-        -1.265_512_23,
-        1.000_023_68,
-        0.374_091_96,
-        0.096_784_18,
-        -0.186_288_06,
-        0.278_868_07,
-        -1.135_203_98,
-        1.488_515_87,
-        -0.822_152_23,
-        0.170_872_77,
-    ];
-    let poly = C.iter().rev().fold(0.0, |acc, c| acc * t + c);
-    let r = t * (-z * z + poly).exp();
-    if x >= 0.0 {
-        r
-    } else {
-        2.0 - r
-    }
 }
 
 /// Standard normal mass on [lo, hi], accurate in both tails.
@@ -572,6 +551,7 @@ impl std::fmt::Debug for DEon {
 }
 
 impl DEon {
+    /// Validates `p` and tabulates each lobe's N_p over (φ, cos θ_o).
     pub fn new(p: &Params) -> Result<Self, ParamError> {
         check_range("longitudinal_roughness", p.longitudinal_roughness, 0.0, 1.0)?;
         check_range("azimuthal_roughness", p.azimuthal_roughness, 0.0, 1.0)?;
@@ -758,6 +738,7 @@ impl Bcsdf for DEon {
     }
 }
 
+/// Parameter sets the statistical tests run on this model ([`crate::HairModel::test_instances`]).
 pub fn test_instances() -> Vec<TestInstance<Params>> {
     let white = |name: &str, rm: f32, rn: f32| TestInstance {
         name: name.into(),

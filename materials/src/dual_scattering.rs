@@ -94,7 +94,7 @@ use std::f32::consts::PI;
 use std::f64::consts::PI as PI64;
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
-use tress_core::math::{safe_asin, Rgb, Vec2, Vec3};
+use tress_core::math::{erf, safe_asin, Rgb, Vec2, Vec3};
 use tress_core::sampling::sample_uniform_sphere;
 use tress_core::Bcsdf;
 
@@ -220,7 +220,9 @@ const DEFAULT_BUILD_SECONDS: f64 = 1.3;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DensityFactors {
+    /// Forward density factor d_f, in [0, 1]: scales the forward-scattered light T_f.
     pub d_f: f32,
+    /// Backward density factor d_b, in [0, 1]: scales the local back-scattering.
     pub d_b: f32,
 }
 
@@ -245,13 +247,20 @@ impl DensityFactors {
 /// Why the tables could not be built.
 #[derive(Debug, Clone, thiserror::Error, PartialEq)]
 pub enum DualScatteringError {
+    /// A table setting is out of range.
     // The cause is in the message, not also a `source`: chains printed with `{:#}` said it twice.
     #[error("dual-scattering settings: {0}")]
     Param(ParamError),
+    /// The BCSDF returned NaN or infinity while the tables were being integrated.
     #[error(
         "the BCSDF returned a non-finite value (lobe {lobe}, light inclination θ = {theta} rad)"
     )]
-    NonFinite { lobe: &'static str, theta: f32 },
+    NonFinite {
+        /// Name of the lobe ([`Bcsdf::lobe_names`]).
+        lobe: &'static str,
+        /// Light inclination at which it happened, in radians.
+        theta: f32,
+    },
 }
 
 impl From<ParamError> for DualScatteringError {
@@ -271,12 +280,15 @@ pub struct DsGlobals {
     /// 1/max(1, ā_f + ā_b), then ā_f clamped to [`A_F_MAX`] (module docs, "Non-conserving
     /// models"). Equal to the measured values for any model that conserves energy.
     pub a_f_eff: Rgb,
+    /// ā_b scaled like `a_f_eff` (not clamped).
     pub a_b_eff: Rgb,
     /// ᾱ_f, ᾱ_b: lobe-weighted mean longitudinal shifts (rad, θ_h units).
     pub alpha_f: Rgb,
+    /// ᾱ_b: the backward half-space's mean shift (rad, θ_h units).
     pub alpha_b: Rgb,
     /// β̄_f², β̄_b²: lobe-weighted longitudinal **variances** (rad², θ_h units).
     pub beta2_f: Rgb,
+    /// β̄_b²: the backward half-space's variance (rad², θ_h units).
     pub beta2_b: Rgb,
     /// Ā_b (eq. 14): average back-scattering attenuation.
     pub big_a_b: Rgb,
@@ -316,6 +328,7 @@ impl DsGlobals {
 pub struct DsLobe {
     /// a_f^t, a_b^t: the lobe's energy in the forward / backward half-space.
     pub a_f: Rgb,
+    /// a_b^t: the lobe's energy in the backward half-space.
     pub a_b: Rgb,
     /// α_t: energy-weighted mean of θ_h (rad); 0 where the lobe carries no energy.
     pub alpha: Rgb,
@@ -812,6 +825,7 @@ pub struct DualScatteringCache {
 }
 
 impl DualScatteringCache {
+    /// An empty cache; most callers share [`DualScatteringCache::global`].
     pub fn new() -> Self {
         Self::default()
     }
@@ -845,6 +859,7 @@ impl DualScatteringCache {
         self.tables.lock().unwrap_or_else(|e| e.into_inner()).len()
     }
 
+    /// Whether no tables are cached.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
@@ -874,19 +889,11 @@ fn longitudinal_density(s: f32, theta_o: f32, mean: Rgb, var: Rgb) -> Rgb {
             1.0
         } else {
             let k = std::f32::consts::SQRT_2 * sd;
-            (0.5 * (erf((1.0 - mu) / k) - erf((-1.0 - mu) / k))).max(1e-6)
+            (0.5 * (erf(f64::from((1.0 - mu) / k)) - erf(f64::from((-1.0 - mu) / k))) as f32)
+                .max(1e-6)
         };
         (-z).exp() / ((2.0 * PI).sqrt() * sd * inside)
     }))
-}
-
-/// erf(x), Abramowitz & Stegun 7.1.26 (absolute error < 1.5e-7).
-fn erf(x: f32) -> f32 {
-    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
-    let poly = t
-        * (0.254_829_6
-            + t * (-0.284_496_74 + t * (1.421_413_7 + t * (-1.453_152_1 + t * 1.061_405_4))));
-    (1.0 - poly * (-x * x).exp()).copysign(x)
 }
 
 /// The forward-scattering state of the light after crossing `n` fibers (§6.1).
@@ -923,14 +930,17 @@ impl DualScatteringShading {
         })
     }
 
+    /// The hair model the tables were built from.
     pub fn bcsdf(&self) -> &dyn Bcsdf {
         self.bcsdf.as_ref()
     }
 
+    /// The precomputed dual-scattering tables.
     pub fn tables(&self) -> &DualScatteringTables {
         &self.tables
     }
 
+    /// The density factors d_f and d_b in use.
     pub fn factors(&self) -> DensityFactors {
         self.factors
     }

@@ -18,9 +18,11 @@ use tress_core::{Bcsdf, BcsdfSample};
 
 const INV_PI2: f32 = 1.0 / (PI * PI);
 
+/// Parameters of [`LambertianFiber`].
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct Params {
+    /// Fraction of energy scattered per RGB channel, each in [0, 1] (default 0.8).
     pub albedo: (f32, f32, f32),
 }
 
@@ -32,12 +34,14 @@ impl Default for Params {
     }
 }
 
+/// The energy-normalised diffuse fiber (module docs).
 #[derive(Debug, Clone)]
 pub struct LambertianFiber {
     albedo: Rgb,
 }
 
 impl LambertianFiber {
+    /// Checks that every albedo channel lies in [0, 1].
     pub fn new(p: &Params) -> Result<Self, ParamError> {
         for v in [p.albedo.0, p.albedo.1, p.albedo.2] {
             check_range("albedo", v, 0.0, 1.0)?;
@@ -73,6 +77,7 @@ impl Bcsdf for LambertianFiber {
     }
 }
 
+/// Parameter sets the statistical tests run on this model ([`crate::HairModel::test_instances`]).
 pub fn test_instances() -> Vec<TestInstance<Params>> {
     vec![
         TestInstance {

@@ -5,6 +5,8 @@
 //! and `test_instances()`) plus one line in the `hair_models!` invocation below; the statistical
 //! test suite (`tests/bcsdf_statistics.rs`) then covers the new model automatically.
 
+#![warn(missing_docs)]
+
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use tress_core::Bcsdf;
@@ -24,12 +26,16 @@ mod test_util;
 #[derive(Debug, Clone, thiserror::Error, PartialEq)]
 #[error("{field} = {value}: {reason}")]
 pub struct ParamError {
+    /// Name of the parameter, as written in scene files.
     pub field: &'static str,
+    /// The rejected value, as text.
     pub value: String,
+    /// What the value must be, e.g. `must lie in [0, 1]`.
     pub reason: String,
 }
 
 impl ParamError {
+    /// An error saying that `field` = `value` breaks `reason`.
     pub fn new(
         field: &'static str,
         value: impl std::fmt::Display,
@@ -88,7 +94,9 @@ pub fn check_range(field: &'static str, value: f32, lo: f32, hi: f32) -> Result<
 /// A named parameter set used by the statistical tests of every model.
 #[derive(Clone, Debug)]
 pub struct TestInstance<P> {
+    /// Short name of the instance, used in test messages.
     pub name: String,
+    /// The model's parameters.
     pub params: P,
     /// Non-absorbing and energy conserving: the white-furnace oracle applies.
     pub white_furnace: bool,
@@ -99,7 +107,13 @@ macro_rules! hair_models {
         /// A hair scattering model and its parameters, as written in scene files.
         #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
         pub enum HairModel {
-            $($variant($module::Params),)*
+            $(
+                #[doc = concat!(
+                    "The [`", stringify!($ty), "`](", stringify!($module), "::", stringify!($ty),
+                    ") model and its parameters."
+                )]
+                $variant($module::Params),
+            )*
         }
 
         impl HairModel {

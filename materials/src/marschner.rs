@@ -87,6 +87,7 @@ const MIN_ETA: f64 = 1.2;
 /// β_n at which a `Pigment::Color` is converted (Chiang's fit needs one).
 const COLOR_BETA_N: f32 = 0.3;
 
+/// Parameters of [`Marschner`] (module docs).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct Params {
@@ -94,7 +95,9 @@ pub struct Params {
     pub alpha_r: f32,
     /// β_R in degrees (standard deviation).
     pub beta_r: f32,
+    /// Index of refraction, in [1.2, 3] (default 1.55).
     pub eta: f32,
+    /// Absorption σ_a per unit radius (default eumelanin 1.3).
     pub pigment: Pigment,
     /// Cross-section axis ratio a ≤ 1 (1 = circular).
     pub eccentricity: f32,
@@ -207,6 +210,7 @@ fn gaussian(x: f64, v: f64) -> f64 {
 }
 
 impl Marschner {
+    /// Validates `p` and builds the lobe-albedo and azimuthal sampling tables.
     pub fn new(p: &Params) -> Result<Self, ParamError> {
         let mut m = Self::unbuilt(p)?;
         m.build_tables();
@@ -486,6 +490,7 @@ impl Bcsdf for Marschner {
     }
 }
 
+/// Parameter sets the statistical tests run on this model ([`crate::HairModel::test_instances`]).
 pub fn test_instances() -> Vec<TestInstance<Params>> {
     let with = |name: &str, params: Params| TestInstance {
         name: name.into(),

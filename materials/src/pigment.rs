@@ -23,8 +23,10 @@ pub enum Pigment {
     SigmaA((f32, f32, f32)),
     /// Melanin concentrations (≈0 blond … ≈8 black for eumelanin; pheomelanin adds red).
     Melanin {
+        /// Eumelanin concentration, ≥ 0 (default 0).
         #[serde(default)]
         eumelanin: f32,
+        /// Pheomelanin concentration, ≥ 0 (default 0).
         #[serde(default)]
         pheomelanin: f32,
     },

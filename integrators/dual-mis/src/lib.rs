@@ -6,6 +6,8 @@
 //!
 //! RON: `DualMis(d_f: Some(0.9), d_b: None)` (settings as for `DualUniform`)
 
+#![warn(missing_docs)]
+
 use tress_core::integrator::BuildError;
 use tress_core::sampling::power_heuristic;
 use tress_core::{Integrator, IntegratorKind, Rgb, Sampler, Scene};

@@ -25,9 +25,11 @@
 //! None, tables: (multiple_scattering: FiberMedium))` — `d_f`/`d_b` default to the tables'
 //! model (1 for `FiberMedium`, the paper's 0.7 for `Paper`).
 
+#![warn(missing_docs)]
+
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
-use tress_core::integrator::{direct_light, escaped_light};
+use tress_core::integrator::{direct_light, escaped_light, scatter};
 use tress_core::shading::Scattering;
 use tress_core::{Integrator, Material, Ray, Rgb, Sampler, Scene, ShadingPoint};
 use tress_materials::dual_scattering::{
@@ -67,12 +69,15 @@ impl Default for DualSettings {
 /// Why a dual-scattering integrator could not be set up for a scene.
 #[derive(Debug, thiserror::Error)]
 pub enum DualError {
+    /// The scene has hair materials but no density grid was built for it.
     #[error("dual scattering needs the hair density grid, but the scene has none")]
     NoDensityGrid,
+    /// The tables could not be built: invalid table settings, or a non-finite BCSDF value.
     // Causes are in the messages, not also `source`s: chains printed with `{:#}` said them
     // two or three times ("d_f = 1.5: must lie in [0, 1]: d_f = 1.5: …").
     #[error("{0}")]
     Tables(DualScatteringError),
+    /// A density factor `d_f` or `d_b` lies outside [0, 1].
     #[error("dual-scattering settings: {0}")]
     Param(tress_materials::ParamError),
 }
@@ -91,10 +96,13 @@ impl From<tress_materials::ParamError> for DualError {
 
 /// A hair point being shaded: everything a [`DirectionSampling`] needs.
 pub struct HairPoint<'a> {
+    /// The hit, with its fiber frame and hair BCSDF.
     pub sp: ShadingPoint<'a>,
+    /// The dual-scattering shading function F of the point's material.
     pub shading: &'a DualScatteringShading,
     /// `wo` in the local fiber frame.
     pub wo_local: tress_core::math::Vec3,
+    /// Offset across the fiber in [−1, 1] (see `tress_core::bcsdf`).
     pub h: f32,
     frame: tress_core::FiberFrame,
     /// Fibers behind the point as seen along the ray that found it: the depth of hair that
@@ -315,15 +323,11 @@ impl<D: DirectionSampling> Integrator for DualScattering<D> {
                     infinite[((u_select * infinite.len() as f32) as usize).min(infinite.len() - 1)];
                 radiance += direct_light(scene, &sp, light, u_light, select_pdf, throughput);
             }
-            let Some(s) = sp.sample(sampler.next_4d()) else {
+            let Some((next, pdf)) = scatter(&sp, sampler, &mut throughput) else {
                 break;
             };
-            if s.pdf <= 0.0 || s.f == Rgb::ZERO {
-                break;
-            }
-            throughput *= s.f / s.pdf;
-            scatter_pdf = Some(s.pdf);
-            ray = sp.spawn(s.wi);
+            scatter_pdf = Some(pdf);
+            ray = next;
         }
         radiance
     }

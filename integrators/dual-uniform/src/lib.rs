@@ -4,6 +4,8 @@
 //!
 //! RON: `DualUniform(d_f: None, d_b: None, grid_resolution: None)` (see [`DualSettings`]).
 
+#![warn(missing_docs)]
+
 use tress_core::integrator::BuildError;
 use tress_core::sampling::{sample_uniform_sphere, INV_4PI};
 use tress_core::{Integrator, IntegratorKind, Rgb, Sampler, Scene};

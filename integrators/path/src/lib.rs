@@ -6,9 +6,11 @@
 //!
 //! RON: `Path(max_depth: 100, rr_depth: 5)`
 
+#![warn(missing_docs)]
+
 use serde::{Deserialize, Serialize};
 use tress_core::integrator::BuildError;
-use tress_core::integrator::{direct_light, escaped_light};
+use tress_core::integrator::{direct_light, escaped_light, scatter};
 use tress_core::{Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint};
 
 /// Path tracer settings.
@@ -38,6 +40,7 @@ pub struct PathTracer {
 }
 
 impl PathTracer {
+    /// A path tracer with `settings`.
     pub fn new(settings: PathSettings) -> Self {
         PathTracer { settings }
     }
@@ -102,16 +105,11 @@ impl Integrator for PathTracer {
                 radiance += direct_light(scene, &sp, light, u_light, light_select_pdf, throughput);
             }
 
-            // Continue the path by sampling the scattering function.
-            let Some(s) = sp.sample(sampler.next_4d()) else {
+            let Some((next, pdf)) = scatter(&sp, sampler, &mut throughput) else {
                 break;
             };
-            if s.pdf <= 0.0 || s.f == Rgb::ZERO {
-                break;
-            }
-            throughput *= s.f / s.pdf;
-            scatter_pdf = Some(s.pdf);
-            ray = sp.spawn(s.wi);
+            scatter_pdf = Some(pdf);
+            ray = next;
 
             // Roulette only paths that have lost energy: white hair keeps a throughput of ~1
             // over hundreds of bounces, and rouletting it anyway would make the surviving

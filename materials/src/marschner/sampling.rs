@@ -3,27 +3,7 @@
 //! density over the azimuth φ ∈ [−π, π) (for N_p).
 
 use std::f64::consts::{FRAC_1_SQRT_2, PI, TAU};
-
-/// erfc with fractional error < 1.2e-7 everywhere (the Chebyshev fit of Numerical Recipes,
-/// §6.2); relative accuracy holds deep in the tail, which the truncated normal needs.
-fn erfc(x: f64) -> f64 {
-    let z = x.abs();
-    let t = 1.0 / (1.0 + 0.5 * z);
-    let poly = -1.265_512_23
-        + t * (1.000_023_68
-            + t * (0.374_091_96
-                + t * (0.096_784_18
-                    + t * (-0.186_288_06
-                        + t * (0.278_868_07
-                            + t * (-1.135_203_98
-                                + t * (1.488_515_87 + t * (-0.822_152_23 + t * 0.170_872_77))))))));
-    let r = t * (-z * z + poly).exp();
-    if x >= 0.0 {
-        r
-    } else {
-        2.0 - r
-    }
-}
+use tress_core::math::erfc;
 
 #[inline]
 fn norm_cdf(z: f64) -> f64 {

@@ -1,0 +1,671 @@
+//! `tress bench`: what the renderer achieves, measured against raw Embree in the same process.
+//!
+//! For each hair model — procedural wavy hair of 10k and 100k strands × 32 segments,
+//! `straight.hair` when present, 1M strands with `--huge` — it measures
+//! - build: load, BVH and density-grid times, peak RSS (VmHWM, reset per model) and bytes per
+//!   segment;
+//! - raw: Embree throughput for camera rays, rays bouncing off hair hit points in random
+//!   directions, and shadow rays toward random directions, as single rays on a twin scene of
+//!   the same curves built without filter support (`plain`: Embree alone, the baseline), on
+//!   tress's scene without and with its self-intersection rule, as 8-wide packets, and as full
+//!   `Accel` queries (with hit construction), on one thread and on N;
+//! - integrator: samples/s and rays/s of every registered integrator rendering the model under
+//!   the built-in sky, the mix of camera, bounce and shadow rays it traced, its ray rate
+//!   divided by the raw rate of the same mix (raw rates weighted by the mix), and divided by
+//!   the rate of its own recorded rays replayed in each raw mode;
+//! - round: the models of the path tracer's ray-rate target again with round curves (tubes),
+//!   raw and path only;
+//! - scaling: time per sample of the large procedural model over the small one — at the same
+//!   fiber radius (10× the optical thickness) and thinned to equal coverage (radius/√10, the
+//!   same picture with 10× the primitives) — and the N-thread speedup;
+//! - bcsdf: eval, sample, pdf and fused eval+pdf cost of every registered hair model,
+//!   dual-scattering table build time.
+//!
+//! Absolute figures follow the machine and its load; the ratios compare figures taken minutes
+//! apart in one process. Every integrator render and ray replay is timed three times (once with
+//! `--quick`) and the fastest run counts, as other processes can only slow a run down. Rows
+//! carrying a target of the performance issue say whether it is met.
+
+use crate::cost::{timed, Cost};
+use crate::integrators::IntegratorDesc;
+use anyhow::{anyhow, bail, Context, Result};
+use clap::Args;
+use rayon::prelude::*;
+use rayon::ThreadPool;
+use std::cell::{Cell, RefCell};
+use std::fmt::Write as _;
+use std::hint::black_box;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+use tress_accel::raw::{Exclusion, RawRay, PACKET};
+use tress_accel::{
+    CurveShape, DensityGrid, EmbreeAccel, HairFile, HairGeometry, HairOptions, HairStyle,
+    ProceduralHair, SceneBuilder,
+};
+use tress_core::film::FilmSettings;
+use tress_core::light::{EnvironmentMap, Light};
+use tress_core::math::{Aabb, Ray, Vec2, Vec3};
+use tress_core::rng::Pcg32;
+use tress_core::sampling::sample_uniform_sphere;
+use tress_core::{Accel, Bcsdf, Camera, Hit, Integrator, Material, Scene};
+use tress_materials::dual_scattering::{DualScatteringCache, DualScatteringSettings};
+use tress_materials::HairModel;
+
+mod raw;
+mod renders;
+mod table;
+use raw::*;
+use renders::*;
+use table::*;
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Small models and short runs (well under a minute): a smoke test.
+    #[arg(long)]
+    pub quick: bool,
+    /// Also build 1M strands × 32 segments and render a small image with it (several GiB).
+    #[arg(long)]
+    pub huge: bool,
+    /// Also write the table to this CSV file (atomically).
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// Threads of the multi-threaded measurements (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Cem Yuksel `.hair` file benchmarked beside the procedural models; skipped with a note
+    /// when absent.
+    #[arg(long, default_value = "../shared/data/hair/straight.hair")]
+    pub hair_file: PathBuf,
+}
+
+/// Sizes of one run.
+struct Plan {
+    /// Procedural strand counts: the scaling pair (small, large).
+    strands: [u32; 2],
+    /// Rays per kind in the raw measurements.
+    rays: usize,
+    /// Film of the integrator renders: width = height, spp.
+    film: (u32, u32),
+    /// BCSDF calls per timing.
+    bcsdf_calls: usize,
+    /// Timed repetitions of every integrator render and replay; the fastest counts, since
+    /// interference from other processes only ever slows a run down.
+    runs: usize,
+    /// Resolution of the dual-scattering tables whose build time is measured.
+    tables: DualScatteringSettings,
+    /// Every registered integrator: with test settings for `--quick`, defaults otherwise.
+    integrators: Vec<IntegratorDesc>,
+}
+
+impl Plan {
+    fn new(quick: bool) -> Plan {
+        if quick {
+            Plan {
+                strands: [1_000, 10_000],
+                rays: 1 << 12,
+                film: (32, 2),
+                bcsdf_calls: 20_000,
+                runs: 1,
+                tables: DualScatteringSettings {
+                    theta_nodes: 16,
+                    h_nodes: 8,
+                    theta_quad: 16,
+                    phi_quad: 24,
+                    walks: 1024,
+                    ..Default::default()
+                },
+                integrators: IntegratorDesc::all_for_tests(),
+            }
+        } else {
+            Plan {
+                strands: [10_000, 100_000],
+                rays: 1 << 18,
+                film: (128, 8),
+                bcsdf_calls: 400_000,
+                runs: 3,
+                tables: DualScatteringSettings::default(),
+                integrators: IntegratorDesc::all(),
+            }
+        }
+    }
+}
+
+/// Segments per procedural strand.
+const SEGMENTS: u32 = 32;
+/// Strands of the `--huge` model.
+const HUGE_STRANDS: u32 = 1_000_000;
+/// Raw queries handed to a worker at a time (a multiple of the packet width).
+const CHUNK: usize = 1024;
+
+/// Where a model's hair comes from.
+#[derive(Clone)]
+enum Source {
+    /// Procedural wavy hair: strands, fiber radius.
+    Procedural(u32, f32),
+    File(PathBuf),
+}
+
+/// Whether the path tracer's ray-rate target applies: the large procedural model (100k strands
+/// at the common radius) and the hair file.
+fn ray_target(source: &Source, plan: &Plan) -> bool {
+    match *source {
+        Source::Procedural(n, r) => n == plan.strands[1] && n == 100_000 && r == RADIUS,
+        Source::File(_) => true,
+    }
+}
+
+/// Fiber radius of the procedural models (the procedural default).
+const RADIUS: f32 = 0.004;
+
+/// Radius of `strands` fibers covering as much as `reference` fibers of [`RADIUS`] do (equal
+/// total cross-section, so equal optical thickness and the same picture).
+fn equal_coverage_radius(strands: u32, reference: u32) -> f32 {
+    RADIUS * (reference as f32 / strands as f32).sqrt()
+}
+
+/// Label of the large procedural model thinned to the small one's coverage.
+fn thin_label(strands: u32) -> String {
+    format!("{}-thin", strand_label(strands))
+}
+
+struct ModelSpec {
+    name: String,
+    source: Source,
+    /// Raw measurements and the integrators' renders; otherwise (the huge model) the path
+    /// tracer on a small film only.
+    full: bool,
+    /// Every integrator, or only the path tracer (the round-curve variants).
+    all_integrators: bool,
+    curve: CurveShape,
+}
+
+fn strand_label(n: u32) -> String {
+    if n >= 1_000_000 && n.is_multiple_of(1_000_000) {
+        format!("{}M", n / 1_000_000)
+    } else if n >= 1000 && n.is_multiple_of(1000) {
+        format!("{}k", n / 1000)
+    } else {
+        n.to_string()
+    }
+}
+
+pub fn run(args: BenchArgs) -> Result<()> {
+    let plan = Plan::new(args.quick);
+    let threads = args
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    if threads == 0 {
+        bail!("--threads must be at least 1");
+    }
+    let pool = |n: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .context("creating a thread pool")
+    };
+    let mut pools = vec![(1, pool(1)?)];
+    if threads > 1 {
+        pools.push((threads, pool(threads)?));
+    }
+
+    let mut table = Table::default();
+    let material = HairModel::Chiang(Default::default());
+    let bcsdf = material
+        .build()
+        .map_err(|e| anyhow!("hair material: {e}"))?;
+    eprintln!("bench: BCSDF costs and dual-scattering tables");
+    bench_bcsdfs(&mut table, plan.bcsdf_calls)?;
+    // Built once here (the integrators fetch them from the process-wide cache) so the build
+    // time is measured apart from any render.
+    let tables = DualScatteringCache::global()
+        .get_or_build(bcsdf.as_ref(), &plan.tables)
+        .map_err(|e| anyhow!("dual-scattering tables: {e}"))?;
+    table.push(
+        ("Chiang/brown", "bcsdf"),
+        "ds_tables_build",
+        None,
+        tables.build_time().as_secs_f64(),
+        "s",
+        format!(
+            "{} θ nodes, {} h nodes, quadrature {}×{}",
+            plan.tables.theta_nodes,
+            plan.tables.h_nodes,
+            plan.tables.theta_quad,
+            plan.tables.phi_quad
+        ),
+    );
+
+    let mut models: Vec<ModelSpec> = plan
+        .strands
+        .iter()
+        .map(|&n| ModelSpec {
+            name: strand_label(n),
+            source: Source::Procedural(n, RADIUS),
+            full: true,
+            all_integrators: true,
+            curve: CurveShape::Flat,
+        })
+        .collect();
+    // Strand count alone, without the 10× optical thickness the fixed radius also brings.
+    let [small, large] = plan.strands;
+    models.push(ModelSpec {
+        name: thin_label(large),
+        source: Source::Procedural(large, equal_coverage_radius(large, small)),
+        full: true,
+        all_integrators: true,
+        curve: CurveShape::Flat,
+    });
+    let file_name = args
+        .hair_file
+        .file_name()
+        .map_or_else(|| "hair file".into(), |n| n.to_string_lossy().into_owned());
+    if args.hair_file.is_file() {
+        models.push(ModelSpec {
+            name: file_name,
+            source: Source::File(args.hair_file.clone()),
+            full: true,
+            all_integrators: true,
+            curve: CurveShape::Flat,
+        });
+    } else {
+        table.note(
+            &file_name,
+            "build",
+            "skipped",
+            format!("{} not found", args.hair_file.display()),
+        );
+    }
+    if args.huge {
+        models.push(ModelSpec {
+            name: strand_label(HUGE_STRANDS),
+            source: Source::Procedural(HUGE_STRANDS, RADIUS),
+            full: false,
+            all_integrators: false,
+            curve: CurveShape::Flat,
+        });
+    }
+    // The models of the ray-rate target again as tubes, for the path tracer.
+    let round: Vec<ModelSpec> = models
+        .iter()
+        .filter(|m| ray_target(&m.source, &plan))
+        .map(|m| ModelSpec {
+            name: format!("{} round", m.name),
+            source: m.source.clone(),
+            full: true,
+            all_integrators: false,
+            curve: CurveShape::Round,
+        })
+        .collect();
+    models.extend(round);
+
+    let mut per_sample: Vec<Timing> = Vec::new();
+    for spec in &models {
+        bench_model(spec, &plan, &pools, &bcsdf, &mut table, &mut per_sample)
+            .with_context(|| format!("model {}", spec.name))?;
+    }
+    scaling(&mut table, &plan, &per_sample, &pools);
+
+    let text = table.text();
+    print!("{text}");
+    if let Some(path) = &args.csv {
+        crate::atomic_write(path, table.csv().as_bytes())?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// eval, sample and pdf cost of one instance of every registered hair model (the first
+/// pigmented test instance, so absorption is exercised).
+fn bench_bcsdfs(table: &mut Table, calls: usize) -> Result<()> {
+    const INPUTS: usize = 4096;
+    let mut rng = Pcg32::new(11, 0);
+    let mut dir = || sample_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
+    let dirs: Vec<(Vec3, Vec3)> = (0..INPUTS).map(|_| (dir(), dir())).collect();
+    let mut rng = Pcg32::new(12, 0);
+    let hs: Vec<f32> = (0..INPUTS).map(|_| 2.0 * rng.next_f32() - 1.0).collect();
+    let us: Vec<[f32; 4]> = (0..INPUTS)
+        .map(|_| std::array::from_fn(|_| rng.next_f32()))
+        .collect();
+    let instances = HairModel::test_instances();
+    for name in HairModel::names() {
+        let prefix = format!("{name}/");
+        let of_model: Vec<_> = instances
+            .iter()
+            .filter(|t| t.name.starts_with(&prefix))
+            .collect();
+        let Some(instance) = of_model
+            .iter()
+            .find(|t| !t.white_furnace)
+            .or(of_model.first())
+        else {
+            continue;
+        };
+        let bcsdf = instance
+            .params
+            .build()
+            .map_err(|e| anyhow!("{}: {e}", instance.name))?;
+        let b: &dyn Bcsdf = bcsdf.as_ref();
+        let time = |f: &dyn Fn(usize) -> f32| {
+            let start = Instant::now();
+            let mut acc = 0.0f32;
+            for i in 0..calls {
+                acc += f(i % INPUTS);
+            }
+            black_box(acc);
+            start.elapsed().as_secs_f64() * 1e9 / calls as f64
+        };
+        let eval = time(&|i| b.eval(dirs[i].0, dirs[i].1, hs[i]).x);
+        let sample = time(&|i| b.sample(dirs[i].0, hs[i], us[i]).map_or(0.0, |s| s.pdf));
+        let pdf = time(&|i| b.pdf(dirs[i].0, dirs[i].1, hs[i]));
+        let eval_pdf = time(&|i| {
+            let (f, pdf) = b.eval_pdf(dirs[i].0, dirs[i].1, hs[i]);
+            f.x + pdf
+        });
+        for (metric, ns) in [
+            ("eval", eval),
+            ("sample", sample),
+            ("pdf", pdf),
+            ("eval_pdf", eval_pdf),
+        ] {
+            table.push(
+                (&instance.name, "bcsdf"),
+                metric,
+                Some(1),
+                ns,
+                "ns/call",
+                "",
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Peak resident memory (VmHWM in /proc/self/status), in bytes.
+fn peak_rss() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line["VmHWM:".len()..]
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    Some(kb * 1024)
+}
+
+/// Resets the peak (VmHWM) to the current RSS, so it measures one model; false where the
+/// kernel does not allow it (then the peak is the process's).
+fn reset_peak_rss() -> bool {
+    std::fs::write("/proc/self/clear_refs", "5").is_ok()
+}
+
+const MIB: f64 = 1024.0 * 1024.0;
+
+/// A camera framing the hair from the front, close enough that it fills most of a 40° view.
+fn framing(bounds: &Aabb) -> Camera {
+    let fov = 40.0f32;
+    let center = bounds.center();
+    let radius = 0.5 * bounds.extent().length();
+    let distance = 0.7 * radius / (0.5 * fov.to_radians()).tan();
+    let from = center + distance * Vec3::new(0.35, 0.1, 1.0).normalize();
+    Camera::perspective(from, center, Vec3::Y, fov, 0.0, None)
+}
+
+fn load(spec: &ModelSpec) -> Result<HairGeometry> {
+    Ok(match &spec.source {
+        Source::Procedural(strands, radius) => ProceduralHair {
+            style: HairStyle::Wavy {
+                amplitude: 0.05,
+                frequency: 2.0,
+            },
+            seed: 7,
+            strands: *strands,
+            radius: *radius,
+            points_per_strand: SEGMENTS + 1,
+            ..Default::default()
+        }
+        .generate()?,
+        Source::File(path) => HairFile::new(path).read()?,
+    })
+}
+
+fn bench_model(
+    spec: &ModelSpec,
+    plan: &Plan,
+    pools: &[(usize, ThreadPool)],
+    bcsdf: &Arc<dyn Bcsdf>,
+    table: &mut Table,
+    per_sample: &mut Vec<Timing>,
+) -> Result<()> {
+    let name = spec.name.as_str();
+    eprintln!("bench: {name}: building");
+    let peak_is_per_model = reset_peak_rss();
+    let (max_threads, big_pool) = pools.last().map(|(n, p)| (*n, p)).expect("a pool");
+
+    // As `tress render` does: the builds run in the render's thread pool.
+    let t0 = Instant::now();
+    let hair = load(spec)?;
+    let load_time = t0.elapsed();
+    let t1 = Instant::now();
+    let options = HairOptions {
+        curve: spec.curve,
+        ..Default::default()
+    };
+    let accel = big_pool.install(|| SceneBuilder::new()?.add_hair(&hair, &options, 0)?.build())?;
+    let bvh_time = t1.elapsed();
+    drop(hair);
+    // The grid of the first integrator that reads one (its cost is part of the build).
+    let grid_settings = plan
+        .integrators
+        .iter()
+        .find_map(IntegratorDesc::density_grid)
+        .unwrap_or_default();
+    let t2 = Instant::now();
+    let grid = big_pool.install(|| DensityGrid::build(&accel, &grid_settings))?;
+    let grid_time = t2.elapsed();
+    let build_peak = peak_rss();
+    // The baseline: the same curves, basis and build quality with no filter support, built
+    // after the peak above so that it measures tress's own build.
+    let plain = spec
+        .full
+        .then(|| -> Result<EmbreeAccel> {
+            let hair = load(spec)?;
+            Ok(big_pool.install(|| {
+                SceneBuilder::new()?
+                    .without_filters()
+                    .add_hair(&hair, &options, 0)?
+                    .build()
+            })?)
+        })
+        .transpose()?;
+
+    let info = accel.info().clone();
+    let segments = info.segments as f64;
+    let build = |t: &mut Table, metric: &str, value: f64, unit: &'static str, note: String| {
+        t.push((name, "build"), metric, None, value, unit, note)
+    };
+    build(table, "strands", info.strands as f64, "", String::new());
+    build(table, "segments", segments, "", String::new());
+    build(table, "load", load_time.as_secs_f64(), "s", String::new());
+    build(
+        table,
+        "bvh",
+        bvh_time.as_secs_f64(),
+        "s",
+        format!("{max_threads} threads"),
+    );
+    build(
+        table,
+        "grid",
+        grid_time.as_secs_f64(),
+        "s",
+        grid.info().to_string(),
+    );
+    let total = (load_time + bvh_time + grid_time).as_secs_f64();
+    let large = name == strand_label(plan.strands[1]) && plan.strands[1] == 100_000;
+    build(
+        table,
+        "load+bvh+grid",
+        total,
+        "s",
+        if large {
+            target("≤ 3 s", total <= 3.0)
+        } else {
+            String::new()
+        },
+    );
+    build(
+        table,
+        "accel_bytes_per_segment",
+        info.memory_bytes as f64 / segments,
+        "B",
+        "Embree (BVH, buffers) + hit/filter data".into(),
+    );
+    build(
+        table,
+        "grid_bytes_per_segment",
+        grid.info().memory_bytes as f64 / segments,
+        "B",
+        String::new(),
+    );
+    let scope = if peak_is_per_model {
+        "peak since this model started"
+    } else {
+        "process peak (VmHWM reset unsupported)"
+    };
+    if let Some(peak) = build_peak {
+        let peak_mib = peak as f64 / MIB;
+        build(
+            table,
+            "peak_rss_build",
+            peak_mib,
+            "MiB",
+            if large {
+                format!("{scope}; {}", target("≤ 1024 MiB", peak_mib <= 1024.0))
+            } else {
+                scope.into()
+            },
+        );
+    }
+
+    let (film_side, spp) = if spec.full { plan.film } else { (64, 1) };
+    let camera = framing(&info.bounds);
+    let film = FilmSettings {
+        width: film_side,
+        height: film_side,
+        spp,
+        seed: 1,
+        crop: None,
+    };
+    let accel = Arc::new(accel);
+    let accels = plain.map(|plain| Accels {
+        tress: Arc::clone(&accel),
+        plain,
+    });
+    let raw = match &accels {
+        Some(accels) => {
+            eprintln!("bench: {name}: raw Embree");
+            let rays = RaySets::new(&accel, &camera, &film, plan.rays)?;
+            Some(bench_raw(name, accels, &rays, pools, table))
+        }
+        None => None,
+    };
+
+    let recording = Arc::new(AtomicBool::new(false));
+    let scene = Scene {
+        camera,
+        accel: Box::new(CountingAccel {
+            inner: Arc::clone(&accel),
+            record: Arc::clone(&recording),
+        }),
+        materials: vec![Material::Hair(Arc::clone(bcsdf))],
+        lights: vec![Light::Environment(EnvironmentMap::builtin_sky(0.0, 1.0)?)],
+        density: Some(Box::new(grid)),
+    };
+    // The ray-rate target and the huge and round models concern the path tracer.
+    let descs: Vec<IntegratorDesc> = if spec.all_integrators {
+        plan.integrators.clone()
+    } else {
+        plan.integrators
+            .iter()
+            .filter(|d| d.name() == "path")
+            .cloned()
+            .collect()
+    };
+    let render_pools: Vec<&(usize, ThreadPool)> = if spec.full {
+        pools.iter().collect()
+    } else {
+        pools.iter().rev().take(1).collect()
+    };
+    for desc in &descs {
+        let integrator = desc
+            .build(&scene)
+            .map_err(|e| anyhow!("integrator {}: {e:#}", desc.name()))?;
+        // An untimed pass records every ray the integrator traces (it also warms up); the
+        // timed renders below repeat exactly that work (the image depends only on the seed).
+        let recorded = if spec.full {
+            eprintln!("bench: {name}: {}: recording its rays", desc.name());
+            Some(record_rays(
+                &scene,
+                integrator.as_ref(),
+                &film,
+                big_pool,
+                &recording,
+            ))
+        } else {
+            None
+        };
+        for (n, pool) in render_pools.iter().map(|(n, p)| (*n, p)) {
+            eprintln!("bench: {name}: {} on {n} thread(s)", desc.name());
+            let r = (0..plan.runs)
+                .map(|_| render(&scene, integrator.as_ref(), &film, pool))
+                .min_by(|a, b| a.cost.wall.total_cmp(&b.cost.wall))
+                .expect("at least one run");
+            let traced = r.traced.iter().sum::<u64>().max(1) as f64;
+            per_sample.push(Timing {
+                model: name.to_string(),
+                integrator: desc.name(),
+                threads: n,
+                per_sample: r.cost.wall / r.samples as f64,
+                per_ray: r.cost.wall / traced,
+                cpu_per_sample: r.cost.cpu.map(|c| c / r.samples as f64),
+                waiting: r.cost.waiting(),
+            });
+            let replay = recorded
+                .as_ref()
+                .zip(accels.as_ref())
+                .map(|(rays, accels)| replay(accels, rays, pool, desc.name(), plan.runs));
+            report_render(
+                table,
+                RenderReport {
+                    model: name,
+                    integrator: desc.name(),
+                    threads: n,
+                    ray_target: ray_target(&spec.source, plan),
+                },
+                &r,
+                raw.as_ref(),
+                replay.as_deref(),
+            );
+        }
+    }
+    if let Some(peak) = peak_rss() {
+        let peak_mib = peak as f64 / MIB;
+        let note = if spec.full {
+            scope.to_string()
+        } else {
+            format!(
+                "{scope}; {film_side}×{film_side} at {spp} spp; {}",
+                target("≤ 24 GiB", peak_mib <= 24.0 * 1024.0)
+            )
+        };
+        table.push((name, "build"), "peak_rss", None, peak_mib, "MiB", note);
+    }
+    Ok(())
+}
+
+fn target(what: &str, met: bool) -> String {
+    format!("target {what}: {}", if met { "met" } else { "MISSED" })
+}
