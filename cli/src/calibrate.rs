@@ -239,7 +239,9 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
             if args.crop.is_some() { " window" } else { "" }
         );
     }
-    let path = reference_integrator.build(scene)?;
+    // One preparation context: the corner and check renders share their tables.
+    let prep = tress_core::prepare::Preparation::new();
+    let path = reference_integrator.build(scene, &prep)?;
     let reference = render(path.as_ref(), args.reference_spp, "path reference")?;
     let reference_mean = masked_mean(&reference, &mask);
     if reference_mean.iter().any(|&m| m <= 0.0) {
@@ -258,7 +260,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
             d_b: Some(d_b as f32),
             ..settings.clone()
         };
-        let integrator = with_settings(s).build(scene)?;
+        let integrator = with_settings(s).build(scene, &prep)?;
         render(integrator.as_ref(), args.spp, label)
     };
     let mut corner = [[[0.0; 3]; 2]; 2];

@@ -6,6 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 use tress_accel::DensitySettings;
+use tress_core::prepare::Preparation;
 use tress_core::{Integrator, IntegratorKind, Scene};
 
 macro_rules! integrators {
@@ -59,11 +60,16 @@ macro_rules! integrators {
                 })
             }
 
-            /// Builds the integrator for `scene` (precomputations such as dual-scattering
-            /// tables happen here).
-            pub fn build(&self, scene: &Scene) -> anyhow::Result<Box<dyn Integrator>> {
+            /// Builds the integrator for `scene`; precomputations (dual-scattering tables)
+            /// come from, or go into, the run's `prep`.
+            pub fn build(
+                &self,
+                scene: &Scene,
+                prep: &Preparation,
+            ) -> anyhow::Result<Box<dyn Integrator>> {
                 let built = match self {
-                    $(IntegratorDesc::$variant(s) => <$kind as IntegratorKind>::build(s, scene),)+
+                    $(IntegratorDesc::$variant(s) =>
+                        <$kind as IntegratorKind>::build(s, scene, prep),)+
                 };
                 built.map_err(|e| anyhow::anyhow!(e))
             }

@@ -215,13 +215,16 @@ pub fn render(args: RenderArgs) -> Result<()> {
         eprintln!("{}", built.summary);
     }
     let t_integrator = Instant::now();
-    let integrator = desc.integrator.build(&built.scene).map_err(|e| {
-        anyhow::anyhow!(
-            "{}: integrator {}: {e:#}",
-            args.scene.display(),
-            desc.integrator.name()
-        )
-    })?;
+    let integrator = desc
+        .integrator
+        .build(&built.scene, &tress_core::prepare::Preparation::new())
+        .map_err(|e| {
+            anyhow::anyhow!(
+                "{}: integrator {}: {e:#}",
+                args.scene.display(),
+                desc.integrator.name()
+            )
+        })?;
     // Worth a line when the integrator precomputed something (dual-scattering tables).
     let setup = t_integrator.elapsed();
     if verbose && setup >= Duration::from_millis(50) {

@@ -180,10 +180,6 @@ pub enum LightDesc {
     },
 }
 
-/// Largest coordinate a camera or light may have: Embree aborts on ray origins beyond about
-/// 1.8e18.
-const MAX_COORDINATE: f32 = 1e16;
-
 fn one() -> f32 {
     1.0
 }
@@ -245,74 +241,19 @@ fn excerpt(line: &str, col: usize) -> (String, usize) {
 /// Longest excerpt of a scene line shown under a parse error.
 const EXCERPT_CHARS: usize = 120;
 
-fn finite3(v: Vec3) -> bool {
-    v.is_finite()
-}
-
 /// Builds the renderable scene.
 pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
     let here = |what: &str| format!("{}: {what}", scene_path.display());
     let c = &desc.camera;
-    if !(c.fov > 0.0 && c.fov < 180.0) {
-        bail!(
-            "{}",
-            here(&format!(
-                "camera.fov = {} must lie in (0, 180) degrees",
-                c.fov
-            ))
-        );
-    }
-    // Embree refuses (aborts on) ray origins beyond about 1.8e18; keep well inside.
-    let placeable = |v: Vec3| finite3(v) && v.abs().max_element() <= MAX_COORDINATE;
-    if !placeable(c.look_from) || !placeable(c.look_at) || !finite3(c.up) {
-        bail!(
-            "{}",
-            here(&format!(
-                "camera positions must be finite and within ±{MAX_COORDINATE:e}"
-            ))
-        );
-    }
-    // Relative tests, in f64: a view direction of length 1e-30 is as good as any (its square
-    // underflows f32).
-    let view = c.look_at.as_dvec3() - c.look_from.as_dvec3();
-    if view.length() == 0.0 {
-        bail!("{}", here("camera.look_at must differ from look_from"));
-    }
-    if c.up.as_dvec3().length() == 0.0
-        || view.normalize().cross(c.up.as_dvec3().normalize()).length() < 1e-6
-    {
-        bail!(
-            "{}",
-            here("camera.up must be non-zero and not parallel to the view direction")
-        );
-    }
-    if !(c.lens_radius >= 0.0 && c.lens_radius <= MAX_COORDINATE) {
-        bail!(
-            "{}",
-            here(&format!(
-                "camera.lens_radius = {} must lie in [0, {MAX_COORDINATE:e}]",
-                c.lens_radius
-            ))
-        );
-    }
-    if let Some(f) = c.focus_distance {
-        if !(f > 0.0 && f <= MAX_COORDINATE) {
-            bail!(
-                "{}",
-                here(&format!(
-                    "camera.focus_distance = Some({f}) must lie in (0, {MAX_COORDINATE:e}]"
-                ))
-            );
-        }
-    }
-    let camera = Camera::perspective(
+    let camera = Camera::new(
         c.look_from,
         c.look_at,
         c.up,
         c.fov,
         c.lens_radius,
         c.focus_distance,
-    );
+    )
+    .map_err(|e| anyhow!("{}", here(&e.to_string())))?;
 
     // Materials, in a stable order; objects refer to them by index.
     let t0 = Instant::now();
@@ -390,7 +331,7 @@ pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
             camera,
             accel: Box::new(accel),
             materials,
-            lights,
+            lights: lights.into(),
             density,
         },
         summary,
@@ -398,92 +339,28 @@ pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
 }
 
 fn build_light(l: &LightDesc, scene_path: &Path) -> Result<Light> {
-    let check = |name: &str, v: Vec3| -> Result<()> {
-        if v.is_finite() && v.min_element() >= 0.0 {
-            Ok(())
-        } else {
-            bail!("{name} {v} must be finite and non-negative")
-        }
-    };
-    let check_scale = |rotation: f32, scale: f32| -> Result<()> {
-        if !(rotation.is_finite() && scale.is_finite() && scale >= 0.0) {
-            bail!("rotation must be finite and scale finite and >= 0 (got {rotation}, {scale})");
-        }
-        Ok(())
-    };
     Ok(match l {
         LightDesc::Environment {
             file,
             rotation,
             scale,
-        } => {
-            check_scale(*rotation, *scale)?;
-            let path = resolve(scene_path, file);
-            Light::Environment(EnvironmentMap::from_file(&path, *rotation, *scale)?)
-        }
+        } => Light::Environment(EnvironmentMap::from_file(
+            resolve(scene_path, file),
+            *rotation,
+            *scale,
+        )?),
         LightDesc::Sky { rotation, scale } => {
-            check_scale(*rotation, *scale)?;
             Light::Environment(EnvironmentMap::builtin_sky(*rotation, *scale)?)
         }
-        LightDesc::Constant { radiance } => {
-            check("radiance", *radiance)?;
-            Light::Constant {
-                radiance: *radiance,
-            }
-        }
+        LightDesc::Constant { radiance } => Light::constant(*radiance)?,
         LightDesc::Distant {
             direction,
             irradiance,
             angular_radius,
-        } => {
-            check("irradiance", *irradiance)?;
-            // `try_normalize` also refuses vectors whose length overflows (3e38, 3e38, 0).
-            if direction.try_normalize().is_none() {
-                bail!("direction {direction} must be finite, non-zero and normalisable");
-            }
-            if !(0.0..90.0).contains(angular_radius) {
-                bail!("angular_radius = {angular_radius} must lie in [0, 90) degrees");
-            }
-            let half = angular_radius.to_radians();
-            // A disc narrower than f32 can tell from its axis (1 − cos half below 1e-6, about
-            // 0.08°) is a point: sampled as a cone, its cos_max rounds to 1 and it rendered black
-            // (or, at 1e-30°, with infinite radiance).
-            let half = if 1.0 - (half as f64).cos() < 1e-6 {
-                0.0
-            } else {
-                half
-            };
-            // Uniform disc radiance delivering `irradiance` at normal incidence:
-            // E = L · π sin²(half) (the cosine-weighted solid angle of the disc).
-            let radiance = if half > 0.0 {
-                *irradiance / (std::f32::consts::PI * half.sin().powi(2))
-            } else {
-                *irradiance
-            };
-            if !radiance.is_finite() {
-                bail!(
-                    "irradiance {irradiance} from a disc of {angular_radius}° is a radiance of \
-                     {radiance}, beyond f32: lower the irradiance or widen the disc"
-                );
-            }
-            Light::Distant {
-                direction: direction.normalize(),
-                radiance,
-                half_angle_rad: half,
-            }
-        }
+        } => Light::distant(*direction, *irradiance, *angular_radius)?,
         LightDesc::Point {
             position,
             intensity,
-        } => {
-            check("intensity", *intensity)?;
-            if !position.is_finite() {
-                bail!("position must be finite");
-            }
-            Light::Point {
-                position: *position,
-                intensity: *intensity,
-            }
-        }
+        } => Light::point(*position, *intensity)?,
     })
 }

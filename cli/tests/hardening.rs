@@ -629,7 +629,10 @@ fn waves_and_partial_images_do_not_change_the_image() {
     let mut desc = tress_cli::scene_desc::load(&scene).unwrap();
     desc.film.spp = 13;
     let built = tress_cli::scene_desc::build(&desc, &scene).unwrap();
-    let integrator = desc.integrator.build(&built.scene).unwrap();
+    let integrator = desc
+        .integrator
+        .build(&built.scene, &Default::default())
+        .unwrap();
     let once = tress_core::render::render(&built.scene, integrator.as_ref(), &desc.film, &|_| {});
     let (waves, _) = tress_core::image_io::read_exr(d.join("plain.exr")).unwrap();
     assert!(once.image.mean() > 0.0);

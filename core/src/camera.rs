@@ -16,7 +16,77 @@ pub struct Camera {
     focus_distance: f32,
 }
 
+/// Largest coordinate a camera (or anything else that starts rays) may have: Embree aborts
+/// on ray origins beyond about 1.8e18.
+pub const MAX_COORDINATE: f32 = 1e16;
+
+/// Why camera parameters cannot make a camera.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum CameraError {
+    /// The field of view is not in (0, 180) degrees.
+    #[error("camera.fov = {0} must lie in (0, 180) degrees")]
+    Fov(f32),
+    /// A position is not finite or too far out, or `up` is not finite.
+    #[error("camera positions must be finite and within ±{MAX_COORDINATE:e}")]
+    Position,
+    /// `look_at` equals `look_from`.
+    #[error("camera.look_at must differ from look_from")]
+    Coincident,
+    /// `up` is zero or parallel to the view direction.
+    #[error("camera.up must be non-zero and not parallel to the view direction")]
+    Up,
+    /// The lens radius is negative, NaN or too large.
+    #[error("camera.lens_radius = {0} must lie in [0, {MAX_COORDINATE:e}]")]
+    LensRadius(f32),
+    /// The focus distance is not positive and finite.
+    #[error("camera.focus_distance = Some({0}) must lie in (0, {MAX_COORDINATE:e}]")]
+    FocusDistance(f32),
+}
+
 impl Camera {
+    /// [`Camera::perspective`] after checking every ray-producing quantity: a camera from it
+    /// only makes finite rays Embree accepts.
+    pub fn new(
+        look_from: Vec3,
+        look_at: Vec3,
+        up: Vec3,
+        fov_y_deg: f32,
+        lens_radius: f32,
+        focus_distance: Option<f32>,
+    ) -> Result<Self, CameraError> {
+        if !(fov_y_deg > 0.0 && fov_y_deg < 180.0) {
+            return Err(CameraError::Fov(fov_y_deg));
+        }
+        let placeable = |v: Vec3| v.is_finite() && v.abs().max_element() <= MAX_COORDINATE;
+        if !placeable(look_from) || !placeable(look_at) || !up.is_finite() {
+            return Err(CameraError::Position);
+        }
+        // Relative tests, in f64: a view direction of length 1e-30 is as good as any (its
+        // square underflows f32).
+        let view = look_at.as_dvec3() - look_from.as_dvec3();
+        if view.length() == 0.0 {
+            return Err(CameraError::Coincident);
+        }
+        let up64 = up.as_dvec3();
+        if up64.length() == 0.0 || view.normalize().cross(up64.normalize()).length() < 1e-6 {
+            return Err(CameraError::Up);
+        }
+        if !(0.0..=MAX_COORDINATE).contains(&lens_radius) {
+            return Err(CameraError::LensRadius(lens_radius));
+        }
+        if let Some(f) = focus_distance.filter(|f| !(*f > 0.0 && *f <= MAX_COORDINATE)) {
+            return Err(CameraError::FocusDistance(f));
+        }
+        Ok(Self::perspective(
+            look_from,
+            look_at,
+            up,
+            fov_y_deg,
+            lens_radius,
+            focus_distance,
+        ))
+    }
+
     /// `fov_y_deg`: vertical field of view in degrees, in (0, 180). `lens_radius` 0 is a pinhole.
     pub fn perspective(
         look_from: Vec3,

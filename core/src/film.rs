@@ -32,6 +32,64 @@ pub const MEMORY_LIMIT_VAR: &str = "TRESS_MEMORY_LIMIT_GIB";
 /// [`MEMORY_LIMIT_VAR`]).
 pub const DEFAULT_MEMORY_LIMIT_GIB: f64 = 16.0;
 
+/// Largest film side, in pixels.
+pub const MAX_FILM_SIDE: u32 = 1 << 16;
+
+/// Why film settings cannot be rendered.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum FilmError {
+    /// A side is zero.
+    #[error("film size {width}x{height} is empty")]
+    Empty {
+        /// Film width, in pixels.
+        width: u32,
+        /// Film height, in pixels.
+        height: u32,
+    },
+    /// A side exceeds [`MAX_FILM_SIDE`].
+    #[error("film size {width}x{height} exceeds {MAX_FILM_SIDE} pixels per side")]
+    TooLarge {
+        /// Film width, in pixels.
+        width: u32,
+        /// Film height, in pixels.
+        height: u32,
+    },
+    /// Zero samples per pixel.
+    #[error("spp must be at least 1")]
+    NoSamples,
+    /// The crop window is empty or reaches outside the film.
+    #[error(
+        "crop window [{}, {}, {}, {}) is empty or outside the {width}x{height} film",
+        crop[0], crop[1], crop[2], crop[3]
+    )]
+    Crop {
+        /// The window `[x0, y0, x1, y1)`.
+        crop: [u32; 4],
+        /// Film width, in pixels.
+        width: u32,
+        /// Film height, in pixels.
+        height: u32,
+    },
+    /// The render's sums and image would exceed the memory limit.
+    #[error(
+        "a {width}x{height} window at {spp} spp needs about {need_gib:.1} GiB for its sample \
+         sums and image, over the {limit_gib} GiB limit: render it in tiles (`tress farm`) or \
+         set {MEMORY_LIMIT_VAR} to a larger number of GiB"
+    )]
+    Memory {
+        /// Window width, in pixels.
+        width: u32,
+        /// Window height, in pixels.
+        height: u32,
+        /// Samples per pixel.
+        spp: u32,
+        /// Estimated need, in GiB.
+        need_gib: f64,
+        /// The limit, in GiB.
+        limit_gib: f64,
+    },
+}
+
 /// The memory a render may plan for, in GiB: [`MEMORY_LIMIT_VAR`] when set to a positive
 /// number, else [`DEFAULT_MEMORY_LIMIT_GIB`]. Films, density grids and tables are checked
 /// against it before they are allocated.
@@ -50,46 +108,43 @@ impl FilmSettings {
     }
 
     /// Checks sizes and the crop window, describing the first problem found.
-    pub fn validate(&self) -> Result<(), String> {
-        const MAX_SIDE: u32 = 1 << 16;
-        if self.width == 0 || self.height == 0 {
-            return Err(format!("film size {}x{} is empty", self.width, self.height));
+    pub fn validate(&self) -> Result<(), FilmError> {
+        let (width, height) = (self.width, self.height);
+        if width == 0 || height == 0 {
+            return Err(FilmError::Empty { width, height });
         }
-        if self.width > MAX_SIDE || self.height > MAX_SIDE {
-            return Err(format!(
-                "film size {}x{} exceeds {MAX_SIDE} pixels per side",
-                self.width, self.height
-            ));
+        if width > MAX_FILM_SIDE || height > MAX_FILM_SIDE {
+            return Err(FilmError::TooLarge { width, height });
         }
         if self.spp == 0 {
-            return Err("spp must be at least 1".into());
+            return Err(FilmError::NoSamples);
         }
-        if let Some([x0, y0, x1, y1]) = self.crop {
-            if x0 >= x1 || y0 >= y1 || x1 > self.width || y1 > self.height {
-                return Err(format!(
-                    "crop window [{x0}, {y0}, {x1}, {y1}) is empty or outside the {}x{} film",
-                    self.width, self.height
-                ));
+        if let Some(crop @ [x0, y0, x1, y1]) = self.crop {
+            if x0 >= x1 || y0 >= y1 || x1 > width || y1 > height {
+                return Err(FilmError::Crop {
+                    crop,
+                    width,
+                    height,
+                });
             }
         }
         Ok(())
     }
 
     /// [`Self::validate`], and that the render fits the memory limit ([`MEMORY_LIMIT_VAR`]).
-    pub fn validate_for_render(&self) -> Result<(), String> {
+    pub fn validate_for_render(&self) -> Result<(), FilmError> {
         self.validate()?;
         let limit_gib = memory_limit_gib();
         let need_gib = self.memory_bytes() as f64 / (1u64 << 30) as f64;
         if need_gib > limit_gib {
             let [x0, y0, x1, y1] = self.window();
-            return Err(format!(
-                "a {}x{} window at {} spp needs about {need_gib:.1} GiB for its sample sums and \
-                 image, over the {limit_gib} GiB limit: render it in tiles (`tress farm`) or set \
-                 {MEMORY_LIMIT_VAR} to a larger number of GiB",
-                x1 - x0,
-                y1 - y0,
-                self.spp
-            ));
+            return Err(FilmError::Memory {
+                width: x1 - x0,
+                height: y1 - y0,
+                spp: self.spp,
+                need_gib,
+                limit_gib,
+            });
         }
         Ok(())
     }

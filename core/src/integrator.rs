@@ -2,6 +2,7 @@
 
 use crate::light::Light;
 use crate::math::{Ray, Rgb, Vec2, Vec3};
+use crate::prepare::Preparation;
 use crate::rng::Sampler;
 use crate::sampling::power_heuristic;
 use crate::scene::Scene;
@@ -34,8 +35,13 @@ pub trait IntegratorKind {
     /// The fiber-density grid the integrator reads: `None` when it needs none, `Some(None)` at
     /// the resolution chosen from the hair, `Some(Some(n))` at `n` voxels along the longest side.
     fn density_grid(settings: &Self::Settings) -> Option<Option<u32>>;
-    /// Builds the integrator for `scene`; its precomputations happen here.
-    fn build(settings: &Self::Settings, scene: &Scene) -> Result<Box<dyn Integrator>, BuildError>;
+    /// Builds the integrator for `scene`; its precomputations happen here, fetched from or
+    /// added to the run's `prep` so that integrators of one run share them.
+    fn build(
+        settings: &Self::Settings,
+        scene: &Scene,
+        prep: &Preparation,
+    ) -> Result<Box<dyn Integrator>, BuildError>;
     /// Settings that exercise everything but run quickly, for the cross-crate tests.
     fn test_settings() -> Self::Settings {
         Self::Settings::default()

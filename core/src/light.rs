@@ -58,7 +58,112 @@ pub enum Light {
     },
 }
 
+/// Why light parameters cannot make a light.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum LightError {
+    /// A radiance, irradiance or intensity with a negative or non-finite channel.
+    #[error("{name} {value} must be finite and non-negative")]
+    Negative {
+        /// Which quantity.
+        name: &'static str,
+        /// Its value.
+        value: Rgb,
+    },
+    /// A direction that is zero, not finite, or overflows when normalised.
+    #[error("direction {0} must be finite, non-zero and normalisable")]
+    Direction(Vec3),
+    /// A sun disc outside [0, 90) degrees.
+    #[error("angular_radius = {0} must lie in [0, 90) degrees")]
+    AngularRadius(f32),
+    /// A finite irradiance spread over so small a disc that its radiance overflows f32.
+    #[error(
+        "irradiance {irradiance} from a disc of {angular_radius_deg}° is a radiance of \
+         {radiance}, beyond f32: lower the irradiance or widen the disc"
+    )]
+    Overflow {
+        /// The irradiance asked for.
+        irradiance: Rgb,
+        /// The disc's angular radius, in degrees.
+        angular_radius_deg: f32,
+        /// The radiance it would take.
+        radiance: Rgb,
+    },
+    /// A point light position that is not finite.
+    #[error("position {0} must be finite")]
+    Position(Vec3),
+}
+
+fn non_negative(name: &'static str, value: Rgb) -> Result<Rgb, LightError> {
+    if value.is_finite() && value.min_element() >= 0.0 {
+        Ok(value)
+    } else {
+        Err(LightError::Negative { name, value })
+    }
+}
+
 impl Light {
+    /// Uniform radiance from every direction.
+    pub fn constant(radiance: Rgb) -> Result<Self, LightError> {
+        Ok(Light::Constant {
+            radiance: non_negative("radiance", radiance)?,
+        })
+    }
+
+    /// A sun shining along `direction` that delivers `irradiance` perpendicular to it, from a
+    /// disc of angular radius `angular_radius_deg` (0: a delta light). A disc narrower than f32
+    /// can tell from its axis (1 − cos below 1e-6, about 0.08°) is a point: sampled as a cone,
+    /// its cos_max rounds to 1 and it rendered black (or, at 1e-30°, with infinite radiance).
+    pub fn distant(
+        direction: Vec3,
+        irradiance: Rgb,
+        angular_radius_deg: f32,
+    ) -> Result<Self, LightError> {
+        let irradiance = non_negative("irradiance", irradiance)?;
+        // `try_normalize` also refuses vectors whose length overflows (3e38, 3e38, 0).
+        let direction = direction
+            .try_normalize()
+            .ok_or(LightError::Direction(direction))?;
+        if !(0.0..90.0).contains(&angular_radius_deg) {
+            return Err(LightError::AngularRadius(angular_radius_deg));
+        }
+        let half = angular_radius_deg.to_radians();
+        let half = if 1.0 - f64::from(half).cos() < 1e-6 {
+            0.0
+        } else {
+            half
+        };
+        // Uniform disc radiance delivering `irradiance` at normal incidence:
+        // E = L · π sin²(half) (the cosine-weighted solid angle of the disc).
+        let radiance = if half > 0.0 {
+            irradiance / (std::f32::consts::PI * half.sin().powi(2))
+        } else {
+            irradiance
+        };
+        if !radiance.is_finite() {
+            return Err(LightError::Overflow {
+                irradiance,
+                angular_radius_deg,
+                radiance,
+            });
+        }
+        Ok(Light::Distant {
+            direction,
+            radiance,
+            half_angle_rad: half,
+        })
+    }
+
+    /// A point light of radiant intensity `intensity` (W/sr) at `position`.
+    pub fn point(position: Vec3, intensity: Rgb) -> Result<Self, LightError> {
+        if !position.is_finite() {
+            return Err(LightError::Position(position));
+        }
+        Ok(Light::Point {
+            position,
+            intensity: non_negative("intensity", intensity)?,
+        })
+    }
+
     /// A direction toward the light from `p`, from two uniform numbers.
     pub fn sample_li(&self, p: Vec3, u: Vec2) -> Option<LightSample> {
         match self {

@@ -40,6 +40,36 @@ use std::time::{Duration, Instant};
 /// Side of the square tiles the film is split into.
 pub const TILE_SIZE: u32 = 16;
 
+/// Why sample sums cannot be joined.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SumsError {
+    /// A block of samples that is not an aligned power-of-two range.
+    #[error("samples [{}, {}) are not an aligned power-of-two block", .0.start, .0.end)]
+    Unaligned(Range<u64>),
+    /// Samples that do not start where the earlier ones end.
+    #[error(
+        "samples [{}, {}) do not follow samples [{}, {})",
+        after.start, after.end, before.start, before.end
+    )]
+    Gap {
+        /// The samples held so far.
+        before: Range<u64>,
+        /// The samples that should follow them.
+        after: Range<u64>,
+    },
+    /// Sums of different pixel windows or films.
+    #[error(
+        "pixel windows differ: {:?} of {}x{} and {:?} of {}x{}",
+        first.0, first.1, first.2, second.0, second.1, second.2
+    )]
+    Windows {
+        /// Window and film size of the sums held.
+        first: ([u32; 4], u32, u32),
+        /// Window and film size of the sums appended.
+        second: ([u32; 4], u32, u32),
+    },
+}
+
 /// What a render cost.
 #[derive(Clone, Debug, Default)]
 pub struct RenderStats {
@@ -154,22 +184,16 @@ impl BlockSums {
 
     /// Appends the aligned block `block` whose samples sum to `sum`; it must start where the
     /// previous block ended.
-    pub fn push(&mut self, block: Range<u64>, sum: [f64; 3]) -> Result<(), String> {
+    pub fn push(&mut self, block: Range<u64>, sum: [f64; 3]) -> Result<(), SumsError> {
         if !is_aligned_block(&block) {
-            return Err(format!(
-                "samples [{}, {}) are not an aligned power-of-two block",
-                block.start, block.end
-            ));
+            return Err(SumsError::Unaligned(block));
         }
         if let Some((last, _)) = self.blocks.last() {
             if block.start != last.end {
-                return Err(format!(
-                    "samples [{}, {}) do not follow samples [{}, {})",
-                    block.start,
-                    block.end,
-                    self.range().start,
-                    last.end
-                ));
+                return Err(SumsError::Gap {
+                    before: self.range().start..last.end,
+                    after: block,
+                });
             }
         }
         self.push_unchecked(block, sum);
@@ -268,25 +292,20 @@ impl SampleSums {
     }
 
     /// Appends the sums of the samples that follow (same window and film), exactly.
-    pub fn append(&mut self, later: &SampleSums) -> Result<(), String> {
+    pub fn append(&mut self, later: &SampleSums) -> Result<(), SumsError> {
         if later.window != self.window
             || (later.full_width, later.full_height) != (self.full_width, self.full_height)
         {
-            return Err(format!(
-                "pixel windows differ: {:?} of {}x{} and {:?} of {}x{}",
-                self.window,
-                self.full_width,
-                self.full_height,
-                later.window,
-                later.full_width,
-                later.full_height
-            ));
+            return Err(SumsError::Windows {
+                first: (self.window, self.full_width, self.full_height),
+                second: (later.window, later.full_width, later.full_height),
+            });
         }
         if later.samples.start != self.samples.end {
-            return Err(format!(
-                "samples [{}, {}) do not follow samples [{}, {})",
-                later.samples.start, later.samples.end, self.samples.start, self.samples.end
-            ));
+            return Err(SumsError::Gap {
+                before: self.samples.clone(),
+                after: later.samples.clone(),
+            });
         }
         if later.samples.is_empty() {
             return Ok(());
@@ -559,10 +578,18 @@ mod tests {
     #[test]
     fn bad_blocks_are_refused() {
         let mut acc = BlockSums::new();
-        assert!(acc.push(3..5, [0.0; 3]).unwrap_err().contains("aligned"));
+        assert!(acc
+            .push(3..5, [0.0; 3])
+            .unwrap_err()
+            .to_string()
+            .contains("aligned"));
         assert!(acc.push(4..4, [0.0; 3]).is_err());
         acc.push(4..8, [1.0; 3]).unwrap();
-        assert!(acc.push(9..10, [0.0; 3]).unwrap_err().contains("follow"));
+        assert!(acc
+            .push(9..10, [0.0; 3])
+            .unwrap_err()
+            .to_string()
+            .contains("follow"));
         assert!(acc.push(0..4, [0.0; 3]).is_err());
         assert_eq!(acc.range(), 4..8);
         assert_eq!(acc.mean(), Rgb::splat(0.25));
@@ -605,7 +632,7 @@ mod tests {
             camera: Camera::perspective(Vec3::Z, Vec3::ZERO, Vec3::Y, 40.0, 0.0, None),
             accel: Box::new(Empty),
             materials: Vec::new(),
-            lights: Vec::new(),
+            lights: Vec::new().into(),
             density: None,
         }
     }
@@ -660,9 +687,17 @@ mod tests {
         let f = film(None);
         let mut a = run(&f, 0..4);
         let gap = run(&f, 5..6);
-        assert!(a.append(&gap).unwrap_err().contains("do not follow"));
+        assert!(a
+            .append(&gap)
+            .unwrap_err()
+            .to_string()
+            .contains("do not follow"));
         let other = run(&film(Some([0, 0, 8, 8])), 4..5);
-        assert!(a.append(&other).unwrap_err().contains("windows differ"));
+        assert!(a
+            .append(&other)
+            .unwrap_err()
+            .to_string()
+            .contains("windows differ"));
         let cancelled = AtomicBool::new(true);
         assert!(render_samples(&scene(), &Noise, &f, 0..4, &cancelled, &|_| {}).is_none());
     }

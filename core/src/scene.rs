@@ -28,10 +28,95 @@ pub struct Scene {
     pub accel: Box<dyn Accel>,
     /// Materials, indexed by [`Hit::material`].
     pub materials: Vec<Material>,
-    /// All lights; next-event estimation picks one uniformly.
-    pub lights: Vec<Light>,
+    /// All lights, with the subsets the integrators sample from (found once).
+    pub lights: Lights,
     /// Hair density for the dual-scattering integrators; `None` when no integrator needs it.
     pub density: Option<Box<dyn FiberDensity>>,
+}
+
+/// The scene's lights and the subsets integrators choose from, found once when the scene is
+/// made (`Vec<Light>::into()`), not per sample: all of them (path tracing's next-event
+/// estimation picks one uniformly), those with area (non-delta: dual scattering's light
+/// strategy mixes them) and the delta lights (evaluated one by one).
+#[derive(Clone, Debug, Default)]
+pub struct Lights {
+    all: Vec<Light>,
+    non_delta: Vec<usize>,
+    delta: Vec<usize>,
+}
+
+impl From<Vec<Light>> for Lights {
+    fn from(all: Vec<Light>) -> Self {
+        let (delta, non_delta) = (0..all.len()).partition(|&i| all[i].is_delta());
+        Lights {
+            all,
+            non_delta,
+            delta,
+        }
+    }
+}
+
+impl Lights {
+    /// Every light, in scene order.
+    pub fn all(&self) -> &[Light] {
+        &self.all
+    }
+
+    /// Whether the scene has no light.
+    pub fn is_empty(&self) -> bool {
+        self.all.is_empty()
+    }
+
+    /// One light chosen uniformly by `u` ∈ [0, 1), with the probability of that choice.
+    pub fn choose(&self, u: f32) -> Option<(&Light, f32)> {
+        let i = choose(self.all.len(), u)?;
+        Some((&self.all[i], self.select_pdf()))
+    }
+
+    /// Probability with which [`Self::choose`] picks any one light (0 when there is none).
+    pub fn select_pdf(&self) -> f32 {
+        if self.all.is_empty() {
+            0.0
+        } else {
+            1.0 / self.all.len() as f32
+        }
+    }
+
+    /// The lights at infinity (environment maps, constant skies, suns, disc or delta).
+    pub fn infinite(&self) -> impl Iterator<Item = &Light> {
+        self.all.iter().filter(|l| l.is_infinite())
+    }
+
+    /// The lights with area (not delta), in scene order.
+    pub fn non_delta(&self) -> impl ExactSizeIterator<Item = &Light> {
+        self.non_delta.iter().map(|&i| &self.all[i])
+    }
+
+    /// One non-delta light chosen uniformly by `u` ∈ [0, 1), with the probability of that
+    /// choice.
+    pub fn choose_non_delta(&self, u: f32) -> Option<(&Light, f32)> {
+        let i = choose(self.non_delta.len(), u)?;
+        Some((&self.all[self.non_delta[i]], self.non_delta_select_pdf()))
+    }
+
+    /// Probability with which [`Self::choose_non_delta`] picks any one light (0 when none).
+    pub fn non_delta_select_pdf(&self) -> f32 {
+        if self.non_delta.is_empty() {
+            0.0
+        } else {
+            1.0 / self.non_delta.len() as f32
+        }
+    }
+
+    /// The delta lights (points, suns without a disc), in scene order.
+    pub fn delta(&self) -> impl Iterator<Item = &Light> {
+        self.delta.iter().map(|&i| &self.all[i])
+    }
+}
+
+/// Index `⌊u·n⌋` of `n` items (clamped to the last), if there is any.
+fn choose(n: usize, u: f32) -> Option<usize> {
+    (n > 0).then(|| ((u * n as f32) as usize).min(n - 1))
 }
 
 thread_local! {
@@ -75,6 +160,49 @@ impl Scene {
 
     /// Lights seen by rays that escape the scene (environment, constant, distant with a disc).
     pub fn escaped_radiance(&self, dir: crate::math::Vec3) -> Rgb {
-        self.lights.iter().map(|l| l.le(dir)).sum()
+        self.lights.all().iter().map(|l| l.le(dir)).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Vec3;
+
+    #[test]
+    fn lights_are_split_once_and_chosen_uniformly() {
+        let point = Light::Point {
+            position: Vec3::ZERO,
+            intensity: Rgb::ONE,
+        };
+        let sky = Light::Constant { radiance: Rgb::ONE };
+        let sun = |half_angle_rad| Light::Distant {
+            direction: -Vec3::Y,
+            radiance: Rgb::ONE,
+            half_angle_rad,
+        };
+        let lights: Lights = vec![point, sky, sun(0.0), sun(0.01)].into();
+        assert_eq!(lights.all().len(), 4);
+        assert_eq!(lights.select_pdf(), 0.25);
+        // Uniform over all: u picks ⌊4u⌋; u = 1 stays on the last.
+        for (u, want) in [(0.0, 0), (0.3, 1), (0.74, 2), (0.99, 3), (1.0, 3)] {
+            let (l, pdf) = lights.choose(u).unwrap();
+            assert!(std::ptr::eq(l, &lights.all()[want]), "u = {u}");
+            assert_eq!(pdf, 0.25);
+        }
+        // The sky and the disc sun have area; the point and the zero-width sun are delta.
+        let non_delta: Vec<_> = lights.non_delta().collect();
+        assert_eq!(non_delta.len(), 2);
+        assert!(std::ptr::eq(non_delta[0], &lights.all()[1]));
+        assert!(std::ptr::eq(non_delta[1], &lights.all()[3]));
+        assert_eq!(lights.delta().count(), 2);
+        assert_eq!(lights.non_delta_select_pdf(), 0.5);
+        let (l, pdf) = lights.choose_non_delta(0.6).unwrap();
+        assert!(std::ptr::eq(l, &lights.all()[3]) && pdf == 0.5);
+        // Both suns and the sky are at infinity; the point is not.
+        assert_eq!(lights.infinite().count(), 3);
+        let none = Lights::from(Vec::new());
+        assert!(none.is_empty() && none.choose(0.5).is_none());
+        assert!(none.choose_non_delta(0.5).is_none() && none.non_delta_select_pdf() == 0.0);
     }
 }

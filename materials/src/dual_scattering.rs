@@ -89,10 +89,9 @@ use crate::fiber_medium::{BackScattering, FiberMedium};
 use crate::ParamError;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
 use std::f32::consts::PI;
 use std::f64::consts::PI as PI64;
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tress_core::math::{erf, safe_asin, Rgb, Vec2, Vec3};
 use tress_core::sampling::sample_uniform_sphere;
@@ -106,7 +105,7 @@ pub const A_F_MAX: f32 = 0.99;
 const MIN_VARIANCE: f32 = 1e-6;
 
 /// Resolution of the tables and of the quadrature that fills them.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DualScatteringSettings {
     /// Table nodes over θ ∈ [−π/2, π/2] (cell centres).
@@ -125,7 +124,7 @@ pub struct DualScatteringSettings {
 }
 
 /// Where the multiple-scattering quantities of F come from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum MultipleScattering {
     /// Zinke et al.'s closed forms: `T_f = d_f ā_f^n`, Ā_b, Δ_b, σ_b (eqs. 14–17).
     Paper,
@@ -814,55 +813,26 @@ fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// Tables built once per (BCSDF, settings) and shared, e.g. by both dual-scattering integrators
-/// in one comparison run.
-///
-/// The key is the BCSDF's `Debug` text plus the settings: every tress model derives `Debug`
-/// over its parameters, so equal parameters share tables.
-#[derive(Debug, Default)]
-pub struct DualScatteringCache {
-    tables: Mutex<HashMap<String, Arc<DualScatteringTables>>>,
-}
-
-impl DualScatteringCache {
-    /// An empty cache; most callers share [`DualScatteringCache::global`].
-    pub fn new() -> Self {
-        Self::default()
-    }
-
-    /// The process-wide cache.
-    pub fn global() -> &'static DualScatteringCache {
-        static CACHE: OnceLock<DualScatteringCache> = OnceLock::new();
-        CACHE.get_or_init(DualScatteringCache::new)
-    }
-
-    /// The tables for `bcsdf` at `settings`, built on first use. Builds are serialised (the
-    /// lock is held while building), so concurrent requests never build the same tables twice.
-    pub fn get_or_build(
-        &self,
-        bcsdf: &dyn Bcsdf,
-        settings: &DualScatteringSettings,
-    ) -> Result<Arc<DualScatteringTables>, DualScatteringError> {
-        let key = format!("{bcsdf:?} | {settings:?}");
-        // A panic while building leaves no entry behind, so a poisoned map is still valid.
-        let mut map = self.tables.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(t) = map.get(&key) {
-            return Ok(t.clone());
+/// What identifies a BCSDF to a run's table cache (`tress_core::prepare::Preparation`, keyed
+/// by this and the settings, compared by value; a model's `Debug` text could leave out a
+/// parameter and hand it another model's tables): every lobe's value and the total, all channels
+/// bit for bit, at 64 fixed random (ω_o, ω_i, h). Equal parameters give equal values; any
+/// parameter that changes the scattering, and so the tables, changes some of them.
+pub fn fingerprint(bcsdf: &dyn Bcsdf) -> Vec<u32> {
+    let mut rng = tress_core::rng::Pcg32::new(0xf1_9e7, 0);
+    let mut next = || rng.next_f32();
+    let lobes = bcsdf.lobe_names().len();
+    let mut key = Vec::new();
+    for _ in 0..64 {
+        let wo = sample_uniform_sphere(Vec2::new(next(), next()));
+        let wi = sample_uniform_sphere(Vec2::new(next(), next()));
+        let h = 2.0 * next() - 1.0;
+        key.extend(bcsdf.eval(wo, wi, h).to_array().map(f32::to_bits));
+        for p in 0..lobes {
+            key.extend(bcsdf.eval_lobe(wo, wi, h, p).to_array().map(f32::to_bits));
         }
-        let t = Arc::new(DualScatteringTables::new(bcsdf, settings)?);
-        map.insert(key, t.clone());
-        Ok(t)
     }
-
-    /// Number of cached tables.
-    pub fn len(&self) -> usize {
-        self.tables.lock().unwrap_or_else(|e| e.into_inner()).len()
-    }
-
-    /// Whether no tables are cached.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
+    key
 }
 
 /// Longitudinal density of a lobe whose θ_h ~ N(mean, var) (θ_i = 2θ_h − θ_o), expressed as
@@ -1094,9 +1064,8 @@ mod tests {
         }
     }
 
-    /// Tables through the process-wide cache, so the tests share each build.
     fn tables(b: &dyn Bcsdf, s: &DualScatteringSettings) -> Arc<DualScatteringTables> {
-        DualScatteringCache::global().get_or_build(b, s).unwrap()
+        crate::test_util::shared_tables(b, s)
     }
 
     fn all_models() -> Vec<(String, Arc<dyn Bcsdf>, bool)> {
@@ -1637,22 +1606,65 @@ mod tests {
     }
 
     #[test]
-    fn cache_builds_each_table_once() {
-        let cache = DualScatteringCache::new();
+    fn tables_are_shared_by_fingerprint_and_settings_by_value() {
+        use tress_core::prepare::Preparation;
+        type Key = (Vec<u32>, DualScatteringSettings);
+        let prep = Preparation::new();
+        let get = |b: &dyn Bcsdf, s: &DualScatteringSettings| {
+            prep.get_or_build((fingerprint(b), s.clone()), || {
+                DualScatteringTables::new(b, s)
+            })
+            .unwrap()
+        };
         let a = model("DEon/brown");
         let same = model("DEon/brown");
         let other = model("DEon/blond");
-        let t1 = cache.get_or_build(a.as_ref(), &coarse()).unwrap();
-        let t2 = cache.get_or_build(same.as_ref(), &coarse()).unwrap();
+        let t1 = get(a.as_ref(), &coarse());
+        let t2 = get(same.as_ref(), &coarse());
         assert!(Arc::ptr_eq(&t1, &t2));
-        let t3 = cache.get_or_build(other.as_ref(), &coarse()).unwrap();
+        let t3 = get(other.as_ref(), &coarse());
         assert!(!Arc::ptr_eq(&t1, &t3));
         let finer = DualScatteringSettings {
             theta_nodes: 16,
             ..coarse()
         };
-        cache.get_or_build(a.as_ref(), &finer).unwrap();
-        assert_eq!(cache.len(), 3);
+        get(a.as_ref(), &finer);
+        assert_eq!(prep.count::<Key, DualScatteringTables>(), 3);
+        // Models whose `Debug` text is the same but whose scattering differs get their own
+        // tables (the key was the `Debug` text).
+        let t4 = get(&Opaque(model("DEon/brown")), &coarse());
+        let t5 = get(&Opaque(model("DEon/blond")), &coarse());
+        assert!(!Arc::ptr_eq(&t4, &t5));
+        // An opaque model is the same model: it shares the tables of its value.
+        assert!(Arc::ptr_eq(&t1, &t4));
+        assert_eq!(prep.count::<Key, DualScatteringTables>(), 3);
+    }
+
+    /// A model whose `Debug` says nothing of its parameters.
+    struct Opaque(Arc<dyn Bcsdf>);
+
+    impl std::fmt::Debug for Opaque {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.write_str("Opaque")
+        }
+    }
+
+    impl Bcsdf for Opaque {
+        fn eval(&self, wo: Vec3, wi: Vec3, h: f32) -> Rgb {
+            self.0.eval(wo, wi, h)
+        }
+        fn sample(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<tress_core::BcsdfSample> {
+            self.0.sample(wo, h, u)
+        }
+        fn pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> f32 {
+            self.0.pdf(wo, wi, h)
+        }
+        fn lobe_names(&self) -> &'static [&'static str] {
+            self.0.lobe_names()
+        }
+        fn eval_lobe(&self, wo: Vec3, wi: Vec3, h: f32, p: usize) -> Rgb {
+            self.0.eval_lobe(wo, wi, h, p)
+        }
     }
 
     /// A fiber that prefers one side: breaks the mirror symmetry h → −h, Δφ → −Δφ.

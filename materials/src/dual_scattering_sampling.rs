@@ -210,7 +210,7 @@ impl DirectionSampler<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::dual_scattering::{DensityFactors, DualScatteringCache, DualScatteringSettings};
+    use crate::dual_scattering::{DensityFactors, DualScatteringSettings};
     use crate::HairModel;
     use std::sync::Arc;
     use tress_core::stats::{sidak_alpha, SphereChi2};
@@ -225,9 +225,7 @@ mod tests {
             theta_nodes: 32,
             ..Default::default()
         };
-        let t = DualScatteringCache::global()
-            .get_or_build(b.as_ref(), &settings)
-            .unwrap();
+        let t = crate::test_util::shared_tables(b.as_ref(), &settings);
         DualScatteringShading::new(Arc::clone(&b), t, DensityFactors::default()).unwrap()
     }
 

@@ -18,3 +18,19 @@ pub(crate) fn assert_rejected<P: Default + Debug, M: Debug>(
         assert_eq!(new(&p).unwrap_err().field, *field, "{p:?}");
     }
 }
+
+/// Dual-scattering tables through one preparation context shared by every test of the crate,
+/// so that the tests share each build.
+pub(crate) fn shared_tables(
+    b: &dyn tress_core::Bcsdf,
+    s: &crate::dual_scattering::DualScatteringSettings,
+) -> std::sync::Arc<crate::dual_scattering::DualScatteringTables> {
+    use crate::dual_scattering::{fingerprint, DualScatteringTables};
+    use tress_core::prepare::Preparation;
+    static PREP: std::sync::OnceLock<Preparation> = std::sync::OnceLock::new();
+    PREP.get_or_init(Preparation::new)
+        .get_or_build((fingerprint(b), s.clone()), || {
+            DualScatteringTables::new(b, s)
+        })
+        .unwrap()
+}

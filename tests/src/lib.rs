@@ -37,7 +37,7 @@ pub fn hair_scene(
         ),
         accel: Box::new(accel),
         materials: vec![Material::Hair(bcsdf)],
-        lights,
+        lights: lights.into(),
         density: None,
     }
 }

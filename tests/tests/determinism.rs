@@ -48,7 +48,7 @@ fn render_with(
         .unwrap();
     pool.install(|| {
         let scene = scene();
-        let integrator = integrator.build(&scene).unwrap();
+        let integrator = integrator.build(&scene, &Default::default()).unwrap();
         render(&scene, integrator.as_ref(), film, &|_| {}).image
     })
 }

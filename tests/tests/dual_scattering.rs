@@ -65,8 +65,9 @@ fn quadrant_means(img: &Image) -> [f64; 4] {
 #[test]
 fn dual_uniform_and_dual_mis_converge_to_the_same_image() {
     let scene = ball_scene(1500);
-    let uniform = DualUniform::new(settings(), &scene, UniformDirections).unwrap();
-    let mis = DualMis::new(settings(), &scene, MisDirections).unwrap();
+    let prep = Default::default();
+    let uniform = DualUniform::new(settings(), &scene, UniformDirections, &prep).unwrap();
+    let mis = DualMis::new(settings(), &scene, MisDirections, &prep).unwrap();
     let runs = |integ: &dyn Integrator| -> Vec<[f64; 4]> {
         (0..8)
             .map(|seed| {
@@ -91,7 +92,7 @@ fn dual_uniform_and_dual_mis_converge_to_the_same_image() {
 #[test]
 fn dual_mis_error_falls_as_one_over_n_without_a_floor() {
     let scene = ball_scene(1500);
-    let mis = DualMis::new(settings(), &scene, MisDirections).unwrap();
+    let mis = DualMis::new(settings(), &scene, MisDirections, &Default::default()).unwrap();
     let f = |spp, seed| film(12, 12, spp, seed);
     let reference = render(&scene, &mis, &f(16384, 999), &|_| {}).image;
     let mse = |img: &Image| {
@@ -158,6 +159,7 @@ fn with_no_fibers_to_cross_and_no_back_scattering_dual_scattering_is_single_scat
         },
         &scene,
         UniformDirections,
+        &Default::default(),
     )
     .unwrap();
     let path = tress_path::PathTracer::new(tress_path::PathSettings {

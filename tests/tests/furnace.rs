@@ -70,7 +70,7 @@ fn every_registered_integrator_in_a_white_furnace() {
             Some(_) => tress_tests::with_density_grid(ball(), &tress_tests::hair_ball(3000)),
             None => ball(),
         };
-        let integrator = desc.build(&scene).unwrap();
+        let integrator = desc.build(&scene, &Default::default()).unwrap();
         // The middle of the ball: every pixel sees hair.
         let mut f = film(48, 48, spp(), 11);
         f.crop = Some([14, 14, 34, 34]);
@@ -132,8 +132,10 @@ fn dual_scattering_does_not_blow_up_in_a_white_furnace() {
             // The middle of the ball: every pixel sees hair.
             let mut f = film(48, 48, 16, 11);
             f.crop = Some([14, 14, 34, 34]);
-            let uniform = DualUniform::new(settings.clone(), &scene, UniformDirections).unwrap();
-            let mis = DualMis::new(settings, &scene, MisDirections).unwrap();
+            let prep = Default::default();
+            let uniform =
+                DualUniform::new(settings.clone(), &scene, UniformDirections, &prep).unwrap();
+            let mis = DualMis::new(settings, &scene, MisDirections, &prep).unwrap();
             let means = [&uniform as &dyn Integrator, &mis].map(|integrator| {
                 let out = render(&scene, integrator, &f, &|_| {});
                 assert_eq!(out.stats.nonfinite_samples, 0);

@@ -47,10 +47,11 @@ use tress_accel::{
 use tress_core::film::FilmSettings;
 use tress_core::light::{EnvironmentMap, Light};
 use tress_core::math::{Aabb, Ray, Vec2, Vec3};
+use tress_core::prepare::Preparation;
 use tress_core::rng::Pcg32;
 use tress_core::sampling::sample_uniform_sphere;
 use tress_core::{Accel, Bcsdf, Camera, Hit, Integrator, Material, Scene};
-use tress_materials::dual_scattering::{DualScatteringCache, DualScatteringSettings};
+use tress_materials::dual_scattering::{DualScatteringSettings, DualScatteringTables};
 use tress_materials::HairModel;
 
 mod raw;
@@ -217,10 +218,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
         .map_err(|e| anyhow!("hair material: {e}"))?;
     eprintln!("bench: BCSDF costs and dual-scattering tables");
     bench_bcsdfs(&mut table, plan.bcsdf_calls)?;
-    // Built once here (the integrators fetch them from the process-wide cache) so the build
-    // time is measured apart from any render.
-    let tables = DualScatteringCache::global()
-        .get_or_build(bcsdf.as_ref(), &plan.tables)
+    // Built here to time the build apart from any integrator.
+    let tables = DualScatteringTables::new(bcsdf.as_ref(), &plan.tables)
         .map_err(|e| anyhow!("dual-scattering tables: {e}"))?;
     table.push(
         ("Chiang/brown", "bcsdf"),
@@ -581,7 +580,7 @@ fn bench_model(
             record: Arc::clone(&recording),
         }),
         materials: vec![Material::Hair(Arc::clone(bcsdf))],
-        lights: vec![Light::Environment(EnvironmentMap::builtin_sky(0.0, 1.0)?)],
+        lights: vec![Light::Environment(EnvironmentMap::builtin_sky(0.0, 1.0)?)].into(),
         density: Some(Box::new(grid)),
     };
     // The ray-rate target and the huge and round models concern the path tracer.
@@ -599,9 +598,11 @@ fn bench_model(
     } else {
         pools.iter().rev().take(1).collect()
     };
+    // One preparation context per model: the dual-scattering integrators share their tables.
+    let prep = Preparation::new();
     for desc in &descs {
         let integrator = desc
-            .build(&scene)
+            .build(&scene, &prep)
             .map_err(|e| anyhow!("integrator {}: {e:#}", desc.name()))?;
         // An untimed pass records every ray the integrator traces (it also warms up); the
         // timed renders below repeat exactly that work (the image depends only on the seed).

@@ -155,11 +155,15 @@ pub(super) fn execute(
         reused: 0,
         render_seconds: 0.0,
     };
+    // One preparation context for the whole study: every scene and integrator that needs the
+    // same tables shares them.
+    let prep = tress_core::prepare::Preparation::new();
     for (si, scene) in plan.scenes.iter().enumerate() {
         let mut runner = SceneRunner {
             scene,
             built: Vec::new(),
             integrators: HashMap::new(),
+            prep: &prep,
             pool,
             bar,
             verbose,

@@ -33,6 +33,8 @@ pub(super) struct SceneRunner<'a> {
     /// Built scenes by the density grid they hold.
     pub(super) built: Vec<(Option<DensitySettings>, BuiltScene)>,
     pub(super) integrators: HashMap<String, Box<dyn Integrator>>,
+    /// The study's preparation context (tables shared by all its integrators).
+    pub(super) prep: &'a tress_core::prepare::Preparation,
     pub(super) pool: &'a rayon::ThreadPool,
     pub(super) bar: &'a ProgressBar,
     pub(super) verbose: bool,
@@ -153,11 +155,14 @@ impl SceneRunner<'_> {
         let built = &self.built[b].1;
         let integrator = match self.integrators.entry(job.integrator.ron.clone()) {
             Entry::Occupied(e) => e.into_mut(),
-            Entry::Vacant(e) => {
-                e.insert(job.integrator.desc.build(&built.scene).with_context(|| {
-                    format!("{}: integrator {}", scene.source, job.integrator.ron)
-                })?)
-            }
+            Entry::Vacant(e) => e.insert(
+                job.integrator
+                    .desc
+                    .build(&built.scene, self.prep)
+                    .with_context(|| {
+                        format!("{}: integrator {}", scene.source, job.integrator.ron)
+                    })?,
+            ),
         };
         let bar = self.bar;
         let progress = |n: u64| bar.inc(n);

@@ -9,6 +9,7 @@
 #![warn(missing_docs)]
 
 use tress_core::integrator::BuildError;
+use tress_core::prepare::Preparation;
 use tress_core::sampling::power_heuristic;
 use tress_core::{Integrator, IntegratorKind, Rgb, Sampler, Scene};
 use tress_dual_scattering::{DirectionSampling, DualScattering, HairPoint};
@@ -31,8 +32,12 @@ impl IntegratorKind for MisDirections {
         settings.density_grid()
     }
 
-    fn build(settings: &DualSettings, scene: &Scene) -> Result<Box<dyn Integrator>, BuildError> {
-        settings.build_with(scene, MisDirections)
+    fn build(
+        settings: &DualSettings,
+        scene: &Scene,
+        prep: &Preparation,
+    ) -> Result<Box<dyn Integrator>, BuildError> {
+        settings.build_with(scene, MisDirections, prep)
     }
 
     fn test_settings() -> DualSettings {
@@ -42,17 +47,16 @@ impl IntegratorKind for MisDirections {
 
 impl DirectionSampling for MisDirections {
     fn estimate(&self, point: &HairPoint, scene: &Scene, sampler: &mut Sampler) -> Rgb {
-        let lights: Vec<&tress_core::Light> =
-            scene.lights.iter().filter(|l| !l.is_delta()).collect();
-        if lights.is_empty() {
+        let lights = &scene.lights;
+        if lights.non_delta().len() == 0 {
             return Rgb::ZERO;
         }
-        let select_pdf = 1.0 / lights.len() as f32;
+        let select_pdf = lights.non_delta_select_pdf();
         // Light strategy density of a direction: the mixture over the light choice, matching
         // `radiance_from`, which sums every light at infinity.
         let light_pdf = |wi| {
             lights
-                .iter()
+                .non_delta()
                 .map(|l| select_pdf * l.pdf_li(wi))
                 .sum::<f32>()
         };
@@ -61,7 +65,9 @@ impl DirectionSampling for MisDirections {
         let (u_select, u_light, u_f) = (sampler.next_1d(), sampler.next_2d(), sampler.next_4d());
         // One mixture for the light sample's pdf and the F sample.
         let f_sampler = point.shading.direction_sampler(point.wo_local);
-        let light = lights[((u_select * lights.len() as f32) as usize).min(lights.len() - 1)];
+        let Some((light, _)) = lights.choose_non_delta(u_select) else {
+            return Rgb::ZERO;
+        };
         if let Some(ls) = light.sample_li(point.sp.p, u_light) {
             let p_light = light_pdf(ls.wi);
             if p_light > 0.0 {

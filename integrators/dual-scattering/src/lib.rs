@@ -30,11 +30,12 @@
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use tress_core::integrator::{direct_light, escaped_light, scatter};
+use tress_core::prepare::Preparation;
 use tress_core::shading::Scattering;
 use tress_core::{Integrator, Material, Ray, Rgb, Sampler, Scene, ShadingPoint};
 use tress_materials::dual_scattering::{
-    DensityFactors, DualScatteringCache, DualScatteringError, DualScatteringSettings,
-    DualScatteringShading,
+    fingerprint, DensityFactors, DualScatteringError, DualScatteringSettings,
+    DualScatteringShading, DualScatteringTables,
 };
 
 /// Settings shared by both dual-scattering integrators.
@@ -178,8 +179,15 @@ pub struct DualScattering<D: DirectionSampling> {
 }
 
 impl<D: DirectionSampling> DualScattering<D> {
-    /// Builds (or fetches from the cache) the tables of every hair material of `scene`.
-    pub fn new(settings: DualSettings, scene: &Scene, directions: D) -> Result<Self, DualError> {
+    /// Builds the tables of every hair material of `scene`, or fetches them from `prep` where
+    /// an integrator of the run already built them (keyed by the model's [`fingerprint`] and
+    /// the table settings, by value).
+    pub fn new(
+        settings: DualSettings,
+        scene: &Scene,
+        directions: D,
+        prep: &Preparation,
+    ) -> Result<Self, DualError> {
         let defaults = DensityFactors::for_model(settings.tables.multiple_scattering);
         let factors = DensityFactors {
             d_f: settings.d_f.unwrap_or(defaults.d_f),
@@ -197,8 +205,10 @@ impl<D: DirectionSampling> DualScattering<D> {
             .iter()
             .map(|m| match m {
                 Material::Hair(b) => {
-                    let tables =
-                        DualScatteringCache::global().get_or_build(b.as_ref(), &settings.tables)?;
+                    let tables = prep
+                        .get_or_build((fingerprint(b.as_ref()), settings.tables.clone()), || {
+                            DualScatteringTables::new(b.as_ref(), &settings.tables)
+                        })?;
                     Ok(Some(DualScatteringShading::new(
                         Arc::clone(b),
                         tables,
@@ -241,11 +251,8 @@ impl<D: DirectionSampling> DualScattering<D> {
         };
         let mut radiance = self.directions.estimate(&point, scene, sampler);
         // Delta lights have one direction each: evaluate them all.
-        for light in scene.lights.iter() {
-            if let Some(ls) = light
-                .sample_li(point.sp.p, tress_core::math::Vec2::ZERO)
-                .filter(|ls| ls.is_delta)
-            {
+        for light in scene.lights.delta() {
+            if let Some(ls) = light.sample_li(point.sp.p, tress_core::math::Vec2::ZERO) {
                 radiance += ls.radiance * point.transport(scene, ls.wi, ls.distance * (1.0 - 1e-4));
             }
         }
@@ -275,31 +282,27 @@ impl DualSettings {
         &self,
         scene: &Scene,
         directions: D,
+        prep: &Preparation,
     ) -> Result<Box<dyn Integrator>, tress_core::integrator::BuildError> {
         Ok(Box::new(DualScattering::new(
             self.clone(),
             scene,
             directions,
+            prep,
         )?))
     }
 }
 
 impl<D: DirectionSampling> Integrator for DualScattering<D> {
     fn li(&self, camera_ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb {
-        let infinite: Vec<&tress_core::Light> =
-            scene.lights.iter().filter(|l| !l.is_delta()).collect();
-        let select_pdf = if infinite.is_empty() {
-            0.0
-        } else {
-            1.0 / infinite.len() as f32
-        };
+        let select_pdf = scene.lights.non_delta_select_pdf();
         let mut radiance = Rgb::ZERO;
         let mut throughput = Rgb::ONE;
         let mut ray = *camera_ray;
         let mut scatter_pdf: Option<f32> = None;
         for depth in 0..=self.settings.max_depth {
             let Some(hit) = scene.intersect(&ray) else {
-                for light in &infinite {
+                for light in scene.lights.non_delta() {
                     radiance += escaped_light(light, ray.dir, scatter_pdf, select_pdf, throughput);
                 }
                 break;
@@ -315,12 +318,10 @@ impl<D: DirectionSampling> Integrator for DualScattering<D> {
             // A surface: next-event estimation as in the path tracer (hair blocks fully here).
             let (u_select, u_light) = (sampler.next_1d(), sampler.next_2d());
             // Every delta light (chosen with probability 1), and one of the others.
-            for light in scene.lights.iter().filter(|l| l.is_delta()) {
+            for light in scene.lights.delta() {
                 radiance += direct_light(scene, &sp, light, u_light, 1.0, throughput);
             }
-            if !infinite.is_empty() {
-                let light =
-                    infinite[((u_select * infinite.len() as f32) as usize).min(infinite.len() - 1)];
+            if let Some((light, select_pdf)) = scene.lights.choose_non_delta(u_select) {
                 radiance += direct_light(scene, &sp, light, u_light, select_pdf, throughput);
             }
             let Some((next, pdf)) = scatter(&sp, sampler, &mut throughput) else {

@@ -7,6 +7,7 @@
 #![warn(missing_docs)]
 
 use tress_core::integrator::BuildError;
+use tress_core::prepare::Preparation;
 use tress_core::sampling::{sample_uniform_sphere, INV_4PI};
 use tress_core::{Integrator, IntegratorKind, Rgb, Sampler, Scene};
 use tress_dual_scattering::{DirectionSampling, DualScattering, HairPoint};
@@ -36,8 +37,12 @@ impl IntegratorKind for UniformDirections {
         settings.density_grid()
     }
 
-    fn build(settings: &DualSettings, scene: &Scene) -> Result<Box<dyn Integrator>, BuildError> {
-        settings.build_with(scene, UniformDirections)
+    fn build(
+        settings: &DualSettings,
+        scene: &Scene,
+        prep: &Preparation,
+    ) -> Result<Box<dyn Integrator>, BuildError> {
+        settings.build_with(scene, UniformDirections, prep)
     }
 
     fn test_settings() -> DualSettings {

@@ -11,6 +11,7 @@
 use serde::{Deserialize, Serialize};
 use tress_core::integrator::BuildError;
 use tress_core::integrator::{direct_light, escaped_light, scatter};
+use tress_core::prepare::Preparation;
 use tress_core::{Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint};
 
 /// Path tracer settings.
@@ -55,7 +56,11 @@ impl IntegratorKind for PathTracer {
         None
     }
 
-    fn build(settings: &PathSettings, _: &Scene) -> Result<Box<dyn Integrator>, BuildError> {
+    fn build(
+        settings: &PathSettings,
+        _: &Scene,
+        _: &Preparation,
+    ) -> Result<Box<dyn Integrator>, BuildError> {
         Ok(Box::new(PathTracer::new(settings.clone())))
     }
 
@@ -71,12 +76,7 @@ impl IntegratorKind for PathTracer {
 
 impl Integrator for PathTracer {
     fn li(&self, camera_ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb {
-        let light_count = scene.lights.len();
-        let light_select_pdf = if light_count > 0 {
-            1.0 / light_count as f32
-        } else {
-            0.0
-        };
+        let light_select_pdf = scene.lights.select_pdf();
         let mut radiance = Rgb::ZERO;
         let mut throughput = Rgb::ONE;
         let mut ray = *camera_ray;
@@ -85,7 +85,7 @@ impl Integrator for PathTracer {
 
         for depth in 0.. {
             let Some(hit) = scene.intersect(&ray) else {
-                for light in scene.lights.iter().filter(|l| l.is_infinite()) {
+                for light in scene.lights.infinite() {
                     radiance +=
                         escaped_light(light, ray.dir, scatter_pdf, light_select_pdf, throughput);
                 }
@@ -99,10 +99,8 @@ impl Integrator for PathTracer {
             // Next-event estimation.
             let u_select = sampler.next_1d();
             let u_light = sampler.next_2d();
-            if light_count > 0 {
-                let light =
-                    &scene.lights[((u_select * light_count as f32) as usize).min(light_count - 1)];
-                radiance += direct_light(scene, &sp, light, u_light, light_select_pdf, throughput);
+            if let Some((light, select_pdf)) = scene.lights.choose(u_select) {
+                radiance += direct_light(scene, &sp, light, u_light, select_pdf, throughput);
             }
 
             let Some((next, pdf)) = scatter(&sp, sampler, &mut throughput) else {
