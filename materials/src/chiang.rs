@@ -28,6 +28,17 @@
 //! [`Bcsdf::eval`] returns `Σ_p M_p A_p N_p`, which is pbrt's `f · |cos θ|` (pbrt divides by the
 //! shading-normal cosine in `f` and its integrator multiplies it back; here neither happens).
 //!
+//! # I₀ and reference values
+//! `M_p` here uses ln I₀ from Abramowitz & Stegun 9.8.1/9.8.2 (|ε| < 2e-7) in its log form, so
+//! it follows the exact Bessel function everywhere. pbrt-v3 (and renderers that took its code)
+//! approximate instead: a 10-term power series for I₀ below 12 and an asymptotic ln I₀ with
+//! ln 2 rounded to 0.6931; measured against mpmath, its R lobe at the peak (θ_i = −θ_o = 0) is
+//! 0.1–0.4 % low for β_m 0.1–0.25 and 1.8 % low at β_m = 0.3, where the argument sits just
+//! below the series' cut-over. `tests/chiang_reference.rs` checks this implementation against
+//! an independent 40-digit evaluation with the exact I₀ (`tests/chiang_reference.py`) on 1200
+//! points — three fibers (absorbing and not), five h, four θ_o, four θ_i, five Δφ — to 1e-4
+//! relative (worst measured 9e-6).
+//!
 //! # Sampling
 //! pbrt's procedure with four independent numbers instead of two demultiplexed ones: `u[0]` picks
 //! the lobe with probability `P(p) = lum(A_p) / Σ_q lum(A_q)`, `u[1]`, `u[2]` draw θ_i from the
