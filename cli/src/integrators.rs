@@ -1,4 +1,4 @@
-//! THE registry of integrators: one line per integrator crate, in [`integrators!`] at the end
+//! THE registry of integrators: one line per integrator crate, in `integrators!` at the end
 //! of this file. Each line names the crate's [`IntegratorKind`] type; the table generates
 //! [`IntegratorDesc`] (the scene-file and command-line form), its names, the scene it needs,
 //! its builder and [`IntegratorDesc::all`], which the CLI, `tress bench`, studies and the

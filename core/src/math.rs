@@ -189,7 +189,7 @@ pub fn erfc(x: f64) -> f64 {
     }
 }
 
-/// erf(x) = 1 − [`erfc`](x).
+/// erf(x) = 1 − erfc(x) (see [`erfc`]).
 pub fn erf(x: f64) -> f64 {
     1.0 - erfc(x)
 }

@@ -12,7 +12,7 @@
 //! - `M_p`: the von Mises–Fisher longitudinal lobe
 //!   `exp(−sin θ_i sin θ_o / v) I₀(cos θ_i cos θ_o / v) / (2 v sinh(1/v))`, variance
 //!   `v_0 = (0.726 β_m + 0.812 β_m² + 3.7 β_m²⁰)²`, `v_1 = v_0/4`, `v_2 = v_3 = 4 v_0`, evaluated
-//!   for every v in one overflow-free log form (see [`longitudinal`]).
+//!   for every v in one overflow-free log form (see `longitudinal`).
 //! - Scale tilt: lobe p sees θ_o rotated by −2α (R), +α (TT), +4α (TRT), 0 (residual).
 //! - `N_p`: logistic of scale `s = √(π/8)(0.265 β_n + 1.194 β_n² + 5.372 β_n²²)` trimmed to
 //!   [−π, π], centred on the exit azimuth `Φ(p, h) = 2p γ_t − 2 γ_o + p π`; uniform for p = 3.
