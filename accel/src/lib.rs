@@ -90,6 +90,7 @@ pub mod source;
 #[cfg(test)]
 mod test_util;
 pub mod tfx;
+pub mod usc;
 
 pub use curves::{CurveBasis, CurveShape};
 pub use cyhair::HairFile;
@@ -102,3 +103,4 @@ pub use scene::raw;
 pub use scene::{AccelInfo, EmbreeAccel, ObjectInfo, ObjectKind, SceneBuilder};
 pub use source::{HairOptions, HairSource};
 pub use tfx::TfxFile;
+pub use usc::UscFile;

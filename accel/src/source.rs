@@ -7,6 +7,7 @@ use crate::error::{format_error, Result};
 use crate::geometry::{HairGeometry, Transform};
 use crate::procedural::ProceduralHair;
 use crate::tfx::TfxFile;
+use crate::usc::UscFile;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -16,6 +17,7 @@ use std::path::{Path, PathBuf};
 /// File("hair/straight.hair")                    // format from the extension, default options
 /// Hair(path: "hair/straight.hair", z_up: true)  // Cem Yuksel .hair
 /// Tfx(path: "hair/sintel_hair.tfx", radius: 0.01)
+/// Usc(path: "hairstyles/strands00001.data", radius: 0.00004)  // USC-HairSalon
 /// Procedural(style: Wavy(amplitude: 0.05, frequency: 3.0), strands: 2000)
 /// ```
 ///
@@ -26,12 +28,15 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub enum HairSource {
-    /// A `.hair` or `.tfx` file (by extension, case-insensitive) with default reader options.
+    /// A `.hair`, `.tfx` or USC-HairSalon `.data` file (by extension, case-insensitive) with
+    /// default reader options.
     File(PathBuf),
     /// A Cem Yuksel `.hair` file with reader options (`z_up`).
     Hair(HairFile),
     /// An AMD TressFX `.tfx` file with reader options (`radius`).
     Tfx(TfxFile),
+    /// A USC-HairSalon `.data` file with reader options (`radius`).
+    Usc(UscFile),
     /// Hair generated from a seed ([`ProceduralHair`]).
     Procedural(ProceduralHair),
 }
@@ -43,6 +48,7 @@ impl HairSource {
             HairSource::File(p) => Some(p),
             HairSource::Hair(f) => Some(&f.path),
             HairSource::Tfx(f) => Some(&f.path),
+            HairSource::Usc(f) => Some(&f.path),
             HairSource::Procedural(_) => None,
         }
     }
@@ -53,6 +59,7 @@ impl HairSource {
             HairSource::File(p) => Some(p),
             HairSource::Hair(f) => Some(&mut f.path),
             HairSource::Tfx(f) => Some(&mut f.path),
+            HairSource::Usc(f) => Some(&mut f.path),
             HairSource::Procedural(_) => None,
         }
     }
@@ -68,14 +75,16 @@ impl HairSource {
                 match ext.as_deref() {
                     Some("hair") => HairFile::new(path).read(),
                     Some("tfx") => TfxFile::new(path).read(),
+                    Some("data") => UscFile::new(path).read(),
                     _ => Err(format_error(
                         path,
-                        "unknown hair file type: expected a .hair or .tfx extension",
+                        "unknown hair file type: expected a .hair, .tfx or .data extension",
                     )),
                 }
             }
             HairSource::Hair(f) => f.read(),
             HairSource::Tfx(f) => f.read(),
+            HairSource::Usc(f) => f.read(),
             HairSource::Procedural(p) => p.generate(),
         }
     }

@@ -1111,3 +1111,30 @@ fn parse_errors_show_an_excerpt_of_long_lines() {
         "{shown}\n{caret}"
     );
 }
+
+/// USC-HairSalon `.data` files load by extension, and a broken one fails naming the file.
+#[test]
+fn usc_hairsalon_files_load_and_broken_ones_are_named() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    let mut bytes = 2i32.to_le_bytes().to_vec();
+    for strand in [
+        [[0.0f32, 0.5, 0.0], [0.0, 0.0, 0.1]],
+        [[0.2, 0.5, 0.0], [0.2, 0.0, 0.1]],
+    ] {
+        bytes.extend(2i32.to_le_bytes());
+        bytes.extend(strand.iter().flatten().flat_map(|v| v.to_le_bytes()));
+    }
+    std::fs::write(d.join("style.data"), &bytes).unwrap();
+    let scene = SCENE.replace(
+        "Procedural(style: Ball, strands: 300, radius: 0.01)",
+        "Usc(path: \"style.data\", radius: 0.01)",
+    );
+    std::fs::write(d.join("scene.ron"), &scene).unwrap();
+    let o = tress(&["info", "scene.ron"], d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("2 strands"), "{out}");
+    std::fs::write(d.join("style.data"), &bytes[..bytes.len() - 5]).unwrap();
+    assert_bad_hair(d, "File(\"style.data\")", &["style.data", "past the end"]);
+}
