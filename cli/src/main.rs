@@ -53,6 +53,12 @@ enum Command {
     Farm(farm::FarmArgs),
     /// Fit dual scattering's d_f and d_b to a short path-traced reference of a scene.
     Calibrate(calibrate::CalibrateArgs),
+    /// Write a commented starter scene (procedural hair on a head under the built-in sky).
+    Init {
+        /// Where to write it; an existing file is not overwritten.
+        #[arg(default_value = "scene.ron")]
+        path: PathBuf,
+    },
 }
 
 fn main() {
@@ -91,7 +97,25 @@ fn run(cli: Cli) -> Result<()> {
         Command::Merge(args) => merge::run(args),
         Command::Farm(args) => farm::run(args),
         Command::Calibrate(args) => calibrate::run(args),
+        Command::Init { path } => init(&path),
     }
+}
+
+/// The starter scene of `tress init`.
+const STARTER_SCENE: &str = include_str!("templates/starter.ron");
+
+/// `tress init`: writes the starter scene, unless `path` exists.
+fn init(path: &std::path::Path) -> Result<()> {
+    if path.exists() {
+        anyhow::bail!("{} exists: not overwritten", path.display());
+    }
+    atomic_write(path, STARTER_SCENE.as_bytes())?;
+    eprintln!(
+        "wrote {}; render it with: tress render {}",
+        path.display(),
+        path.display()
+    );
+    Ok(())
 }
 
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so readers

@@ -27,6 +27,13 @@ pub struct RenderArgs {
     /// Samples per pixel; overrides the scene's film.spp.
     #[arg(long)]
     pub spp: Option<u32>,
+    /// Film width in pixels; overrides the scene's film.width (the camera keeps its vertical
+    /// field of view, so a wider film sees more to the sides).
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Film height in pixels; overrides the scene's film.height.
+    #[arg(long)]
+    pub height: Option<u32>,
     /// Render sample indices N..N+spp of every pixel instead of 0..spp (same seed stream), so
     /// that `tress merge` can add them to a render of 0..N exactly.
     #[arg(long, default_value_t = 0)]
@@ -81,6 +88,12 @@ fn load_with_overrides(args: &RenderArgs) -> Result<SceneDesc> {
     }
     if let Some(seed) = args.seed {
         desc.film.seed = seed;
+    }
+    if let Some(width) = args.width {
+        desc.film.width = width;
+    }
+    if let Some(height) = args.height {
+        desc.film.height = height;
     }
     if args.crop.is_some() {
         desc.film.crop = args.crop;

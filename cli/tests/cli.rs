@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{scene_dir, stderr, tress, SCENE};
+use common::{render_ok, scene_dir, stderr, tress, SCENE};
 
 #[test]
 fn renders_exr_and_png_with_metadata() {
@@ -54,6 +54,34 @@ fn command_line_overrides_and_crop() {
     );
     assert_eq!((image.full_width, image.full_height), (24, 20));
     assert!(attrs.iter().any(|(k, v)| k == "tress:spp" && v == "3"));
+}
+
+#[test]
+fn film_size_overrides() {
+    let (dir, _) = scene_dir(SCENE);
+    render_ok(
+        &[
+            "--out", "w.exr", "--width", "40", "--height", "10", "--quiet",
+        ],
+        dir.path(),
+    );
+    let (image, _) = tress_core::image_io::read_exr(dir.path().join("w.exr")).unwrap();
+    assert_eq!((image.width, image.height), (40, 10));
+    // Overridden sizes are validated as scene ones are.
+    let o = tress(
+        &[
+            "render",
+            "scene.ron",
+            "--out",
+            "z.exr",
+            "--width",
+            "0",
+            "--quiet",
+        ],
+        dir.path(),
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("empty"), "{}", stderr(&o));
 }
 
 #[test]
@@ -347,4 +375,34 @@ fn tiny_sun_discs_render_like_a_point_sun() {
     }
     let disc = mean_with("0.5");
     assert!((disc - point).abs() < 0.05 * point, "{disc} vs {point}");
+}
+
+#[test]
+fn init_writes_a_starter_scene_that_renders() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let o = tress(&["init"], d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = tress(&["info", "scene.ron"], d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = tress(
+        &[
+            "render",
+            "scene.ron",
+            "--spp",
+            "1",
+            "--width",
+            "32",
+            "--height",
+            "32",
+            "--quiet",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(d.join("scene.exr").exists() && d.join("scene.png").exists());
+    // It does not overwrite.
+    let o = tress(&["init"], d);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("not overwritten"), "{}", stderr(&o));
 }
