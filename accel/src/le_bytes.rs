@@ -1,7 +1,24 @@
-//! Little-endian fields of the binary hair formats (HAIR, TressFX), read at byte offsets the
-//! readers have already checked against the file's length.
+//! Reading the binary hair formats (HAIR, TressFX, USC-HairSalon): whole regular files, and
+//! little-endian fields at byte offsets the readers have already checked against the length.
 
+use std::path::Path;
 use tress_core::math::Vec3;
+
+/// The bytes of a hair file whose format has no fiber radius, after checking the `radius`
+/// option the reader supplies instead.
+pub(crate) fn read_with_radius(path: &Path, radius: f32) -> crate::Result<Vec<u8>> {
+    if !(radius.is_finite() && radius > 0.0) {
+        return Err(crate::Error::InvalidOption {
+            object: path.display().to_string(),
+            field: "radius",
+            reason: format!("must be finite and positive, got {radius}"),
+        });
+    }
+    tress_core::files::read_regular(path).map_err(|source| crate::Error::Io {
+        path: path.to_owned(),
+        source,
+    })
+}
 
 /// The `u32` at byte `at`.
 pub(crate) fn u32_at(b: &[u8], at: usize) -> u32 {

@@ -13,7 +13,7 @@
 
 use crate::error::{format_error, Result};
 use crate::geometry::{HairAttribute, HairGeometry};
-use crate::le_bytes::{f32_at, u32_at};
+use crate::le_bytes::{f32_at, read_with_radius, u32_at};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use tress_core::math::{Rgb, Vec3};
@@ -46,18 +46,7 @@ impl TfxFile {
 
     /// Reads and validates the file.
     pub fn read(&self) -> Result<HairGeometry> {
-        if !(self.radius.is_finite() && self.radius > 0.0) {
-            return Err(crate::Error::InvalidOption {
-                object: self.path.display().to_string(),
-                field: "radius",
-                reason: format!("must be finite and positive, got {}", self.radius),
-            });
-        }
-        let bytes =
-            tress_core::files::read_regular(&self.path).map_err(|source| crate::Error::Io {
-                path: self.path.clone(),
-                source,
-            })?;
+        let bytes = read_with_radius(&self.path, self.radius)?;
         parse(&bytes, &self.path, self.radius)
     }
 }

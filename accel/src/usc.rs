@@ -8,7 +8,7 @@
 
 use crate::error::{format_error, Result};
 use crate::geometry::HairGeometry;
-use crate::le_bytes::{u32_at, vec3_at};
+use crate::le_bytes::{read_with_radius, u32_at, vec3_at};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 #[cfg(test)]
@@ -40,18 +40,7 @@ impl UscFile {
 
     /// Reads and validates the file.
     pub fn read(&self) -> Result<HairGeometry> {
-        if !(self.radius.is_finite() && self.radius > 0.0) {
-            return Err(crate::Error::InvalidOption {
-                object: self.path.display().to_string(),
-                field: "radius",
-                reason: format!("must be finite and positive, got {}", self.radius),
-            });
-        }
-        let bytes =
-            tress_core::files::read_regular(&self.path).map_err(|source| crate::Error::Io {
-                path: self.path.clone(),
-                source,
-            })?;
+        let bytes = read_with_radius(&self.path, self.radius)?;
         parse(&bytes, &self.path, self.radius)
     }
 }

@@ -8,10 +8,8 @@
 
 #![warn(missing_docs)]
 
-use tress_core::integrator::BuildError;
-use tress_core::prepare::Preparation;
 use tress_core::sampling::power_heuristic;
-use tress_core::{Integrator, IntegratorKind, Rgb, Sampler, Scene};
+use tress_core::{Rgb, Sampler, Scene};
 use tress_dual_scattering::{DirectionSampling, DualScattering, HairPoint};
 
 pub use tress_dual_scattering::{DualError, DualSettings};
@@ -23,27 +21,7 @@ pub struct MisDirections;
 /// The `dual-mis` integrator.
 pub type DualMis = DualScattering<MisDirections>;
 
-impl IntegratorKind for MisDirections {
-    type Settings = DualSettings;
-    const NAME: &'static str = "dual-mis";
-    const UNBIASED: bool = false;
-
-    fn density_grid(settings: &DualSettings) -> Option<Option<u32>> {
-        settings.density_grid()
-    }
-
-    fn build(
-        settings: &DualSettings,
-        scene: &Scene,
-        prep: &Preparation,
-    ) -> Result<Box<dyn Integrator>, BuildError> {
-        settings.build_with(scene, MisDirections, prep)
-    }
-
-    fn test_settings() -> DualSettings {
-        DualSettings::for_tests()
-    }
-}
+tress_dual_scattering::dual_scattering_integrator!(MisDirections, "dual-mis");
 
 impl DirectionSampling for MisDirections {
     fn estimate(&self, point: &HairPoint, scene: &Scene, sampler: &mut Sampler) -> Rgb {

@@ -260,6 +260,45 @@ impl<D: DirectionSampling> DualScattering<D> {
     }
 }
 
+/// Registers a [`DirectionSampling`] type (a unit struct) as the dual-scattering integrator
+/// `$name`: implements `tress_core::IntegratorKind` for it, with [`DualSettings`], no bias
+/// claim, the density grid its settings ask for and quick test tables. The two dual-scattering
+/// crates differ only in this name and their directions.
+#[macro_export]
+macro_rules! dual_scattering_integrator {
+    ($directions:ident, $name:literal) => {
+        impl $crate::__private::IntegratorKind for $directions {
+            type Settings = $crate::DualSettings;
+            const NAME: &'static str = $name;
+            const UNBIASED: bool = false;
+
+            fn density_grid(settings: &$crate::DualSettings) -> Option<Option<u32>> {
+                settings.density_grid()
+            }
+
+            fn build(
+                settings: &$crate::DualSettings,
+                scene: &$crate::__private::Scene,
+                prep: &$crate::__private::Preparation,
+            ) -> Result<Box<dyn $crate::__private::Integrator>, $crate::__private::BuildError> {
+                settings.build_with(scene, $directions, prep)
+            }
+
+            fn test_settings() -> $crate::DualSettings {
+                $crate::DualSettings::for_tests()
+            }
+        }
+    };
+}
+
+/// What [`dual_scattering_integrator!`] expands to needs, by paths that work from any crate.
+#[doc(hidden)]
+pub mod __private {
+    pub use tress_core::integrator::BuildError;
+    pub use tress_core::prepare::Preparation;
+    pub use tress_core::{Integrator, IntegratorKind, Scene};
+}
+
 impl DualSettings {
     /// The density grid the estimator reads (for [`tress_core::IntegratorKind::density_grid`]).
     pub fn density_grid(&self) -> Option<Option<u32>> {

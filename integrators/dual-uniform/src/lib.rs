@@ -6,10 +6,8 @@
 
 #![warn(missing_docs)]
 
-use tress_core::integrator::BuildError;
-use tress_core::prepare::Preparation;
 use tress_core::sampling::{sample_uniform_sphere, INV_4PI};
-use tress_core::{Integrator, IntegratorKind, Rgb, Sampler, Scene};
+use tress_core::{Rgb, Sampler, Scene};
 use tress_dual_scattering::{DirectionSampling, DualScattering, HairPoint};
 
 pub use tress_dual_scattering::{DualError, DualSettings};
@@ -28,24 +26,4 @@ impl DirectionSampling for UniformDirections {
 /// The `dual-uniform` integrator.
 pub type DualUniform = DualScattering<UniformDirections>;
 
-impl IntegratorKind for UniformDirections {
-    type Settings = DualSettings;
-    const NAME: &'static str = "dual-uniform";
-    const UNBIASED: bool = false;
-
-    fn density_grid(settings: &DualSettings) -> Option<Option<u32>> {
-        settings.density_grid()
-    }
-
-    fn build(
-        settings: &DualSettings,
-        scene: &Scene,
-        prep: &Preparation,
-    ) -> Result<Box<dyn Integrator>, BuildError> {
-        settings.build_with(scene, UniformDirections, prep)
-    }
-
-    fn test_settings() -> DualSettings {
-        DualSettings::for_tests()
-    }
-}
+tress_dual_scattering::dual_scattering_integrator!(UniformDirections, "dual-uniform");
