@@ -246,6 +246,26 @@ impl EnvironmentMap {
         self.texel_at(self.uv_of(dir).0).radiance
     }
 
+    /// Radiance from `dir` interpolated bilinearly between the four nearest texel centres (u
+    /// wraps around, v is clamped at the poles): the map as the camera sees it directly,
+    /// without the blocks of [`Self::radiance`]. Lighting keeps the nearest texel, which the
+    /// sampling density matches exactly.
+    pub fn radiance_bilinear(&self, dir: Vec3) -> Rgb {
+        let (uv, _) = self.uv_of(dir);
+        let (w, h) = (self.width as i64, self.height as i64);
+        let x = uv.x * self.width as f32 - 0.5;
+        let y = uv.y * self.height as f32 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let column = |i: i64| i.rem_euclid(w) as usize;
+        let row = |j: i64| j.clamp(0, h - 1) as usize;
+        let (i0, j0) = (x0 as i64, y0 as i64);
+        let at = |i: i64, j: i64| self.texels[row(j) * self.width + column(i)].radiance;
+        let top = at(i0, j0) * (1.0 - fx) + at(i0 + 1, j0) * fx;
+        let bottom = at(i0, j0 + 1) * (1.0 - fx) + at(i0 + 1, j0 + 1) * fx;
+        top * (1.0 - fy) + bottom * fy
+    }
+
     /// The texel whose cell holds `uv`: the one cell arithmetic of lookups, densities and
     /// sampling.
     #[inline]
@@ -521,6 +541,28 @@ mod tests {
             outcome.p_value > sidak_alpha(0.01, CHI2_TESTS),
             "{outcome:?}"
         );
+    }
+
+    #[test]
+    fn bilinear_radiance_interpolates_between_texel_centres() {
+        let env = synthetic_map(0.0);
+        let (w, h) = (160.0f32, 80.0f32);
+        let dir = |u: f32, v: f32| map_direction(0.5 * PI - v * PI, (u - 0.5) * TAU);
+        let texel = |i: usize, j: usize| env.texels[j * env.width + i].radiance;
+        // At a texel centre: the texel.
+        let at = env.radiance_bilinear(dir(30.5 / w, 20.5 / h));
+        assert!((at - texel(30, 20)).length() < 1e-4 * texel(30, 20).length());
+        // Halfway between two centres of a row: their mean; and across the u = 0/1 seam.
+        for (i0, i1, u) in [(30, 31, 31.0 / w), (159, 0, 0.0)] {
+            let mid = env.radiance_bilinear(dir(u, 20.5 / h));
+            let want = 0.5 * (texel(i0, 20) + texel(i1, 20));
+            assert!(
+                (mid - want).length() < 1e-3 * want.length(),
+                "{mid} vs {want}"
+            );
+        }
+        // Lighting keeps the nearest texel.
+        assert_eq!(env.radiance(dir(31.2 / w, 20.5 / h)), texel(31, 20));
     }
 
     #[test]

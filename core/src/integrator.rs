@@ -103,7 +103,8 @@ pub fn direct_light(
 /// What the light at infinity `light` adds to a path of weight `throughput` that escaped along
 /// `dir`, MIS-weighted against next-event estimation choosing it with probability
 /// `select_pdf`. `scatter_pdf` is the density of the scattering sample that produced the ray;
-/// `None` for a camera ray, which light sampling cannot produce (weight 1).
+/// `None` for a camera ray, which light sampling cannot produce (weight 1), and which sees
+/// environment maps interpolated between texels ([`Light::le_seen`]).
 pub fn escaped_light(
     light: &Light,
     dir: Vec3,
@@ -111,10 +112,13 @@ pub fn escaped_light(
     select_pdf: f32,
     throughput: Rgb,
 ) -> Rgb {
+    // A camera ray sees the light directly: no MIS weight, and environment maps smooth.
+    let Some(scatter_pdf) = scatter_pdf else {
+        return throughput * light.le_seen(dir);
+    };
     let (le, light_pdf) = light.le_pdf(dir);
     if le == Rgb::ZERO {
         return Rgb::ZERO;
     }
-    let weight = scatter_pdf.map_or(1.0, |p| power_heuristic(p, select_pdf * light_pdf));
-    throughput * le * weight
+    throughput * le * power_heuristic(scatter_pdf, select_pdf * light_pdf)
 }

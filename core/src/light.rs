@@ -248,6 +248,15 @@ impl Light {
         }
     }
 
+    /// [`Self::le`] as seen directly by the camera: environment maps interpolated between texel
+    /// centres rather than blocky; every other light as `le`.
+    pub fn le_seen(&self, dir: Vec3) -> Rgb {
+        match self {
+            Light::Environment(env) => env.radiance_bilinear(dir),
+            _ => self.le(dir),
+        }
+    }
+
     /// `(le(dir), pdf_li(dir))` in one call (the environment map locates its texel once).
     pub fn le_pdf(&self, dir: Vec3) -> (Rgb, f32) {
         match self {
