@@ -51,7 +51,7 @@ use tress_core::prepare::Preparation;
 use tress_core::rng::Pcg32;
 use tress_core::sampling::sample_uniform_sphere;
 use tress_core::{Accel, Bcsdf, Camera, Hit, Integrator, Material, Scene};
-use tress_materials::dual_scattering::{DualScatteringSettings, DualScatteringTables};
+use tress_materials::dual_scattering::{fingerprint, DualScatteringSettings, DualScatteringTables};
 use tress_materials::HairModel;
 
 mod raw;
@@ -218,8 +218,14 @@ pub fn run(args: BenchArgs) -> Result<()> {
         .map_err(|e| anyhow!("hair material: {e}"))?;
     eprintln!("bench: BCSDF costs and dual-scattering tables");
     bench_bcsdfs(&mut table, plan.bcsdf_calls)?;
-    // Built here to time the build apart from any integrator.
-    let tables = DualScatteringTables::new(bcsdf.as_ref(), &plan.tables)
+    // One preparation context for the whole run. The tables are built here, through it, to
+    // time the build apart from any render; the integrators of every model then find them in
+    // it (the same model and settings) instead of building them again per model.
+    let prep = Preparation::new();
+    let tables = prep
+        .get_or_build((fingerprint(bcsdf.as_ref()), plan.tables.clone()), || {
+            DualScatteringTables::new(bcsdf.as_ref(), &plan.tables)
+        })
         .map_err(|e| anyhow!("dual-scattering tables: {e}"))?;
     table.push(
         ("Chiang/brown", "bcsdf"),
@@ -301,8 +307,16 @@ pub fn run(args: BenchArgs) -> Result<()> {
 
     let mut per_sample: Vec<Timing> = Vec::new();
     for spec in &models {
-        bench_model(spec, &plan, &pools, &bcsdf, &mut table, &mut per_sample)
-            .with_context(|| format!("model {}", spec.name))?;
+        bench_model(
+            spec,
+            &plan,
+            &pools,
+            &bcsdf,
+            &prep,
+            &mut table,
+            &mut per_sample,
+        )
+        .with_context(|| format!("model {}", spec.name))?;
     }
     scaling(&mut table, &plan, &per_sample, &pools);
 
@@ -435,6 +449,7 @@ fn bench_model(
     plan: &Plan,
     pools: &[(usize, ThreadPool)],
     bcsdf: &Arc<dyn Bcsdf>,
+    prep: &Preparation,
     table: &mut Table,
     per_sample: &mut Vec<Timing>,
 ) -> Result<()> {
@@ -598,11 +613,9 @@ fn bench_model(
     } else {
         pools.iter().rev().take(1).collect()
     };
-    // One preparation context per model: the dual-scattering integrators share their tables.
-    let prep = Preparation::new();
     for desc in &descs {
         let integrator = desc
-            .build(&scene, &prep)
+            .build(&scene, prep)
             .map_err(|e| anyhow!("integrator {}: {e:#}", desc.name()))?;
         // An untimed pass records every ray the integrator traces (it also warms up); the
         // timed renders below repeat exactly that work (the image depends only on the seed).

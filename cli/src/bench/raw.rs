@@ -215,14 +215,21 @@ pub(super) struct Accels {
     pub(super) plain: EmbreeAccel,
 }
 
+impl Accels {
+    /// The scene a mode queries: the twin for [`Mode::Plain`], tress's for the others.
+    pub(super) fn for_mode(&self, mode: Mode) -> &EmbreeAccel {
+        if mode == Mode::Plain {
+            &self.plain
+        } else {
+            &self.tress
+        }
+    }
+}
+
 /// Traces a chunk of rays; returns how many hit (or are blocked).
 pub(super) fn trace_chunk(accels: &Accels, kind: Kind, mode: Mode, rays: &[RawRay]) -> u64 {
     let closest = kind != Kind::Shadow;
-    let accel = if mode == Mode::Plain {
-        &accels.plain
-    } else {
-        &*accels.tress
-    };
+    let accel = accels.for_mode(mode);
     let single = |exclusion| -> u64 {
         rays.iter()
             .map(|r| {

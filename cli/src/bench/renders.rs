@@ -161,11 +161,7 @@ pub(super) fn replay(
     [Mode::Plain, Mode::Embree1, Mode::Embree1Excl, Mode::Accel]
         .into_iter()
         .map(|mode| {
-            let accel = if mode == Mode::Plain {
-                &accels.plain
-            } else {
-                &*accels.tress
-            };
+            let accel = accels.for_mode(mode);
             let exclusion = if mode == Mode::Embree1Excl {
                 Exclusion::Tress
             } else {
