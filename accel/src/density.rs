@@ -677,6 +677,10 @@ impl DensityGrid {
 }
 
 impl FiberDensity for DensityGrid {
+    fn describe(&self) -> String {
+        self.info().to_string()
+    }
+
     fn fibers_crossed(&self, ray: &Ray) -> f32 {
         let len = ray.dir.length();
         if self.data.is_empty() || len.is_nan() || len <= 0.0 {

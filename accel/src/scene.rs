@@ -18,7 +18,7 @@ use std::borrow::Cow;
 use std::fmt;
 use std::sync::atomic::{AtomicIsize, Ordering};
 use std::sync::Arc;
-use tress_core::accel::{Accel, Hit, HitKind, PrimId};
+use tress_core::accel::{Accel, BuildError, FiberDensity, Hit, HitKind, PrimId};
 use tress_core::bcsdf::FiberFrame;
 use tress_core::math::{Aabb, Ray, Vec3};
 
@@ -908,6 +908,20 @@ impl Accel for EmbreeAccel {
 
     fn bounds(&self) -> Aabb {
         self.info.bounds
+    }
+
+    fn fiber_density(
+        &self,
+        resolution: Option<u32>,
+    ) -> std::result::Result<Option<Arc<dyn FiberDensity>>, BuildError> {
+        if self.info.strands == 0 {
+            return Ok(None);
+        }
+        let settings = crate::DensitySettings {
+            resolution,
+            ..Default::default()
+        };
+        Ok(Some(Arc::new(crate::DensityGrid::build(self, &settings)?)))
     }
 }
 

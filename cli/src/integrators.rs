@@ -1,11 +1,10 @@
 //! THE registry of integrators: one line per integrator crate, in `integrators!` at the end
 //! of this file. Each line names the crate's [`IntegratorKind`] type; the table generates
-//! [`IntegratorDesc`] (the scene-file and command-line form), its names, the scene it needs,
+//! [`IntegratorDesc`] (the scene-file and command-line form), its names,
 //! its builder and [`IntegratorDesc::all`], which the CLI, `tress bench`, studies and the
 //! cross-crate tests iterate, so a new integrator is covered everywhere without other edits.
 
 use serde::{Deserialize, Serialize};
-use tress_accel::DensitySettings;
 use tress_core::prepare::Preparation;
 use tress_core::{Integrator, IntegratorKind, Scene};
 
@@ -47,17 +46,6 @@ macro_rules! integrators {
                 match self {
                     $(IntegratorDesc::$variant(_) => <$kind as IntegratorKind>::UNBIASED,)+
                 }
-            }
-
-            /// The hair density grid the integrator needs in the scene, if any.
-            pub fn density_grid(&self) -> Option<DensitySettings> {
-                let resolution = match self {
-                    $(IntegratorDesc::$variant(s) => <$kind as IntegratorKind>::density_grid(s),)+
-                };
-                resolution.map(|resolution| DensitySettings {
-                    resolution,
-                    ..Default::default()
-                })
             }
 
             /// Builds the integrator for `scene`; precomputations (dual-scattering tables)

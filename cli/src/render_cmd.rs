@@ -228,9 +228,9 @@ pub fn render(args: RenderArgs) -> Result<()> {
         eprintln!("{}", built.summary);
     }
     let t_integrator = Instant::now();
-    let integrator = desc
-        .integrator
-        .build(&built.scene, &tress_core::prepare::Preparation::new())
+    let prep = tress_core::prepare::Preparation::new();
+    let integrator = pool
+        .install(|| desc.integrator.build(&built.scene, &prep))
         .map_err(|e| {
             anyhow::anyhow!(
                 "{}: integrator {}: {e:#}",
@@ -240,6 +240,11 @@ pub fn render(args: RenderArgs) -> Result<()> {
         })?;
     // Worth a line when the integrator precomputed something (dual-scattering tables).
     let setup = t_integrator.elapsed();
+    if verbose {
+        prep.take_notes()
+            .iter()
+            .for_each(|line| eprintln!("{line}"));
+    }
     if verbose && setup >= Duration::from_millis(50) {
         eprintln!(
             "{} set up in {:.2} s",

@@ -297,43 +297,15 @@ pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
     let (accel, geometry_summary) =
         crate::geometry::build_accel(&desc.objects, scene_path, &material_index, &materials)?;
     let geometry_time = t1.elapsed();
-    let mut summary = format!(
+    let summary = format!(
         "{geometry_summary}\nmaterials: {} built in {:.1} ms; lights: {}; geometry built in {:.2} s",
         materials.len(),
         material_time.as_secs_f64() * 1e3,
         lights.len(),
         geometry_time.as_secs_f64()
     );
-    let density: Option<Box<dyn tress_core::FiberDensity>> = match desc.integrator.density_grid() {
-        Some(settings) if accel.info().strands > 0 => {
-            let t2 = Instant::now();
-            let grid = tress_accel::DensityGrid::build(&accel, &settings)
-                .map_err(|e| anyhow!("{}: {e}", scene_path.display()))?;
-            summary.push_str(&format!(
-                "\n{} built in {:.2} s",
-                grid.info(),
-                t2.elapsed().as_secs_f64()
-            ));
-            Some(Box::new(grid))
-        }
-        // Say what is missing, rather than the integrator finding no grid.
-        Some(_) if materials.iter().any(|m| matches!(m, Material::Hair(_))) => bail!(
-            "{}: integrator {} shades hair from a density grid of the scene's hair objects, \
-             but the scene has hair materials and no hair object: add a `Hair(source: …)` \
-             object, or render it with `path`",
-            scene_path.display(),
-            desc.integrator.name()
-        ),
-        _ => None,
-    };
     Ok(BuiltScene {
-        scene: Scene {
-            camera,
-            accel: Box::new(accel),
-            materials,
-            lights: lights.into(),
-            density,
-        },
+        scene: Scene::new(camera, Box::new(accel), materials, lights.into()),
         summary,
     })
 }

@@ -887,7 +887,7 @@ fn extreme_hair_extents_under_dual_scattering_give_clear_errors() {
             dir.path(),
             &render,
             &[
-                "scene.ron: density grid: the hair",
+                "scene.ron: integrator dual-mis: density grid: the hair",
                 expect,
                 "scale the hair",
             ],

@@ -1,6 +1,7 @@
 //! The ray-intersection interface implemented by `tress-accel` (Embree).
 
 use crate::math::{Aabb, Ray, Vec3};
+use std::sync::Arc;
 
 /// Identifies one primitive: an Embree geometry and a primitive (curve segment, triangle, sphere)
 /// inside it.
@@ -67,7 +68,21 @@ pub trait Accel: Send + Sync {
     }
     /// Bounds of all geometry.
     fn bounds(&self) -> Aabb;
+    /// Builds the density grid of the hair fibers in this geometry with `resolution` voxels
+    /// along the longest side of their bounds (`None`: chosen from the fibers); `Ok(None)` when
+    /// there is no hair. Integrators reach it through [`crate::Scene::fiber_density`], which
+    /// builds it once per run and resolution.
+    fn fiber_density(
+        &self,
+        resolution: Option<u32>,
+    ) -> Result<Option<Arc<dyn FiberDensity>>, BuildError> {
+        let _ = resolution;
+        Ok(None)
+    }
 }
+
+/// Why derived geometry (a density grid) could not be built.
+pub type BuildError = Box<dyn std::error::Error + Send + Sync>;
 
 /// Hair density along rays, for dual scattering: the expected number of fibers a ray crosses.
 /// Implemented by the voxel density grid in `tress-accel`; kept apart from [`Accel`] because it
@@ -75,4 +90,6 @@ pub trait Accel: Send + Sync {
 pub trait FiberDensity: Send + Sync {
     /// Expected number of fibers crossed along `ray` over `(0, ray.t_max)`.
     fn fibers_crossed(&self, ray: &Ray) -> f32;
+    /// One line for logs: resolution, memory, what it stores.
+    fn describe(&self) -> String;
 }

@@ -32,11 +32,9 @@ pub trait IntegratorKind {
     /// Whether the images converge to the exact solution of the scene (white-furnace tests hold
     /// it to 1 %) rather than to an approximation (held to not creating energy).
     const UNBIASED: bool;
-    /// The fiber-density grid the integrator reads: `None` when it needs none, `Some(None)` at
-    /// the resolution chosen from the hair, `Some(Some(n))` at `n` voxels along the longest side.
-    fn density_grid(settings: &Self::Settings) -> Option<Option<u32>>;
-    /// Builds the integrator for `scene`; its precomputations happen here, fetched from or
-    /// added to the run's `prep` so that integrators of one run share them.
+    /// Builds the integrator for `scene`; its precomputations (tables, the scene's density
+    /// grid: [`Scene::fiber_density`]) happen here, fetched from or added to the run's `prep` so
+    /// that integrators of one run share them.
     fn build(
         settings: &Self::Settings,
         scene: &Scene,
@@ -49,7 +47,7 @@ pub trait IntegratorKind {
 }
 
 /// Why an integrator could not be built for a scene (the integrator's own error).
-pub type BuildError = Box<dyn std::error::Error + Send + Sync>;
+pub use crate::accel::BuildError;
 
 /// Continues a path at `sp` by sampling its scattering function: the next ray and the sample's
 /// density (for MIS at the next vertex), with `throughput` multiplied by f/pdf; `None` ends the

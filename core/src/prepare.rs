@@ -1,6 +1,7 @@
 //! The preparation context of a run: what integrators derive from a scene before rendering
-//! (dual-scattering tables, …), built once and shared by every integrator the run builds, and
-//! dropped with the run. It replaces process-wide caches: two runs in one process (a study's
+//! (dual-scattering tables, the scene's density grids, …), built once and shared by every
+//! integrator the run builds, and dropped with the run (Tungsten's `prepareForRender`). Scenes
+//! know nothing of integrators: an integrator asks for what it needs while it is built. It replaces process-wide caches: two runs in one process (a study's
 //! jobs share one; separate renders or tests do not) never see each other's data, and a cache
 //! entry is found by the value of its key, never by a description of it.
 
@@ -14,6 +15,8 @@ use std::sync::{Arc, Mutex};
 pub struct Preparation {
     /// Per (key type, value type): a `HashMap<K, Arc<T>>`.
     caches: Mutex<HashMap<TypeId, Box<dyn Any + Send + Sync>>>,
+    /// What was built, one line each, for the caller to log.
+    notes: Mutex<Vec<String>>,
 }
 
 impl std::fmt::Debug for Preparation {
@@ -61,6 +64,20 @@ impl Preparation {
         Ok(t)
     }
 
+    /// Records one line about something built (what, how large, how long), for the caller to
+    /// log when it chooses ([`Preparation::take_notes`]).
+    pub fn note(&self, line: String) {
+        self.notes
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(line);
+    }
+
+    /// The lines recorded since the last call, oldest first.
+    pub fn take_notes(&self) -> Vec<String> {
+        std::mem::take(&mut *self.notes.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
     /// How many `T`s are held under keys of type `K`.
     pub fn count<K: 'static, T: 'static>(&self) -> usize {
         self.lock()
@@ -98,5 +115,9 @@ mod tests {
         // A failed build is not kept.
         assert!(prep.get_or_build(3u32, || Err::<String, _>("no")).is_err());
         assert_eq!(prep.count::<u32, String>(), 2);
+        prep.note("grid".into());
+        prep.note("tables".into());
+        assert_eq!(prep.take_notes(), ["grid", "tables"]);
+        assert!(prep.take_notes().is_empty());
     }
 }

@@ -628,13 +628,12 @@ mod tests {
     }
 
     fn scene() -> Scene {
-        Scene {
-            camera: Camera::perspective(Vec3::Z, Vec3::ZERO, Vec3::Y, 40.0, 0.0, None),
-            accel: Box::new(Empty),
-            materials: Vec::new(),
-            lights: Vec::new().into(),
-            density: None,
-        }
+        Scene::new(
+            Camera::perspective(Vec3::Z, Vec3::ZERO, Vec3::Y, 40.0, 0.0, None),
+            Box::new(Empty),
+            Vec::new(),
+            Vec::new().into(),
+        )
     }
 
     fn film(crop: Option<[u32; 4]>) -> FilmSettings {

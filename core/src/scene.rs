@@ -1,12 +1,15 @@
 //! The renderable scene: camera, geometry, materials, lights.
 
-use crate::accel::{Accel, FiberDensity, Hit};
+use crate::accel::{Accel, BuildError, FiberDensity, Hit};
 use crate::bcsdf::Bcsdf;
 use crate::camera::Camera;
 use crate::light::Light;
 use crate::math::{Aabb, Ray, Rgb};
+use crate::prepare::Preparation;
 use std::cell::Cell;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
+use std::time::Instant;
 
 /// How a hit scatters light.
 #[derive(Clone, Debug)]
@@ -20,18 +23,27 @@ pub enum Material {
     },
 }
 
-/// Everything an integrator needs to shade.
+/// Everything an integrator needs to shade. A scene knows nothing of integrators: what one
+/// derives from it (a density grid) it asks for while it is built ([`Scene::fiber_density`]).
 pub struct Scene {
     /// The camera primary rays start from.
     pub camera: Camera,
-    /// Ray queries against all geometry; prefer the counting wrappers on `Scene`.
-    pub accel: Box<dyn Accel>,
+    /// Ray queries against all geometry (private: data derived from it is cached under the
+    /// scene's identity, so it must not change; queries go through the counting wrappers).
+    accel: Box<dyn Accel>,
     /// Materials, indexed by [`Hit::material`].
     pub materials: Vec<Material>,
     /// All lights, with the subsets the integrators sample from (found once).
     pub lights: Lights,
-    /// Hair density for the dual-scattering integrators; `None` when no integrator needs it.
-    pub density: Option<Box<dyn FiberDensity>>,
+    /// Distinguishes this scene's geometry from any other's in a shared [`Preparation`].
+    geometry_id: u64,
+}
+
+/// The key of a density grid in a [`Preparation`]: whose geometry, at what resolution.
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+struct DensityKey {
+    geometry_id: u64,
+    resolution: Option<u32>,
 }
 
 /// The scene's lights and the subsets integrators choose from, found once when the scene is
@@ -129,6 +141,55 @@ pub fn rays_traced_on_this_thread() -> u64 {
 }
 
 impl Scene {
+    /// A scene of `accel`'s geometry.
+    pub fn new(
+        camera: Camera,
+        accel: Box<dyn Accel>,
+        materials: Vec<Material>,
+        lights: Lights,
+    ) -> Self {
+        static NEXT_GEOMETRY_ID: AtomicU64 = AtomicU64::new(0);
+        Scene {
+            camera,
+            accel,
+            materials,
+            lights,
+            geometry_id: NEXT_GEOMETRY_ID.fetch_add(1, Ordering::Relaxed),
+        }
+    }
+
+    /// The geometry, for queries that bypass the ray statistics (tests, benchmarks).
+    pub fn accel(&self) -> &dyn Accel {
+        self.accel.as_ref()
+    }
+
+    /// The density grid of the scene's hair at `resolution` voxels along the longest side
+    /// (`None`: chosen from the fibers), built on the first request of the run `prep` and
+    /// shared after; `Ok(None)` when the scene has no hair. The build is noted in `prep`.
+    pub fn fiber_density(
+        &self,
+        prep: &Preparation,
+        resolution: Option<u32>,
+    ) -> Result<Option<Arc<dyn FiberDensity>>, BuildError> {
+        let key = DensityKey {
+            geometry_id: self.geometry_id,
+            resolution,
+        };
+        let grid = prep.get_or_build(key, || {
+            let start = Instant::now();
+            let grid = self.accel.fiber_density(resolution)?;
+            if let Some(grid) = &grid {
+                prep.note(format!(
+                    "{} built in {:.2} s",
+                    grid.describe(),
+                    start.elapsed().as_secs_f64()
+                ));
+            }
+            Ok::<_, BuildError>(grid)
+        })?;
+        Ok(grid.as_ref().clone())
+    }
+
     /// Closest hit, counted in the ray statistics.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {

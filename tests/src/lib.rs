@@ -26,8 +26,8 @@ pub fn hair_scene(
         .and_then(|b| b.add_hair(hair, options, 0))
         .and_then(|b| b.build())
         .expect("embree scene");
-    Scene {
-        camera: Camera::perspective(
+    Scene::new(
+        Camera::perspective(
             Vec3::new(0.0, 0.0, 4.0),
             Vec3::ZERO,
             Vec3::Y,
@@ -35,11 +35,10 @@ pub fn hair_scene(
             0.0,
             None,
         ),
-        accel: Box::new(accel),
-        materials: vec![Material::Hair(bcsdf)],
-        lights: lights.into(),
-        density: None,
-    }
+        Box::new(accel),
+        vec![Material::Hair(bcsdf)],
+        lights.into(),
+    )
 }
 
 /// A constant white environment of radiance 1.
@@ -71,19 +70,6 @@ pub fn shared_data(rel: &str) -> Option<PathBuf> {
         );
         None
     }
-}
-
-/// Adds the hair density grid the dual-scattering integrators need, built from the scene's
-/// own fibers.
-pub fn with_density_grid(mut scene: Scene, hair: &tress_accel::HairGeometry) -> Scene {
-    let accel = SceneBuilder::new()
-        .and_then(|b| b.add_hair(hair, &HairOptions::default(), 0))
-        .and_then(|b| b.build())
-        .expect("embree scene");
-    let grid = tress_accel::DensityGrid::build(&accel, &Default::default()).expect("density grid");
-    scene.accel = Box::new(accel);
-    scene.density = Some(Box::new(grid));
-    scene
 }
 
 /// The hair ball of [`hair_ball_scene`], as geometry.

@@ -8,12 +8,10 @@ use tress_core::render::render;
 use tress_core::Scene;
 use tress_materials::pigment::Pigment;
 use tress_materials::HairModel;
-use tress_tests::{film, hair_ball, hair_ball_scene, with_density_grid};
+use tress_tests::{film, hair_ball_scene};
 
 /// Dark hair under a sky so dim (scale 1e-36) that most radiance values are denormal floats, so
-/// any thread computing in another floating-point mode (flush-to-zero) shows in the bits; with
-/// the density grid the dual-scattering integrators need (built for every integrator, so that
-/// none depends on whether it is there).
+/// any thread computing in another floating-point mode (flush-to-zero) shows in the bits.
 fn scene() -> Scene {
     let model = HairModel::Chiang(tress_materials::chiang::Params {
         pigment: Pigment::Melanin {
@@ -25,8 +23,7 @@ fn scene() -> Scene {
     .build()
     .unwrap();
     let sky = EnvironmentMap::builtin_sky(30.0, 1e-36).unwrap();
-    let scene = hair_ball_scene(Arc::clone(&model), 1500, vec![Light::Environment(sky)]);
-    with_density_grid(scene, &hair_ball(1500))
+    hair_ball_scene(Arc::clone(&model), 1500, vec![Light::Environment(sky)])
 }
 
 /// Every registered integrator, with its quick test settings.

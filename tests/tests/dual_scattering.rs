@@ -8,7 +8,7 @@ use tress_core::{Image, Integrator, Scene};
 use tress_dual_mis::{DualMis, MisDirections};
 use tress_dual_uniform::{DualSettings, DualUniform, UniformDirections};
 use tress_materials::HairModel;
-use tress_tests::{film, hair_ball, hair_ball_scene, mean_and_standard_error, with_density_grid};
+use tress_tests::{film, hair_ball_scene, hair_scene, mean_and_standard_error};
 
 /// A smooth, strongly directional environment (bright warm top-left, dark blue bottom): no sun
 /// disc, whose rare hits would make the uniform estimator's variance too heavy-tailed for a
@@ -33,8 +33,7 @@ fn smooth_environment() -> Light {
 
 fn ball_scene(strands: u32) -> Scene {
     let model = HairModel::Chiang(Default::default()).build().unwrap();
-    let scene = hair_ball_scene(Arc::clone(&model), strands, vec![smooth_environment()]);
-    with_density_grid(scene, &hair_ball(strands))
+    hair_ball_scene(Arc::clone(&model), strands, vec![smooth_environment()])
 }
 
 fn settings() -> DualSettings {
@@ -150,8 +149,12 @@ fn with_no_fibers_to_cross_and_no_back_scattering_dual_scattering_is_single_scat
     };
     let model = HairModel::Chiang(Default::default()).build().unwrap();
     let sky = EnvironmentMap::builtin_sky(0.0, 1.0).unwrap();
-    let base = hair_ball_scene(Arc::clone(&model), 10, vec![Light::Environment(sky)]);
-    let scene = with_density_grid(base, &hair);
+    let scene = hair_scene(
+        &hair,
+        &Default::default(),
+        Arc::clone(&model),
+        vec![Light::Environment(sky)],
+    );
     let ds = DualUniform::new(
         DualSettings {
             d_b: Some(0.0),

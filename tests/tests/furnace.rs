@@ -66,10 +66,7 @@ fn every_registered_integrator_in_a_white_furnace() {
     });
     let ball = || hair_ball_scene(model.build().unwrap(), 3000, white_environment());
     for desc in IntegratorDesc::all_for_tests() {
-        let scene = match desc.density_grid() {
-            Some(_) => tress_tests::with_density_grid(ball(), &tress_tests::hair_ball(3000)),
-            None => ball(),
-        };
+        let scene = ball();
         let integrator = desc.build(&scene, &Default::default()).unwrap();
         // The middle of the ball: every pixel sees hair.
         let mut f = film(48, 48, spp(), 11);
@@ -113,10 +110,7 @@ fn dual_scattering_does_not_blow_up_in_a_white_furnace() {
                 "Chiang(beta_m: {beta}, beta_n: {beta}, pigment: SigmaA(0, 0, 0))"
             ))
             .unwrap();
-        let scene = tress_tests::with_density_grid(
-            hair_ball_scene(model.build().unwrap(), 3000, white_environment()),
-            &tress_tests::hair_ball(3000),
-        );
+        let scene = hair_ball_scene(model.build().unwrap(), 3000, white_environment());
         for (ms, bound) in [
             (MultipleScattering::Paper, 1.0),
             (MultipleScattering::FiberMedium, 1.2),

@@ -23,7 +23,7 @@ fn coverage(scene: &Scene) -> f64 {
         for x in 0..SIDE * SUB {
             let (px, py) = ((x as f32 + 0.5) / SUB as f32, (y as f32 + 0.5) / SUB as f32);
             let ray = scene.camera.generate_ray(px, py, SIDE, SIDE, Vec2::ZERO);
-            hits += u64::from(scene.accel.intersect(&ray).is_some());
+            hits += u64::from(scene.accel().intersect(&ray).is_some());
         }
     }
     hits as f64 / f64::from(SIDE * SIDE * SUB * SUB)

@@ -41,16 +41,17 @@ use std::sync::Arc;
 use std::time::Instant;
 use tress_accel::raw::{Exclusion, RawRay, PACKET};
 use tress_accel::{
-    CurveShape, DensityGrid, EmbreeAccel, HairFile, HairGeometry, HairOptions, HairStyle,
-    ProceduralHair, SceneBuilder,
+    CurveShape, DensityGrid, DensitySettings, EmbreeAccel, HairFile, HairGeometry, HairOptions,
+    HairStyle, ProceduralHair, SceneBuilder,
 };
+use tress_core::accel::BuildError;
 use tress_core::film::FilmSettings;
 use tress_core::light::{EnvironmentMap, Light};
 use tress_core::math::{Aabb, Ray, Vec2, Vec3};
 use tress_core::prepare::Preparation;
 use tress_core::rng::Pcg32;
 use tress_core::sampling::sample_uniform_sphere;
-use tress_core::{Accel, Bcsdf, Camera, Hit, Integrator, Material, Scene};
+use tress_core::{Accel, Bcsdf, Camera, FiberDensity, Hit, Integrator, Material, Scene};
 use tress_materials::dual_scattering::{fingerprint, DualScatteringSettings, DualScatteringTables};
 use tress_materials::HairModel;
 
@@ -470,14 +471,10 @@ fn bench_model(
     let accel = big_pool.install(|| SceneBuilder::new()?.add_hair(&hair, &options, 0)?.build())?;
     let bvh_time = t1.elapsed();
     drop(hair);
-    // The grid of the first integrator that reads one (its cost is part of the build).
-    let grid_settings = plan
-        .integrators
-        .iter()
-        .find_map(IntegratorDesc::density_grid)
-        .unwrap_or_default();
+    // The grid the dual-scattering integrators read at their default resolution (its cost is
+    // part of the build); the scene below hands it to them.
     let t2 = Instant::now();
-    let grid = big_pool.install(|| DensityGrid::build(&accel, &grid_settings))?;
+    let grid = big_pool.install(|| DensityGrid::build(&accel, &DensitySettings::default()))?;
     let grid_time = t2.elapsed();
     let build_peak = peak_rss();
     // The baseline: the same curves, basis and build quality with no filter support, built
@@ -588,16 +585,16 @@ fn bench_model(
     };
 
     let recording = Arc::new(AtomicBool::new(false));
-    let scene = Scene {
+    let scene = Scene::new(
         camera,
-        accel: Box::new(CountingAccel {
+        Box::new(CountingAccel {
             inner: Arc::clone(&accel),
             record: Arc::clone(&recording),
+            grid: Arc::new(grid),
         }),
-        materials: vec![Material::Hair(Arc::clone(bcsdf))],
-        lights: vec![Light::Environment(EnvironmentMap::builtin_sky(0.0, 1.0)?)].into(),
-        density: Some(Box::new(grid)),
-    };
+        vec![Material::Hair(Arc::clone(bcsdf))],
+        vec![Light::Environment(EnvironmentMap::builtin_sky(0.0, 1.0)?)].into(),
+    );
     // The ray-rate target and the huge and round models concern the path tracer.
     let descs: Vec<IntegratorDesc> = if spec.all_integrators {
         plan.integrators.clone()

@@ -20,6 +20,8 @@ thread_local! {
 pub(super) struct CountingAccel {
     pub(super) inner: Arc<EmbreeAccel>,
     pub(super) record: Arc<AtomicBool>,
+    /// The density grid at the default resolution, built (and timed) with the BVH.
+    pub(super) grid: Arc<DensityGrid>,
 }
 
 impl CountingAccel {
@@ -64,6 +66,16 @@ impl Accel for CountingAccel {
 
     fn bounds(&self) -> Aabb {
         self.inner.bounds()
+    }
+
+    fn fiber_density(
+        &self,
+        resolution: Option<u32>,
+    ) -> Result<Option<Arc<dyn FiberDensity>>, BuildError> {
+        match resolution {
+            None => Ok(Some(Arc::clone(&self.grid) as Arc<dyn FiberDensity>)),
+            Some(_) => self.inner.fiber_density(resolution),
+        }
     }
 }
 

@@ -161,7 +161,7 @@ pub(super) fn execute(
     for (si, scene) in plan.scenes.iter().enumerate() {
         let mut runner = SceneRunner {
             scene,
-            built: Vec::new(),
+            built: None,
             integrators: HashMap::new(),
             prep: &prep,
             pool,

@@ -44,7 +44,6 @@ use std::collections::hash_map::Entry;
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use tress_accel::DensitySettings;
 use tress_core::film::FilmSettings;
 use tress_core::image_io;
 use tress_core::rng::hash_words;

@@ -30,8 +30,9 @@ pub(super) enum Cached {
 /// is actually needed, so a fully cached rerun reads images only.
 pub(super) struct SceneRunner<'a> {
     pub(super) scene: &'a PlanScene,
-    /// Built scenes by the density grid they hold.
-    pub(super) built: Vec<(Option<DensitySettings>, BuiltScene)>,
+    /// The scene, once a job needs it (density grids are the integrators' business, built
+    /// per resolution in `prep`, so every integrator shares one scene and BVH).
+    pub(super) built: Option<BuiltScene>,
     pub(super) integrators: HashMap<String, Box<dyn Integrator>>,
     /// The study's preparation context (tables shared by all its integrators).
     pub(super) prep: &'a tress_core::prepare::Preparation,
@@ -137,28 +138,20 @@ impl SceneRunner<'_> {
 
         let scene = &self.scene;
         let pool = self.pool;
-        // The scene carries the density grid its integrator asks for, so integrators with
-        // different grid needs get different builds of it.
-        let grid = job.integrator.desc.density_grid();
-        let b = match self.built.iter().position(|(g, _)| *g == grid) {
-            Some(b) => b,
-            None => {
-                let desc = SceneDesc {
-                    integrator: job.integrator.desc.clone(),
-                    ..scene.desc.clone()
-                };
-                let built = pool.install(|| scene_desc::build(&desc, &scene.base))?;
-                self.built.push((grid, built));
-                self.built.len() - 1
-            }
+        let built = match &mut self.built {
+            Some(built) => built,
+            slot => slot.insert(pool.install(|| scene_desc::build(&scene.desc, &scene.base))?),
         };
-        let built = &self.built[b].1;
         let integrator = match self.integrators.entry(job.integrator.ron.clone()) {
             Entry::Occupied(e) => e.into_mut(),
             Entry::Vacant(e) => e.insert(
-                job.integrator
-                    .desc
-                    .build(&built.scene, self.prep)
+                pool.install(|| job.integrator.desc.build(&built.scene, self.prep))
+                    .inspect(|_| {
+                        let built_now = self.prep.take_notes();
+                        if self.verbose {
+                            built_now.into_iter().for_each(|line| note(self.bar, line));
+                        }
+                    })
                     .with_context(|| {
                         format!("{}: integrator {}", scene.source, job.integrator.ron)
                     })?,

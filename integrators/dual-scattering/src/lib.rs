@@ -6,7 +6,7 @@
 //! At a hair hit x seen from ω_o the outgoing radiance is
 //! `L_o = ∫ L(ω_d) F(ω_o, ω_d; n(ω_d), V(ω_d)) dω_d` (+ the delta lights' terms), where
 //! - n(ω_d) is the expected number of fibers crossed from x toward ω_d, from the voxel
-//!   density grid (`Scene::density`);
+//!   density grid of the scene's hair (`Scene::fiber_density`, built once per run);
 //! - V(ω_d) is a shadow ray: unoccluded ⇒ the light arrives directly (direct fraction 1, n = 0);
 //!   blocked by hair only ⇒ it arrives forward-scattered through n fibers (direct fraction 0);
 //!   blocked by a surface (a head, an occluder) ⇒ nothing arrives;
@@ -32,7 +32,7 @@ use std::sync::Arc;
 use tress_core::integrator::{direct_light, escaped_light, scatter};
 use tress_core::prepare::Preparation;
 use tress_core::shading::Scattering;
-use tress_core::{Integrator, Material, Ray, Rgb, Sampler, Scene, ShadingPoint};
+use tress_core::{FiberDensity, Integrator, Material, Ray, Rgb, Sampler, Scene, ShadingPoint};
 use tress_materials::dual_scattering::{
     fingerprint, DensityFactors, DualScatteringError, DualScatteringSettings,
     DualScatteringShading, DualScatteringTables,
@@ -70,9 +70,17 @@ impl Default for DualSettings {
 /// Why a dual-scattering integrator could not be set up for a scene.
 #[derive(Debug, thiserror::Error)]
 pub enum DualError {
-    /// The scene has hair materials but no density grid was built for it.
-    #[error("dual scattering needs the hair density grid, but the scene has none")]
-    NoDensityGrid,
+    /// The scene has hair materials but no hair geometry to build the density grid from.
+    #[error(
+        "dual scattering shades hair from a density grid of the scene's hair objects, but the \
+         scene has hair materials and no hair object: add a `Hair(source: …)` object, or \
+         render it with `path`"
+    )]
+    NoHairGeometry,
+    /// The density grid could not be built (e.g. too large for the memory limit); the
+    /// message says "density grid: …".
+    #[error("{0}")]
+    DensityGrid(tress_core::accel::BuildError),
     /// The tables could not be built: invalid table settings, or a non-finite BCSDF value.
     // Causes are in the messages, not also `source`s: chains printed with `{:#}` said them
     // two or three times ("d_f = 1.5: must lie in [0, 1]: d_f = 1.5: …").
@@ -101,6 +109,8 @@ pub struct HairPoint<'a> {
     pub sp: ShadingPoint<'a>,
     /// The dual-scattering shading function F of the point's material.
     pub shading: &'a DualScatteringShading,
+    /// The scene's hair density: fibers crossed toward a light.
+    pub density: &'a dyn FiberDensity,
     /// `wo` in the local fiber frame.
     pub wo_local: tress_core::math::Vec3,
     /// Offset across the fiber in [−1, 1] (see `tress_core::bcsdf`).
@@ -131,14 +141,8 @@ impl HairPoint<'_> {
         if scene.occluded_by_surfaces(&ray) {
             return Rgb::ZERO;
         }
-        let crossed = || {
-            scene
-                .density
-                .as_ref()
-                .map_or(0.0, |d| d.fibers_crossed(&ray))
-        };
         let (n, direct) = if scene.occluded(&ray) {
-            (crossed(), 0.0)
+            (self.density.fibers_crossed(&ray), 0.0)
         } else {
             (0.0, 1.0)
         };
@@ -170,12 +174,24 @@ pub trait DirectionSampling: Send + Sync + std::fmt::Debug {
 }
 
 /// The dual-scattering estimator, parameterised by its direction sampling.
-#[derive(Debug)]
 pub struct DualScattering<D: DirectionSampling> {
     settings: DualSettings,
     /// Per scene material: the shading function, for hair materials.
     shading: Vec<Option<DualScatteringShading>>,
+    /// The scene's hair density (`None` without hair materials, when nothing reads it).
+    density: Option<Arc<dyn FiberDensity>>,
     directions: D,
+}
+
+impl<D: DirectionSampling> std::fmt::Debug for DualScattering<D> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DualScattering")
+            .field("settings", &self.settings)
+            .field("shading", &self.shading)
+            .field("density", &self.density.as_ref().map(|d| d.describe()))
+            .field("directions", &self.directions)
+            .finish()
+    }
 }
 
 impl<D: DirectionSampling> DualScattering<D> {
@@ -197,9 +213,14 @@ impl<D: DirectionSampling> DualScattering<D> {
             .materials
             .iter()
             .any(|m| matches!(m, Material::Hair(_)));
-        if has_hair && scene.density.is_none() {
-            return Err(DualError::NoDensityGrid);
-        }
+        let density = if has_hair {
+            let grid = scene
+                .fiber_density(prep, settings.grid_resolution)
+                .map_err(DualError::DensityGrid)?;
+            Some(grid.ok_or(DualError::NoHairGeometry)?)
+        } else {
+            None
+        };
         let shading = scene
             .materials
             .iter()
@@ -221,6 +242,7 @@ impl<D: DirectionSampling> DualScattering<D> {
         Ok(DualScattering {
             settings,
             shading,
+            density,
             directions,
         })
     }
@@ -237,14 +259,19 @@ impl<D: DirectionSampling> DualScattering<D> {
         else {
             return Rgb::ZERO;
         };
-        let behind = match &scene.density {
-            Some(d) if shading.uses_depth_behind() => d.fibers_crossed(&sp.spawn(-sp.wo)),
-            _ => f32::INFINITY,
+        let Some(density) = self.density.as_deref() else {
+            return Rgb::ZERO;
+        };
+        let behind = if shading.uses_depth_behind() {
+            density.fibers_crossed(&sp.spawn(-sp.wo))
+        } else {
+            f32::INFINITY
         };
         let point = HairPoint {
             wo_local: frame.to_local(sp.wo),
             sp,
             shading,
+            density,
             h,
             frame,
             behind,
@@ -262,7 +289,7 @@ impl<D: DirectionSampling> DualScattering<D> {
 
 /// Registers a [`DirectionSampling`] type (a unit struct) as the dual-scattering integrator
 /// `$name`: implements `tress_core::IntegratorKind` for it, with [`DualSettings`], no bias
-/// claim, the density grid its settings ask for and quick test tables. The two dual-scattering
+/// claim and quick test tables. The two dual-scattering
 /// crates differ only in this name and their directions.
 #[macro_export]
 macro_rules! dual_scattering_integrator {
@@ -271,10 +298,6 @@ macro_rules! dual_scattering_integrator {
             type Settings = $crate::DualSettings;
             const NAME: &'static str = $name;
             const UNBIASED: bool = false;
-
-            fn density_grid(settings: &$crate::DualSettings) -> Option<Option<u32>> {
-                settings.density_grid()
-            }
 
             fn build(
                 settings: &$crate::DualSettings,
@@ -300,11 +323,6 @@ pub mod __private {
 }
 
 impl DualSettings {
-    /// The density grid the estimator reads (for [`tress_core::IntegratorKind::density_grid`]).
-    pub fn density_grid(&self) -> Option<Option<u32>> {
-        Some(self.grid_resolution)
-    }
-
     /// Coarse tables (16 θ nodes) that build in a fraction of a second, for tests.
     pub fn for_tests() -> Self {
         DualSettings {

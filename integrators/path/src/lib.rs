@@ -52,10 +52,6 @@ impl IntegratorKind for PathTracer {
     const NAME: &'static str = "path";
     const UNBIASED: bool = true;
 
-    fn density_grid(_: &PathSettings) -> Option<Option<u32>> {
-        None
-    }
-
     fn build(
         settings: &PathSettings,
         _: &Scene,
