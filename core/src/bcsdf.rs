@@ -63,6 +63,21 @@ pub trait Bcsdf: Send + Sync + Debug {
             Rgb::ZERO
         }
     }
+
+    /// [`Bcsdf::eval_lobe`] of every lobe for every direction of `wis`, at one `wo` and `h`:
+    /// `out[i * lobes + p]` for `wis[i]` and lobe `p` (`out.len()` = `wis.len()` × lobe
+    /// count). Quadratures over `wi` (the dual-scattering tables) call this; models whose
+    /// per-`(wo, h)` work (Fresnel, attenuations, exit azimuths) dominates compute it once here
+    /// and must give exactly what `eval_lobe` gives.
+    fn eval_lobes_batch(&self, wo: Vec3, h: f32, wis: &[Vec3], out: &mut [Rgb]) {
+        let lobes = self.lobe_names().len();
+        debug_assert_eq!(out.len(), wis.len() * lobes);
+        for (&wi, row) in wis.iter().zip(out.chunks_exact_mut(lobes)) {
+            for (p, v) in row.iter_mut().enumerate() {
+                *v = self.eval_lobe(wo, wi, h, p);
+            }
+        }
+    }
 }
 
 /// The local frame at a fiber hit (module docs): built from the tangent and the direction the hit

@@ -356,6 +356,18 @@ impl Bcsdf for Chiang {
         let (sin_i, cos_i, phi) = self.angles_i(&g, wi);
         g.ap[p] * (self.m(&g, p, sin_i, cos_i) * self.n(&g, p, phi))
     }
+
+    // The geometry (Fresnel, attenuations, exit azimuths) once for all directions, and the
+    // angles of each direction once for all lobes: the same operations as `eval_lobe`.
+    fn eval_lobes_batch(&self, wo: Vec3, h: f32, wis: &[Vec3], out: &mut [Rgb]) {
+        let g = self.geometry(wo, h);
+        for (&wi, row) in wis.iter().zip(out.chunks_exact_mut(P_MAX + 1)) {
+            let (sin_i, cos_i, phi) = self.angles_i(&g, wi);
+            for (p, v) in row.iter_mut().enumerate() {
+                *v = g.ap[p] * (self.m(&g, p, sin_i, cos_i) * self.n(&g, p, phi));
+            }
+        }
+    }
 }
 
 /// `−ln v − ln(1 − e^{−2/v})`, the log of `e^{1/v} / (2 v sinh(1/v))`.
