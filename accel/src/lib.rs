@@ -76,6 +76,7 @@
 
 #![warn(missing_docs)]
 
+mod children;
 mod curves;
 pub mod cyhair;
 pub mod density;
@@ -84,6 +85,8 @@ mod fp_mode;
 pub mod geometry;
 mod le_bytes;
 pub mod mesh;
+pub mod pbrt;
+pub mod ply;
 pub mod procedural;
 mod scene;
 pub mod source;
@@ -92,12 +95,15 @@ mod test_util;
 pub mod tfx;
 pub mod usc;
 
+pub use children::ChildStrands;
 pub use curves::{CurveBasis, CurveShape};
 pub use cyhair::HairFile;
 pub use density::{DensityGrid, DensityInfo, DensitySettings};
 pub use error::{Error, Result};
 pub use geometry::{HairAttribute, HairGeometry, Rotation, Transform};
 pub use mesh::TriangleMesh;
+pub use pbrt::PbrtFile;
+pub use ply::PlyFile;
 pub use procedural::{HairStyle, ProceduralHair};
 pub use scene::raw;
 pub use scene::{AccelInfo, EmbreeAccel, ObjectInfo, ObjectKind, SceneBuilder};

@@ -379,6 +379,8 @@ impl SceneBuilder {
     ) -> Result<Self> {
         hair.validate()?;
         options.validate(&hair.name)?;
+        let grown = options.with_children(hair)?;
+        let hair: &HairGeometry = &grown;
         let (hair, ids): (Cow<HairGeometry>, Vec<u32>) = if options.strand_fraction < 1.0 {
             let (sub, ids) = hair.subsample(options.strand_fraction, options.strand_seed);
             (Cow::Owned(sub), ids)

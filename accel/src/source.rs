@@ -1,10 +1,13 @@
 //! Where a hair object comes from, as written in a scene file, and the per-object options
 //! applied when it is added to the scene.
 
+use crate::children::ChildStrands;
 use crate::curves::{CurveBasis, CurveShape};
 use crate::cyhair::HairFile;
 use crate::error::{format_error, Result};
 use crate::geometry::{HairGeometry, Transform};
+use crate::pbrt::PbrtFile;
+use crate::ply::PlyFile;
 use crate::procedural::ProceduralHair;
 use crate::tfx::TfxFile;
 use crate::usc::UscFile;
@@ -18,6 +21,8 @@ use std::path::{Path, PathBuf};
 /// Hair(path: "hair/straight.hair", z_up: true)  // Cem Yuksel .hair
 /// Tfx(path: "hair/sintel_hair.tfx", radius: 0.01)
 /// Usc(path: "hairstyles/strands00001.data", radius: 0.00004)  // USC-HairSalon
+/// Ply(path: "groom.ply", radius: Some(0.0001), z_up: true)    // PLY strands (Blender, Houdini, …)
+/// Pbrt(path: "hair.pbrt")                                      // a pbrt scene's Shape "curve"s
 /// Procedural(style: Wavy(amplitude: 0.05, frequency: 3.0), strands: 2000)
 /// ```
 ///
@@ -28,8 +33,8 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub enum HairSource {
-    /// A `.hair`, `.tfx` or USC-HairSalon `.data` file (by extension, case-insensitive) with
-    /// default reader options.
+    /// A `.hair`, `.tfx`, USC-HairSalon `.data`, `.ply` or `.pbrt` file (by extension,
+    /// case-insensitive) with default reader options.
     File(PathBuf),
     /// A Cem Yuksel `.hair` file with reader options (`z_up`).
     Hair(HairFile),
@@ -37,6 +42,12 @@ pub enum HairSource {
     Tfx(TfxFile),
     /// A USC-HairSalon `.data` file with reader options (`radius`).
     Usc(UscFile),
+    /// A PLY file of strands with reader options (`radius`, `points_per_strand`, `z_up`); the
+    /// layouts understood are listed in [`crate::ply`].
+    Ply(PlyFile),
+    /// The `Shape "curve"` statements of a pbrt-v4 (or v3) scene file, with reader options
+    /// (`z_up`); what is read and what is ignored is listed in [`crate::pbrt`].
+    Pbrt(PbrtFile),
     /// Hair generated from a seed ([`ProceduralHair`]).
     Procedural(ProceduralHair),
 }
@@ -49,6 +60,8 @@ impl HairSource {
             HairSource::Hair(f) => Some(&f.path),
             HairSource::Tfx(f) => Some(&f.path),
             HairSource::Usc(f) => Some(&f.path),
+            HairSource::Ply(f) => Some(&f.path),
+            HairSource::Pbrt(f) => Some(&f.path),
             HairSource::Procedural(_) => None,
         }
     }
@@ -60,6 +73,8 @@ impl HairSource {
             HairSource::Hair(f) => Some(&mut f.path),
             HairSource::Tfx(f) => Some(&mut f.path),
             HairSource::Usc(f) => Some(&mut f.path),
+            HairSource::Ply(f) => Some(&mut f.path),
+            HairSource::Pbrt(f) => Some(&mut f.path),
             HairSource::Procedural(_) => None,
         }
     }
@@ -76,15 +91,20 @@ impl HairSource {
                     Some("hair") => HairFile::new(path).read(),
                     Some("tfx") => TfxFile::new(path).read(),
                     Some("data") => UscFile::new(path).read(),
+                    Some("ply") => PlyFile::new(path).read(),
+                    Some("pbrt") => PbrtFile::new(path).read(),
                     _ => Err(format_error(
                         path,
-                        "unknown hair file type: expected a .hair, .tfx or .data extension",
+                        "unknown hair file type: expected a .hair, .tfx, .data, .ply or .pbrt \
+                         extension",
                     )),
                 }
             }
             HairSource::Hair(f) => f.read(),
             HairSource::Tfx(f) => f.read(),
             HairSource::Usc(f) => f.read(),
+            HairSource::Ply(f) => f.read(),
+            HairSource::Pbrt(f) => f.read(),
             HairSource::Procedural(p) => p.generate(),
         }
     }
@@ -95,7 +115,8 @@ impl HairSource {
 /// ```ron
 /// (basis: CatmullRom, curve: Round, radius_scale: 1.5, tip_scale: 0.3,
 ///  transform: (scale: 0.1, rotate: Euler(0, 90, 0), translate: (0, 1, 0)),
-///  strand_fraction: 0.1, strand_seed: 7)
+///  strand_fraction: 0.1, strand_seed: 7,
+///  children: Some(per_guide: 8, radius: 0.05, seed: 1))
 /// ```
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -115,6 +136,9 @@ pub struct HairOptions {
     pub strand_fraction: f32,
     /// Seed of the strand subset.
     pub strand_seed: u64,
+    /// Child strands grown around every strand (taken as a guide) before the subset is drawn
+    /// (default none); see [`ChildStrands`].
+    pub children: Option<ChildStrands>,
 }
 
 impl Default for HairOptions {
@@ -127,6 +151,7 @@ impl Default for HairOptions {
             transform: Transform::default(),
             strand_fraction: 1.0,
             strand_seed: 0,
+            children: None,
         }
     }
 }
@@ -156,7 +181,22 @@ impl HairOptions {
                 format!("must be in (0, 1], got {}", self.strand_fraction),
             ));
         }
+        if let Some(children) = &self.children {
+            children.validate(object)?;
+        }
         self.transform.validate(object)
+    }
+
+    /// `hair` with the child strands of [`HairOptions::children`] added (unchanged without
+    /// them). Children are grown in the hair's own units, before the object transform.
+    pub(crate) fn with_children<'a>(
+        &self,
+        hair: &'a HairGeometry,
+    ) -> Result<std::borrow::Cow<'a, HairGeometry>> {
+        Ok(match &self.children {
+            Some(children) => std::borrow::Cow::Owned(children.grow(hair, self.transform.scale)?),
+            None => std::borrow::Cow::Borrowed(hair),
+        })
     }
 }
 
@@ -171,6 +211,13 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("x.obj") && e.contains("extension"), "{e}");
+        for missing in ["missing.PLY", "missing.pbrt"] {
+            let e = HairSource::File(missing.into())
+                .load()
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(missing) && !e.contains("extension"), "{e}");
+        }
         let e = HairSource::File("missing.HAIR".into())
             .load()
             .unwrap_err()
@@ -229,8 +276,28 @@ mod tests {
                 ..Default::default()
             })
         );
+        assert_eq!(
+            parse(r#"Ply((path: "g.ply", radius: Some(0.001), z_up: true))"#).unwrap(),
+            HairSource::Ply(PlyFile {
+                radius: Some(0.001),
+                z_up: true,
+                ..PlyFile::new("g.ply")
+            })
+        );
+        assert_eq!(
+            parse(r#"Ply((path: "g.ply", points_per_strand: Some(100)))"#).unwrap(),
+            HairSource::Ply(PlyFile {
+                points_per_strand: Some(100),
+                ..PlyFile::new("g.ply")
+            })
+        );
+        assert_eq!(
+            parse(r#"Pbrt((path: "h.pbrt"))"#).unwrap(),
+            HairSource::Pbrt(PbrtFile::new("h.pbrt"))
+        );
         // Typos are errors.
         assert!(parse(r#"Hair((path: "s.hair", zup: false))"#).is_err());
+        assert!(parse(r#"Ply((path: "g.ply", width: 1))"#).is_err());
         assert!(parse("Procedural((strand: 5))").is_err());
 
         let o: HairOptions = ron::from_str(
@@ -254,6 +321,21 @@ mod tests {
             HairOptions::default()
         );
         assert!(ron::from_str::<HairOptions>("(basis: Bezier)").is_err());
+        let o: HairOptions =
+            ron::from_str("(children: Some((per_guide: 8, radius: 0.05, seed: 1)))").unwrap();
+        assert_eq!(
+            o.children,
+            Some(ChildStrands {
+                per_guide: 8,
+                radius: 0.05,
+                seed: 1,
+                blend: 1,
+                clump: 0.0,
+                thinning: 0.0,
+                radius_jitter: 0.0,
+            })
+        );
+        assert!(ron::from_str::<HairOptions>("(children: Some((per_guide: 8)))").is_err());
         // Round trip.
         let text = ron::to_string(&o).unwrap();
         assert_eq!(ron::from_str::<HairOptions>(&text).unwrap(), o);
@@ -273,5 +355,22 @@ mod tests {
         };
         assert!(o.validate("head").is_err());
         HairOptions::default().validate("head").unwrap();
+        let o = HairOptions {
+            children: Some(ChildStrands {
+                per_guide: 0,
+                radius: 1.0,
+                seed: 0,
+                blend: 1,
+                clump: 0.0,
+                thinning: 0.0,
+                radius_jitter: 0.0,
+            }),
+            ..Default::default()
+        };
+        let e = o.validate("head").unwrap_err().to_string();
+        assert!(
+            e.contains("head") && e.contains("children.per_guide"),
+            "{e}"
+        );
     }
 }
