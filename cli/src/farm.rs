@@ -2,12 +2,19 @@
 //! of whole rows, via `--crop`) times sample-range passes (`--spp-offset`) — printed one shell
 //! command per line for GNU parallel, a Slurm array job or an OpenCue layer, plus the
 //! `tress merge` command that assembles their outputs into the image of the single full render.
+//! Every job writes its exact sample sums (`--sums`), which the merge needs.
 
 use crate::integrators::IntegratorDesc;
 use crate::scene_desc;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
+use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+use tress_core::film::Aov;
+
+fn parse_aov(s: &str) -> Result<Aov, String> {
+    s.parse()
+}
 
 #[derive(Args, Debug)]
 pub struct FarmArgs {
@@ -34,6 +41,12 @@ pub struct FarmArgs {
     /// Worker threads per job (default: all cores of the machine running it).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Also write the alpha channel (passed to every job; see `tress render --alpha`).
+    #[arg(long)]
+    pub alpha: bool,
+    /// Extra outputs, passed to every job (see `tress render --aov`).
+    #[arg(long, value_delimiter = ',', value_parser = parse_aov)]
+    pub aov: Vec<Aov>,
     /// The tress executable the commands run. Default: this one, by absolute path.
     #[arg(long)]
     pub tress: Option<String>,
@@ -121,6 +134,14 @@ pub fn run(args: FarmArgs) -> Result<()> {
     if let Some(t) = args.threads {
         common.push(format!("--threads {t}"));
     }
+    if args.alpha {
+        common.push("--alpha".into());
+    }
+    let aovs: BTreeSet<Aov> = args.aov.iter().copied().collect();
+    if !aovs.is_empty() {
+        let names: Vec<&str> = aovs.iter().map(|a| a.name()).collect();
+        common.push(format!("--aov {}", names.join(",")));
+    }
     let common = common.iter().map(|c| format!(" {c}")).collect::<String>();
 
     let (tiles, passes) = (args.tiles as u64, args.passes as u64);
@@ -136,7 +157,7 @@ pub fn run(args: FarmArgs) -> Result<()> {
             let piece = dir.join(format!("{stem}-t{t:0tw$}-p{p:0pw$}.exr"));
             jobs.push(format!(
                 "{tress} render {} --crop {x0},{ty0},{x1},{ty1} --spp-offset {s0} --spp {}{common} \
-                 --out {} --no-preview --quiet",
+                 --sums --out {} --no-preview --quiet",
                 utf8(&scene)?,
                 s1 - s0,
                 utf8(&piece)?

@@ -1,6 +1,6 @@
 //! `tress merge`: assembles tiles (`--crop`) and sample-range passes (`--spp-offset`) of one
 //! render into the image of one long full render, bit for bit, from the sums the render EXRs
-//! carry (`crate::render_file`).
+//! carry (`crate::render_file`; `tress render --sums`).
 
 use crate::render_file::{
     parse_crop, read_piece, read_sums, write_render, Identity, Piece, PreviewArgs,
@@ -10,6 +10,7 @@ use clap::Args;
 use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::PathBuf;
+use tress_core::image_io::Attribute;
 use tress_core::render::{dyadic_cover, SampleSums};
 /// `tress merge`.
 #[derive(Args, Debug)]
@@ -27,6 +28,9 @@ pub struct MergeArgs {
     /// Refuse unless the merged image holds exactly this many samples per pixel.
     #[arg(long)]
     pub expect_spp: Option<u64>,
+    /// Also write the merged sample sums, so that the result can be merged again.
+    #[arg(long)]
+    pub sums: bool,
     #[command(flatten)]
     pub preview: PreviewArgs,
     /// No summary.
@@ -85,13 +89,20 @@ pub fn run(args: MergeArgs) -> Result<()> {
     }
 
     let first = &pieces[0];
-    let mut merged = SampleSums::empty(plan.window, first.film.0, first.film.1, plan.samples.start);
+    let outputs = first.outputs.clone();
+    let mut merged = SampleSums::empty(
+        plan.window,
+        first.film.0,
+        first.film.1,
+        plan.samples.start,
+        outputs.clone(),
+    );
     for group in &plan.groups {
         let blocks = dyadic_cover(group.samples.clone());
-        let nb = blocks.len();
+        let per_pixel = blocks.len() * merged.quantity_count();
         let [wx0, wy0, wx1, wy1] = plan.window;
         let ww = (wx1 - wx0) as usize;
-        let mut sums = vec![[0.0f64; 3]; ww * (wy1 - wy0) as usize * nb];
+        let mut sums = vec![0.0f64; ww * (wy1 - wy0) as usize * per_pixel];
         for &i in &group.pieces {
             let part = read_sums(&pieces[i])?;
             let [x0, y0, x1, _] = part.window;
@@ -99,7 +110,7 @@ pub fn run(args: MergeArgs) -> Result<()> {
             for p in 0..part.pixel_count() {
                 let (x, y) = (x0 as usize + p % pw, y0 as usize + p / pw);
                 let q = (y - wy0 as usize) * ww + (x - wx0 as usize);
-                sums[q * nb..(q + 1) * nb].copy_from_slice(part.pixel(p));
+                sums[q * per_pixel..(q + 1) * per_pixel].copy_from_slice(part.pixel(p));
             }
         }
         let group_sums = SampleSums {
@@ -108,6 +119,7 @@ pub fn run(args: MergeArgs) -> Result<()> {
             full_height: first.film.1,
             samples: group.samples.clone(),
             blocks,
+            outputs: outputs.clone(),
             sums,
         };
         merged
@@ -118,19 +130,23 @@ pub fn run(args: MergeArgs) -> Result<()> {
     let sum_attr = |name: &str| -> f64 {
         pieces
             .iter()
-            .filter_map(|p| p.attributes.get(name)?.parse::<f64>().ok())
+            .filter_map(|p| p.attributes.get(name)?.as_f64())
             .sum()
     };
-    let mut attributes: Vec<(&str, String)> = ["tress:scene", "tress:integrator"]
-        .into_iter()
-        .filter_map(|k| Some((k, first.attributes.get(k)?.clone())))
-        .collect();
-    attributes.push((
-        "tress:render_time_s",
-        format!("{:.3}", sum_attr("tress:render_time_s")),
-    ));
-    attributes.push(("tress:rays", format!("{:.0}", sum_attr("tress:rays"))));
-    attributes.push(("tress:merged_from", pieces.len().to_string()));
+    // What the pieces share (scene, integrator, camera) is copied from the first.
+    let mut attributes: Vec<(&str, Attribute)> = [
+        "tress:scene",
+        "tress:integrator",
+        "worldToCamera",
+        "worldToNDC",
+    ]
+    .into_iter()
+    .filter_map(|k| Some((k, first.attributes.get(k)?.clone())))
+    .collect();
+    for statistic in ["tress:render_time_s", "tress:rays", "tress:dropped_samples"] {
+        attributes.push((statistic, Attribute::Double(sum_attr(statistic))));
+    }
+    attributes.push(("tress:merged_from", Attribute::whole(pieces.len() as u64)));
     let identity = Identity {
         seed: first.seed,
         scene_hash: first.scene_hash.clone(),
@@ -139,7 +155,7 @@ pub fn run(args: MergeArgs) -> Result<()> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("creating output folder {}", dir.display()))?;
     }
-    write_render(&args.out, &merged, &identity, &attributes)?;
+    write_render(&args.out, &merged, args.sums, &identity, &attributes)?;
     args.preview.write(&args.out, &merged.image())?;
     if !args.quiet {
         let [x0, y0, x1, y1] = plan.window;
@@ -200,6 +216,13 @@ fn plan(pieces: &[Piece], crop: Option<[u32; 4]>) -> Result<Plan> {
                 "the scene (description or integrator)",
                 format!("hash {}", first.scene_hash),
                 format!("hash {}", p.scene_hash),
+            ));
+        }
+        if p.outputs != first.outputs {
+            return Err(mismatch(
+                "what is recorded (render all pieces with the same --alpha and --aov)",
+                first.outputs.channel_names().join(", "),
+                p.outputs.channel_names().join(", "),
             ));
         }
     }

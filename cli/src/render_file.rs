@@ -1,48 +1,51 @@
-//! The render EXR, shared by `tress render` and `tress merge`: pixel values plus the exact
-//! sample sums that let `tress merge` assemble tiles (`--crop`) and sample-range passes
-//! (`--spp-offset`) into the image of one long full render, bit for bit; and the PNG preview
-//! beside it.
+//! The render EXR, shared by `tress render` and `tress merge`: the output channels (radiance,
+//! alpha, AOVs), optionally the exact sample sums that let `tress merge` assemble tiles
+//! (`--crop`) and sample-range passes (`--spp-offset`) into the image of one long full render,
+//! bit for bit; and the PNG preview beside it.
 //!
-//! Besides the R, G, B pixel values, a render EXR holds, for every pixel, the f64 RGB sums of
-//! the aligned sample blocks that cover its sample range (see `tress_core::render`): block `k`
-//! of the [`dyadic_cover`] of the range is stored as six u32 channels `tress.sumKKK.Rhi`,
-//! `Rlo`, `Ghi`, … (the high and low halves of each f64's bits). The header records the sample
-//! range (`tress:spp_offset`, `tress:spp`), the seed, the film (display window) and crop (data
-//! window), a hash of the scene description and the format version (`tress:sums`). Merging
-//! checks all of these, then joins the blocks exactly.
+//! Channels: `R`, `G`, `B`, then `A` with alpha, then the AOVs as OpenEXR layers (`depth.Z`,
+//! `tangent.X`…, `albedo.R`…, `variance.R`…; see `tress_core::film::Aov`), all 32-bit float.
+//! With sums (`--sums`), for every pixel the f64 sums of every recorded quantity
+//! (`tress_core::render::Quantity`) over the aligned sample blocks that cover its sample range:
+//! block `k` of the [`dyadic_cover`] of the range, quantity `q`, is stored as two u32 channels
+//! `tress.sumKKK.<q>hi` and `<q>lo` (the high and low halves of the f64's bits), e.g.
+//! `tress.sum000.Rhi`, `tress.sum001.hitslo`. The header records the sample range
+//! (`tress:spp_offset`, `tress:spp`), the seed, the film (display window) and crop (data
+//! window), a hash of the scene description and, with sums, their format (`tress:sums`).
+//! Merging checks all of these, then joins the blocks exactly and recomputes every channel.
+//!
+//! Whole numbers that must stay exact (spp, offset, seed) are EXR `int` attributes, or decimal
+//! text beyond the int range; statistics (render time, rays, dropped samples) are `double`s.
 
 use anyhow::{anyhow, bail, Result};
 use clap::Args;
-use exr::meta::header::Header;
 use exr::prelude as ex;
-use exr::prelude::{AttributeValue, ReadChannels, ReadLayers, Text, WritableImage};
+use exr::prelude::{ReadChannels, ReadLayers};
 use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
-use tress_core::image_io;
-use tress_core::render::{dyadic_cover, SampleSums};
+use tress_core::film::{Aov, Outputs};
+use tress_core::image_io::{self, Attribute, ChannelSamples, ToneMap};
+use tress_core::render::{dyadic_cover, quantities, Quantity, SampleSums};
 
-/// Value of the `tress:sums` attribute: the layout of the sum channels.
-pub const SUMS_FORMAT: &str = "dyadic-f64-blocks-1";
+/// Value of the `tress:sums` attribute: the layout of the sum channels. Version 2 sums every
+/// recorded quantity; version 1 (radiance only, same channel names) is still read.
+pub const SUMS_FORMAT: &str = "dyadic-f64-blocks-2";
+const SUMS_FORMAT_RADIANCE_ONLY: &str = "dyadic-f64-blocks-1";
+
+/// The `software` attribute of every EXR tress writes.
+pub fn software() -> String {
+    format!("tress {}", env!("CARGO_PKG_VERSION"))
+}
 
 /// Largest film side and pixel count accepted when reading, so that a corrupt header cannot
 /// make us attempt a huge allocation.
 const MAX_SIDE: u32 = 1 << 16;
 const MAX_PIXELS: u64 = 1 << 28;
 
-const RGB: [&str; 3] = ["R", "G", "B"];
-
-fn sum_channel(block: usize, channel: usize, high: bool) -> String {
+fn sum_channel(block: usize, quantity: Quantity, high: bool) -> String {
     let half = if high { "hi" } else { "lo" };
-    format!("tress.sum{block:03}.{}{half}", RGB[channel])
-}
-
-fn text(s: &str) -> Text {
-    Text::from_bytes_unchecked(s.as_bytes().into())
-}
-
-fn text_string(t: &Text) -> String {
-    String::from_utf8_lossy(t.as_slice()).into_owned()
+    format!("tress.sum{block:03}.{}{half}", quantity.name())
 }
 
 /// What identifies the render a piece belongs to, besides the film.
@@ -53,79 +56,68 @@ pub struct Identity {
     pub scene_hash: String,
 }
 
-/// Writes the image of `sums` and the sums themselves as an EXR (ZIP compressed), atomically:
-/// display window = the film, data window = the pixel window. `attributes` are added as text
-/// attributes to the sample range, seed, scene hash and format that merging needs.
+/// Writes the output channels of `sums` (and with `with_sums` the sums themselves) as an EXR
+/// (ZIP compressed), atomically: display window = the film, data window = the pixel window.
+/// `attributes` are added to the sample range, seed, scene hash, software and sums format.
 pub fn write_render(
     path: &Path,
     sums: &SampleSums,
+    with_sums: bool,
     identity: &Identity,
-    attributes: &[(&str, String)],
+    attributes: &[(&str, Attribute)],
 ) -> Result<()> {
-    let [x0, y0, x1, y1] = sums.window;
-    let (w, h) = ((x1 - x0) as usize, (y1 - y0) as usize);
-    let image = sums.image();
-    let mut channels: ex::SmallVec<[ex::AnyChannel<ex::FlatSamples>; 4]> = ex::SmallVec::new();
-    for (c, name) in RGB.iter().enumerate() {
-        let values = image.pixels.iter().map(|p| p[c]).collect();
-        channels.push(ex::AnyChannel::new(*name, ex::FlatSamples::F32(values)));
-    }
-    for k in 0..sums.blocks.len() {
-        for c in 0..3 {
-            for high in [true, false] {
-                let values = (0..sums.pixel_count())
-                    .map(|p| {
-                        let bits = sums.pixel(p)[k][c].to_bits();
-                        if high {
-                            (bits >> 32) as u32
-                        } else {
-                            bits as u32
-                        }
-                    })
+    let mut channels: Vec<(String, ChannelSamples)> = sums
+        .channels()
+        .into_iter()
+        .map(|(name, values)| (name.to_string(), ChannelSamples::F32(values)))
+        .collect();
+    let mut own = vec![
+        ("software", Attribute::Text(software())),
+        (
+            "tress:spp",
+            Attribute::whole(sums.samples.end - sums.samples.start),
+        ),
+        ("tress:spp_offset", Attribute::whole(sums.samples.start)),
+        ("tress:seed", Attribute::whole(identity.seed)),
+        (
+            "tress:scene_hash",
+            Attribute::Text(identity.scene_hash.clone()),
+        ),
+    ];
+    if with_sums {
+        own.push(("tress:sums", Attribute::Text(SUMS_FORMAT.into())));
+        let quantities = quantities(&sums.outputs);
+        let stride = sums.blocks.len() * quantities.len();
+        for k in 0..sums.blocks.len() {
+            for (q, &quantity) in quantities.iter().enumerate() {
+                let at = k * quantities.len() + q;
+                let bits: Vec<u64> = sums
+                    .sums
+                    .iter()
+                    .skip(at)
+                    .step_by(stride.max(1))
+                    .map(|v| v.to_bits())
                     .collect();
-                channels.push(ex::AnyChannel::new(
-                    text(&sum_channel(k, c, high)),
-                    ex::FlatSamples::U32(values),
-                ));
+                for high in [true, false] {
+                    let half = bits
+                        .iter()
+                        .map(|b| if high { (b >> 32) as u32 } else { *b as u32 })
+                        .collect();
+                    channels.push((sum_channel(k, quantity, high), ChannelSamples::U32(half)));
+                }
             }
         }
     }
-
-    let mut la = ex::LayerAttributes {
-        layer_position: ex::Vec2(x0 as i32, y0 as i32),
-        ..Default::default()
-    };
-    let own = [
-        ("tress:sums", SUMS_FORMAT.to_string()),
-        (
-            "tress:spp",
-            (sums.samples.end - sums.samples.start).to_string(),
-        ),
-        ("tress:spp_offset", sums.samples.start.to_string()),
-        ("tress:seed", identity.seed.to_string()),
-        ("tress:scene_hash", identity.scene_hash.clone()),
-    ];
-    for (name, value) in own.iter().chain(attributes) {
-        la.other
-            .insert(text(name), AttributeValue::Text(text(value)));
-    }
-    let layer = ex::Layer::new(
-        (w, h),
-        la,
-        ex::Encoding::SMALL_LOSSLESS,
-        ex::AnyChannels::sort(channels),
-    );
-    let mut exr_image = ex::Image::from_layer(layer);
-    exr_image.attributes.display_window = ex::IntegerBounds::new(
-        ex::Vec2(0, 0),
-        (sums.full_width as usize, sums.full_height as usize),
-    );
-    let mut bytes = Vec::new();
-    exr_image
-        .write()
-        .to_buffered(std::io::Cursor::new(&mut bytes))
-        .map_err(|e| anyhow!("{}: cannot encode EXR: {e}", path.display()))?;
-    crate::atomic_write(path, &bytes)
+    let all: Vec<(&str, Attribute)> = own.into_iter().chain(attributes.iter().cloned()).collect();
+    // The message already names the cause; anyhow would print its source a second time.
+    image_io::write_exr_channels(
+        path,
+        sums.window,
+        (sums.full_width, sums.full_height),
+        channels,
+        &all,
+    )
+    .map_err(|e| anyhow!("{e}"))
 }
 
 /// A render EXR's header: what merging checks before reading any pixels.
@@ -137,8 +129,10 @@ pub struct Piece {
     pub samples: Range<u64>,
     pub seed: u64,
     pub scene_hash: String,
-    /// Every text attribute.
-    pub attributes: BTreeMap<String, String>,
+    /// What the piece records besides radiance (from its channels).
+    pub outputs: Outputs,
+    /// Every header attribute, typed.
+    pub attributes: BTreeMap<String, Attribute>,
 }
 
 impl Piece {
@@ -163,28 +157,29 @@ pub fn read_piece(path: &Path) -> Result<Piece> {
             meta.headers.len()
         );
     };
-    let mut attributes = BTreeMap::new();
-    for (name, value) in header
-        .own_attributes
-        .other
-        .iter()
-        .chain(&header.shared_attributes.other)
-    {
-        if let AttributeValue::Text(v) = value {
-            attributes.insert(text_string(name), text_string(v));
-        }
-    }
-    match attributes.get("tress:sums").map(String::as_str) {
-        Some(SUMS_FORMAT) => {}
+    let attributes: BTreeMap<String, Attribute> = image_io::read_exr_attributes(path)
+        .map_err(|e| anyhow!("{e}"))?
+        .into_iter()
+        .collect();
+    let sums_format = attributes.get("tress:sums").map(|a| a.to_string());
+    match sums_format.as_deref() {
+        Some(SUMS_FORMAT | SUMS_FORMAT_RADIANCE_ONLY) => {}
         Some(other) => {
             return Err(here(format!(
                 "sample sums in format {other:?}; this tress reads {SUMS_FORMAT:?} (render it again with this version)"
             )))
         }
+        None if attributes.contains_key("tress:spp") => {
+            return Err(here(
+                "has no sample sums (tress:sums attribute), which merging needs: render the \
+                 pieces with `tress render --sums` (the job lines of `tress farm` do)"
+                    .into(),
+            ))
+        }
         None => {
             return Err(here(
                 "not a mergeable tress render: it has no sample sums (tress:sums attribute); \
-                 only EXRs written by `tress render` or `tress merge` can be merged"
+                 only EXRs written by `tress render --sums` or `tress merge --sums` can be merged"
                     .into(),
             ))
         }
@@ -193,8 +188,8 @@ pub fn read_piece(path: &Path) -> Result<Piece> {
         let v = attributes
             .get(name)
             .ok_or_else(|| here(format!("the {name} attribute is missing")))?;
-        v.parse()
-            .map_err(|_| here(format!("the {name} attribute {v:?} is not a whole number")))
+        v.as_whole()
+            .ok_or_else(|| here(format!("the {name} attribute {v:?} is not a whole number")))
     };
     let spp = number("tress:spp")?;
     let offset = number("tress:spp_offset")?;
@@ -207,7 +202,8 @@ pub fn read_piece(path: &Path) -> Result<Piece> {
     }
     let scene_hash = attributes
         .get("tress:scene_hash")
-        .cloned()
+        .and_then(|a| a.as_text())
+        .map(str::to_owned)
         .ok_or_else(|| here("the tress:scene_hash attribute is missing".into()))?;
 
     let display = header.shared_attributes.display_window;
@@ -228,8 +224,22 @@ pub fn read_piece(path: &Path) -> Result<Piece> {
     if (w as u64) * (h as u64) > MAX_PIXELS {
         return Err(here(format!("data window {w}x{h} is too large")));
     }
+    let have: BTreeMap<String, ex::SampleType> = header
+        .channels
+        .list
+        .iter()
+        .map(|c| (c.name.to_string(), c.sample_type))
+        .collect();
+    let outputs = outputs_of(&have).map_err(here)?;
+    if sums_format.as_deref() == Some(SUMS_FORMAT_RADIANCE_ONLY) && outputs != Outputs::default() {
+        return Err(here(format!(
+            "sums in format {SUMS_FORMAT_RADIANCE_ONLY:?} hold radiance only, but the file has \
+             channels {}",
+            outputs.channel_names().join(", ")
+        )));
+    }
     let blocks = dyadic_cover(offset..end);
-    check_channels(header, blocks.len()).map_err(here)?;
+    check_channels(&have, &outputs, blocks.len()).map_err(here)?;
     Ok(Piece {
         path: path.to_owned(),
         window: [
@@ -242,45 +252,86 @@ pub fn read_piece(path: &Path) -> Result<Piece> {
         samples: offset..end,
         seed,
         scene_hash,
+        outputs,
         attributes,
     })
 }
 
-fn check_channels(header: &Header, blocks: usize) -> Result<(), String> {
-    let have: BTreeMap<String, ex::SampleType> = header
-        .channels
-        .list
-        .iter()
-        .map(|c| (text_string(&c.name), c.sample_type))
-        .collect();
-    let mut want: Vec<(String, ex::SampleType)> = RGB
-        .iter()
+/// What a render EXR records besides radiance, from its output channels: alpha when it has
+/// `A`, each AOV whose channels it has (all of them, or it is refused).
+fn outputs_of(have: &BTreeMap<String, ex::SampleType>) -> Result<Outputs, String> {
+    let mut outputs = Outputs {
+        alpha: have.contains_key("A"),
+        ..Default::default()
+    };
+    for aov in Aov::ALL {
+        let present: Vec<&str> = aov
+            .channels()
+            .iter()
+            .copied()
+            .filter(|c| have.contains_key(*c))
+            .collect();
+        if present.len() == aov.channels().len() {
+            outputs.aovs.insert(aov);
+        } else if !present.is_empty() {
+            return Err(format!(
+                "the {aov} layer is incomplete: it has {} of the channels {}",
+                present.join(", "),
+                aov.channels().join(", ")
+            ));
+        }
+    }
+    Ok(outputs)
+}
+
+fn check_channels(
+    have: &BTreeMap<String, ex::SampleType>,
+    outputs: &Outputs,
+    blocks: usize,
+) -> Result<(), String> {
+    let mut want: Vec<(String, ex::SampleType)> = outputs
+        .channel_names()
+        .into_iter()
         .map(|n| (n.to_string(), ex::SampleType::F32))
         .collect();
+    let outputs_end = want.len();
+    let quantities = quantities(outputs);
     for k in 0..blocks {
-        for c in 0..3 {
+        for &q in &quantities {
             for high in [true, false] {
-                want.push((sum_channel(k, c, high), ex::SampleType::U32));
+                want.push((sum_channel(k, q, high), ex::SampleType::U32));
             }
         }
     }
-    for (name, kind) in &want {
+    for (i, (name, kind)) in want.iter().enumerate() {
         match have.get(name) {
             Some(t) if t == kind => {}
             Some(t) => return Err(format!("channel {name} holds {t:?} samples, not {kind:?}")),
+            None if i < outputs_end => return Err(format!("channel {name} is missing")),
             None => {
                 return Err(format!(
-                    "channel {name} is missing ({} sample blocks need {} channels)",
-                    blocks,
-                    want.len()
+                    "channel {name} is missing ({blocks} sample blocks of {} quantities need {} \
+                     sum channels)",
+                    quantities.len(),
+                    want.len() - outputs_end
                 ))
             }
         }
     }
+    // Sums of quantities these outputs do not record: the file was edited or is foreign.
+    if let Some(extra) = have
+        .keys()
+        .find(|n| n.starts_with("tress.sum") && !want.iter().any(|(w, _)| w == *n))
+    {
+        return Err(format!(
+            "channel {extra} is not a sum of this render's outputs ({})",
+            outputs.channel_names().join(", ")
+        ));
+    }
     Ok(())
 }
 
-/// Reads a piece's sums and checks that its pixel values are the ones they define.
+/// Reads a piece's sums and checks that its channels are the ones they define.
 pub fn read_sums(piece: &Piece) -> Result<SampleSums> {
     let path = &piece.path;
     let here = |reason: String| anyhow!("{}: {reason}", path.display());
@@ -297,9 +348,10 @@ pub fn read_sums(piece: &Piece) -> Result<SampleSums> {
         .channel_data
         .list
         .iter()
-        .map(|c| (text_string(&c.name), &c.sample_data))
+        .map(|c| (c.name.to_string(), &c.sample_data))
         .collect();
     let blocks = dyadic_cover(piece.samples.clone());
+    let quantities = quantities(&piece.outputs);
     let [x0, y0, x1, y1] = piece.window;
     let pixels = (x1 - x0) as usize * (y1 - y0) as usize;
     let u32s = |name: String| -> Result<&Vec<u32>> {
@@ -308,19 +360,18 @@ pub fn read_sums(piece: &Piece) -> Result<SampleSums> {
             _ => Err(here(format!("channel {name} is missing or malformed"))),
         }
     };
-    let nb = blocks.len();
-    let mut sums = vec![[0.0f64; 3]; pixels * nb];
+    let (nb, nq) = (blocks.len(), quantities.len());
+    let mut sums = vec![0.0f64; pixels * nb * nq];
     for k in 0..nb {
-        let halves = (0..3)
-            .map(|c| {
-                Ok((
-                    u32s(sum_channel(k, c, true))?,
-                    u32s(sum_channel(k, c, false))?,
-                ))
-            })
-            .collect::<Result<Vec<_>>>()?;
-        for (p, px) in sums.iter_mut().skip(k).step_by(nb).enumerate() {
-            for (v, (hi, lo)) in px.iter_mut().zip(&halves) {
+        for (q, &quantity) in quantities.iter().enumerate() {
+            let hi = u32s(sum_channel(k, quantity, true))?;
+            let lo = u32s(sum_channel(k, quantity, false))?;
+            for (p, v) in sums
+                .iter_mut()
+                .skip(k * nq + q)
+                .step_by(nb * nq)
+                .enumerate()
+            {
                 *v = f64::from_bits((u64::from(hi[p]) << 32) | u64::from(lo[p]));
             }
         }
@@ -331,17 +382,17 @@ pub fn read_sums(piece: &Piece) -> Result<SampleSums> {
         full_height: piece.film.1,
         samples: piece.samples.clone(),
         blocks,
+        outputs: piece.outputs.clone(),
         sums,
     };
-    let expected = sums.image();
-    for (c, name) in RGB.iter().enumerate() {
-        let Some(ex::FlatSamples::F32(values)) = channels.get(*name) else {
+    for (name, expected) in sums.channels() {
+        let Some(ex::FlatSamples::F32(values)) = channels.get(name) else {
             return Err(here(format!(
                 "channel {name} is missing or not 32-bit float"
             )));
         };
-        if let Some(p) = (0..pixels)
-            .find(|&p| values.get(p).map(|v| v.to_bits()) != Some(expected.pixels[p][c].to_bits()))
+        if let Some(p) =
+            (0..pixels).find(|&p| values.get(p).map(|v| v.to_bits()) != Some(expected[p].to_bits()))
         {
             let w = (x1 - x0) as usize;
             return Err(here(format!(
@@ -361,6 +412,10 @@ pub struct PreviewArgs {
     /// Exposure of the PNG preview, in stops.
     #[arg(long, default_value_t = 0.0, value_parser = parse_exposure, allow_hyphen_values = true)]
     pub exposure: f32,
+    /// Tone mapping of the PNG preview: filmic (AgX, Blender's default: highlights roll off to
+    /// white, middle grey unchanged) or clamp (each channel clipped at 1).
+    #[arg(long, default_value_t = ToneMap::Filmic, value_parser = parse_tonemap)]
+    pub tonemap: ToneMap,
     /// Do not write the PNG preview.
     #[arg(long)]
     pub no_preview: bool,
@@ -370,10 +425,20 @@ impl PreviewArgs {
     /// Writes the preview of `image` beside `exr` (same name, `.png`) unless disabled.
     pub fn write(&self, exr: &Path, image: &tress_core::Image) -> Result<()> {
         if !self.no_preview {
-            image_io::write_png(exr.with_extension("png"), image, self.exposure)?;
+            image_io::write_png_tonemapped(
+                exr.with_extension("png"),
+                image,
+                self.exposure,
+                self.tonemap,
+            )
+            .map_err(|e| anyhow!("{e}"))?;
         }
         Ok(())
     }
+}
+
+fn parse_tonemap(s: &str) -> Result<ToneMap, String> {
+    s.parse()
 }
 
 /// Checked before rendering: a NaN or overflowing gain made the PNG fail after the EXR was

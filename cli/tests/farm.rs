@@ -95,6 +95,109 @@ fn tiles_times_passes_merge_into_the_full_render() {
         && l.contains("scene-farm/")));
 }
 
+/// Jobs write sums (the merge needs them) and pass alpha and the AOVs on; the merge rebuilds
+/// every output channel bit for bit, with or without sums of its own.
+#[test]
+fn farm_jobs_carry_sums_and_outputs_and_merge_exactly() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    let outputs = ["--alpha", "--aov", "variance,depth,albedo,tangent"];
+    render_ok(
+        &[&outputs[..], &["--out", "full.exr", "--quiet"]].concat(),
+        d,
+    );
+    render_ok(
+        &[
+            &outputs[..],
+            &["--out", "full_sums.exr", "--sums", "--quiet"],
+        ]
+        .concat(),
+        d,
+    );
+    let args = [
+        &["--tiles", "3", "--passes", "2", "--out", "f"],
+        &outputs[..],
+    ]
+    .concat();
+    let jobs = farm(&args, d);
+    assert_eq!(jobs.lines().count(), 6, "{jobs}");
+    for line in jobs.lines() {
+        assert!(
+            line.contains(" --sums ")
+                && line.contains(" --alpha")
+                && line.contains(" --aov depth,tangent,albedo,variance"),
+            "{line}"
+        );
+    }
+    run_lines(&jobs, d);
+    let merge = farm(&[&args[..], &["--merge"]].concat(), d);
+    assert!(
+        !merge.contains("--sums"),
+        "the final merge needs no sums: {merge}"
+    );
+    run_lines(&merge, d);
+    let merged = pixels(&d.join("f/scene.exr"));
+    let names: Vec<&str> = merged.channels.iter().map(|c| c.0.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "A",
+            "B",
+            "G",
+            "R",
+            "albedo.B",
+            "albedo.G",
+            "albedo.R",
+            "depth.Z",
+            "tangent.X",
+            "tangent.Y",
+            "tangent.Z",
+            "variance.B",
+            "variance.G",
+            "variance.R"
+        ]
+    );
+    assert_eq!(merged, pixels(&d.join("full.exr")));
+    // The merge keeps the pieces' camera and version.
+    let header = |f: &str| tress_core::image_io::read_exr_attributes(d.join(f)).unwrap();
+    let (full_header, merged_header) = (header("full.exr"), header("f/scene.exr"));
+    for name in [
+        "worldToCamera",
+        "worldToNDC",
+        "software",
+        "tress:integrator",
+    ] {
+        let get = |h: &[(String, tress_core::image_io::Attribute)]| {
+            h.iter().find(|a| a.0 == name).map(|a| a.1.clone())
+        };
+        assert!(get(&full_header).is_some(), "{name}");
+        assert_eq!(get(&merged_header), get(&full_header), "{name}");
+    }
+    // Merged with --sums, it equals the single render with sums, and merges again.
+    let pieces: Vec<String> = merge
+        .split_whitespace()
+        .skip(3)
+        .take(6)
+        .map(String::from)
+        .collect();
+    let o = tress(
+        &[
+            &["merge", "again.exr", "--sums", "--quiet"][..],
+            &pieces.iter().map(String::as_str).collect::<Vec<_>>(),
+        ]
+        .concat(),
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        pixels(&d.join("again.exr")),
+        pixels(&d.join("full_sums.exr"))
+    );
+    let o = tress(&["merge", "once_more.exr", "again.exr", "--quiet"], d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(pixels(&d.join("once_more.exr")), merged);
+}
+
 #[test]
 fn bad_farm_requests_are_refused() {
     let (dir, _) = scene_dir(SCENE);
@@ -106,6 +209,7 @@ fn bad_farm_requests_are_refused() {
         (vec!["--passes", "0"], "--passes 0"),
         (vec!["--spp", "0"], "spp must be at least 1"),
         (vec!["--integrator", "bogus"], "bogus"),
+        (vec!["--aov", "depth,bogus"], "unknown AOV 'bogus'"),
     ] {
         let mut a = vec!["farm", "scene.ron"];
         a.extend_from_slice(&args);
@@ -157,10 +261,18 @@ fn incompatible_pieces_are_refused_with_clear_errors() {
     ];
     for (out, extra) in renders {
         render_ok(
-            &[&["--out", out, "--no-preview", "--quiet"], extra].concat(),
+            &[&["--out", out, "--sums", "--no-preview", "--quiet"], extra].concat(),
             d,
         );
     }
+    // Pieces without sums, or recording other outputs.
+    let without_sums = ["--crop", "0,10,24,20", "--spp", "4", "--out", "no_sums.exr"];
+    render_ok(&[&without_sums[..], &["--quiet"]].concat(), d);
+    let with_alpha = ["--crop", "0,10,24,20", "--spp", "4", "--out", "alpha.exr"];
+    render_ok(
+        &[&with_alpha[..], &["--sums", "--alpha", "--quiet"]].concat(),
+        d,
+    );
     std::fs::write(
         d.join("big.ron"),
         SCENE.replace("width: 24, height: 20", "width: 24, height: 30"),
@@ -176,6 +288,7 @@ fn incompatible_pieces_are_refused_with_clear_errors() {
             "4",
             "--out",
             "big.exr",
+            "--sums",
             "--quiet",
         ],
         d,
@@ -203,7 +316,17 @@ fn incompatible_pieces_are_refused_with_clear_errors() {
     }
 
     // (pieces, extra arguments, what the message must say)
-    let refused: [(&[&str], &[&str], &[&str]); 13] = [
+    let refused: [(&[&str], &[&str], &[&str]); 15] = [
+        (
+            &["top.exr", "no_sums.exr"],
+            &[],
+            &["no_sums.exr", "no sample sums", "tress render --sums"],
+        ),
+        (
+            &["top.exr", "alpha.exr"],
+            &[],
+            &["alpha.exr", "differs (R, G, B vs R, G, B, A)", "--alpha"],
+        ),
         (
             &["top.exr", "top_seed.exr"],
             &[],

@@ -661,6 +661,7 @@ fn sample_range_passes_merge_into_the_single_render() {
                 spp,
                 "--out",
                 out,
+                "--sums",
                 "--quiet",
             ],
             d,
@@ -682,9 +683,9 @@ fn sample_range_passes_merge_into_the_single_render() {
         let o = tress(&a, d);
         assert!(o.status.success(), "{}", stderr(&o));
     };
-    merge(&["m1.exr", "c.exr", "a.exr", "b.exr"]);
-    merge(&["ab.exr", "a.exr", "b.exr"]);
-    merge(&["m2.exr", "ab.exr", "c.exr", "--expect-spp", "12"]);
+    merge(&["m1.exr", "c.exr", "a.exr", "b.exr", "--sums"]);
+    merge(&["ab.exr", "a.exr", "b.exr", "--sums"]);
+    merge(&["m2.exr", "ab.exr", "c.exr", "--expect-spp", "12", "--sums"]);
     let whole = pixels(&d.join("whole.exr"));
     assert_eq!(
         whole.channels.len(),
@@ -790,7 +791,7 @@ fn sigterm_writes_the_finished_samples_and_exits_cleanly() {
 fn outputs_onto_directories_fail_cleanly_without_temporary_files() {
     let (dir, _) = scene_dir(SCENE);
     let d = dir.path();
-    render_ok(&["--out", "a.exr", "--quiet"], d);
+    render_ok(&["--out", "a.exr", "--sums", "--quiet"], d);
     std::fs::create_dir(d.join("taken.exr")).unwrap();
     std::fs::create_dir(d.join("taken.png")).unwrap();
     std::fs::create_dir(d.join("png_taken.png")).unwrap();
@@ -1037,7 +1038,13 @@ fn concurrent_renders_to_one_output_leave_a_consistent_pair() {
         assert!(attributes
             .iter()
             .any(|(k, v)| k == "tress:dropped_samples" && v == "0"));
-        tress_core::image_io::write_png(d.join("check.png"), &image, 0.0).unwrap();
+        tress_core::image_io::write_png_tonemapped(
+            d.join("check.png"),
+            &image,
+            0.0,
+            tress_core::image_io::ToneMap::Filmic,
+        )
+        .unwrap();
         assert_eq!(
             std::fs::read(d.join("same.png")).unwrap(),
             std::fs::read(d.join("check.png")).unwrap(),

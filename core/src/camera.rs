@@ -1,7 +1,8 @@
 //! Perspective camera with an optional thin lens.
 
-use crate::math::{Ray, Vec2, Vec3};
+use crate::math::{Mat4, Ray, Vec2, Vec3};
 use crate::sampling::sample_uniform_disk_concentric;
+use glam::Vec4;
 
 /// A pinhole or thin-lens perspective camera.
 #[derive(Clone, Debug)]
@@ -133,6 +134,40 @@ impl Camera {
     pub fn position(&self) -> Vec3 {
         self.origin
     }
+
+    /// World to camera space as OpenEXR's `worldToCamera` attribute (and RenderMan) define it:
+    /// the camera at the origin, +x right, +y up and +z the viewing direction (left-handed).
+    /// Column-vector convention (`m * p`); OpenEXR stores it transposed, which is glam's
+    /// column-major array.
+    pub fn world_to_camera(&self) -> Mat4 {
+        let rows = Mat4::from_cols(
+            self.right.extend(0.0),
+            self.up.extend(0.0),
+            self.forward.extend(0.0),
+            Vec4::W,
+        )
+        .transpose();
+        rows * Mat4::from_translation(-self.origin)
+    }
+
+    /// World to normalised device coordinates of a `width`×`height` film, as OpenEXR's
+    /// `worldToNDC` attribute defines them: after the perspective divide, (0, 0) is the film's
+    /// upper-left corner and (1, 1) its lower-right, x right and y down; z becomes 1 / (depth
+    /// along the view axis). The projection through the lens centre (a thin lens brings the
+    /// plane of focus to the same place). Column-vector convention, as [`Self::world_to_camera`].
+    pub fn world_to_ndc(&self, width: u32, height: u32) -> Mat4 {
+        let aspect = width as f32 / height as f32;
+        let kx = 0.5 / (self.tan_half_fov * aspect);
+        let ky = 0.5 / self.tan_half_fov;
+        // x = (kx·cx + cz/2) / cz, y = (cz/2 − ky·cy) / cz, z = 1 / cz, w = cz.
+        let projection = Mat4::from_cols(
+            Vec4::new(kx, 0.0, 0.0, 0.0),
+            Vec4::new(0.0, -ky, 0.0, 0.0),
+            Vec4::new(0.5, 0.5, 0.0, 1.0),
+            Vec4::new(0.0, 0.0, 1.0, 0.0),
+        );
+        projection * self.world_to_camera()
+    }
 }
 
 #[cfg(test)]
@@ -154,6 +189,49 @@ mod tests {
         // Top edge of the film is fov/2 above the axis.
         let top = c.generate_ray(50.0, 0.0, 100, 100, Vec2::ZERO);
         assert!((top.dir.y.atan2(-top.dir.z).to_degrees() - 20.0).abs() < 1e-3);
+    }
+
+    /// The matrices put a point seen through film position (px, py) at (px / w, py / h) in NDC
+    /// and at positive camera z, the camera at the origin.
+    #[test]
+    fn world_to_ndc_projects_onto_the_film_position_of_the_ray() {
+        let c = Camera::perspective(
+            Vec3::new(1.0, 2.0, 5.0),
+            Vec3::new(-0.5, 0.3, -1.0),
+            Vec3::new(0.1, 1.0, 0.0),
+            50.0,
+            0.0,
+            None,
+        );
+        let (w, h) = (64, 48);
+        let to_camera = c.world_to_camera();
+        let to_ndc = c.world_to_ndc(w, h);
+        assert!(to_camera.transform_point3(c.position()).length() < 1e-5);
+        assert!(to_camera.determinant() < 0.0, "camera space is left-handed");
+        for (px, py, d) in [
+            (0.0, 0.0, 1.0),
+            (64.0, 48.0, 7.5),
+            (10.5, 40.25, 0.3),
+            (32.0, 24.0, 3.0),
+        ] {
+            let r = c.generate_ray(px, py, w, h, Vec2::ZERO);
+            let p = r.at(d);
+            let cam = to_camera.transform_point3(p);
+            assert!((cam.length() - d).abs() < 1e-4 && cam.z > 0.0, "{cam}");
+            // Right of centre is +x, above is +y.
+            assert_eq!(cam.x > 1e-4, px > 32.0);
+            assert_eq!(cam.y > 1e-4, py < 24.0);
+            let ndc = to_ndc.project_point3(p);
+            assert!(
+                (ndc.x - px / w as f32).abs() < 1e-5,
+                "{ndc} for ({px}, {py})"
+            );
+            assert!(
+                (ndc.y - py / h as f32).abs() < 1e-5,
+                "{ndc} for ({px}, {py})"
+            );
+            assert!((ndc.z - 1.0 / cam.z).abs() < 1e-4 * ndc.z);
+        }
     }
 
     #[test]

@@ -1,7 +1,11 @@
-//! Film settings and the image buffer the render loop fills.
+//! Film settings, what a render records per pixel (radiance, alpha, AOVs) and the image buffer
+//! the render loop fills.
 
 use crate::math::Rgb;
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeSet;
+use std::fmt;
+use std::str::FromStr;
 
 /// Film description: resolution, samples, seed and an optional crop window.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -131,11 +135,18 @@ impl FilmSettings {
         Ok(())
     }
 
-    /// [`Self::validate`], and that the render fits the memory limit ([`MEMORY_LIMIT_VAR`]).
+    /// [`Self::validate`], and that a render of radiance alone fits the memory limit
+    /// ([`MEMORY_LIMIT_VAR`]).
     pub fn validate_for_render(&self) -> Result<(), FilmError> {
+        self.validate_for_outputs(&Outputs::default())
+    }
+
+    /// [`Self::validate`], and that a render recording `outputs` fits the memory limit
+    /// ([`MEMORY_LIMIT_VAR`]).
+    pub fn validate_for_outputs(&self, outputs: &Outputs) -> Result<(), FilmError> {
         self.validate()?;
         let limit_gib = memory_limit_gib();
-        let need_gib = self.memory_bytes() as f64 / (1u64 << 30) as f64;
+        let need_gib = self.memory_bytes_for(outputs) as f64 / (1u64 << 30) as f64;
         if need_gib > limit_gib {
             let [x0, y0, x1, y1] = self.window();
             return Err(FilmError::Memory {
@@ -149,14 +160,121 @@ impl FilmSettings {
         Ok(())
     }
 
-    /// Memory the render of the window needs at the least: per pixel an f64 RGB sum for each
-    /// aligned block of its samples (at most ⌊log2 spp⌋ + 1 of them; `render::dyadic_cover`)
-    /// and the f32 image, twice over while waves are merged.
+    /// Memory a render of radiance alone needs at the least ([`Self::memory_bytes_for`]).
     pub fn memory_bytes(&self) -> u64 {
+        self.memory_bytes_for(&Outputs::default())
+    }
+
+    /// Memory the render of the window recording `outputs` needs at the least: per pixel an
+    /// f64 sum of every recorded quantity (`render::quantities`: RGB, and what alpha and the
+    /// AOVs need) for each aligned block of its samples (at most ⌊log2 spp⌋ + 1 of them;
+    /// `render::dyadic_cover`) and the f32 output channels, twice over while waves are merged.
+    pub fn memory_bytes_for(&self, outputs: &Outputs) -> u64 {
         let [x0, y0, x1, y1] = self.window();
         let pixels = (x1 - x0) as u64 * (y1 - y0) as u64;
         let blocks = 64 - (self.spp.max(1) as u64).leading_zeros() as u64;
-        2 * pixels * (24 * blocks + 12)
+        let quantities = crate::render::quantity_count(outputs) as u64;
+        let channels = outputs.channel_names().len() as u64;
+        2 * pixels * (8 * quantities * blocks + 4 * channels)
+    }
+}
+
+/// An extra per-pixel output a render can write beside its radiance (an "AOV", arbitrary
+/// output variable), learnt from the first hit of each camera ray.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Aov {
+    /// Distance along the camera ray to the first hit, averaged over the pixel's samples that
+    /// hit something; +∞ where none did. Channel `depth.Z`.
+    Depth,
+    /// Unit fiber tangent (world space, root → tip) at the first hit, averaged over the
+    /// pixel's samples whose first hit is a fiber, and not renormalised: shorter than 1 where
+    /// the pixel's fibers point different ways, 0 where no sample saw a fiber. Channels
+    /// `tangent.X`, `tangent.Y`, `tangent.Z`.
+    Tangent,
+    /// Directional albedo of the first hit's material toward the camera, averaged over the
+    /// pixel's samples that hit something; 0 where none did. Each sample estimates it from
+    /// one direction drawn by the material's own sampling (f·cos θ / pdf): exact for diffuse
+    /// surfaces, unbiased and nearly noise-free for fiber models that sample their lobes
+    /// exactly. Channels `albedo.R`, `albedo.G`, `albedo.B`.
+    Albedo,
+    /// Variance of the pixel value (the mean of its n samples), from the sums of the samples
+    /// and of their squares: (Σx² − (Σx)²/n) / (n(n − 1)) per channel; +∞ below two samples.
+    /// Channels `variance.R`, `variance.G`, `variance.B`.
+    Variance,
+}
+
+impl Aov {
+    /// Every AOV, in the order channels are listed.
+    pub const ALL: [Aov; 4] = [Aov::Depth, Aov::Tangent, Aov::Albedo, Aov::Variance];
+
+    /// The name on the command line and the layer name in the EXR.
+    pub fn name(self) -> &'static str {
+        match self {
+            Aov::Depth => "depth",
+            Aov::Tangent => "tangent",
+            Aov::Albedo => "albedo",
+            Aov::Variance => "variance",
+        }
+    }
+
+    /// The EXR channels it is written to, `layer.channel` as OpenEXR names layers.
+    pub fn channels(self) -> &'static [&'static str] {
+        match self {
+            Aov::Depth => &["depth.Z"],
+            Aov::Tangent => &["tangent.X", "tangent.Y", "tangent.Z"],
+            Aov::Albedo => &["albedo.R", "albedo.G", "albedo.B"],
+            Aov::Variance => &["variance.R", "variance.G", "variance.B"],
+        }
+    }
+}
+
+impl fmt::Display for Aov {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Aov {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Aov::ALL
+            .into_iter()
+            .find(|a| a.name() == s.trim())
+            .ok_or_else(|| {
+                let names: Vec<&str> = Aov::ALL.iter().map(|a| a.name()).collect();
+                format!("unknown AOV '{s}' (expected {})", names.join(", "))
+            })
+    }
+}
+
+/// What a render records per pixel besides radiance.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Outputs {
+    /// Alpha: the fraction of the pixel's camera samples whose camera ray hit geometry, hair or
+    /// surface (channel `A`).
+    pub alpha: bool,
+    /// The AOVs.
+    pub aovs: BTreeSet<Aov>,
+}
+
+impl Outputs {
+    /// Whether `aov` is recorded.
+    pub fn has(&self, aov: Aov) -> bool {
+        self.aovs.contains(&aov)
+    }
+
+    /// The output channels in the order they are listed: `R`, `G`, `B`, `A` with alpha, then
+    /// the AOVs' channels (`depth.Z`, `tangent.X`, …).
+    pub fn channel_names(&self) -> Vec<&'static str> {
+        let mut names = vec!["R", "G", "B"];
+        if self.alpha {
+            names.push("A");
+        }
+        for aov in &self.aovs {
+            names.extend_from_slice(aov.channels());
+        }
+        names
     }
 }
 

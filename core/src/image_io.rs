@@ -4,12 +4,16 @@
 //! temporary file in the target's directory, which is synced and then renamed over the target,
 //! so an interrupted render never leaves a truncated image behind.
 //!
-//! EXR text attributes are stored as UTF-8 bytes. The standard text attributes `software`,
-//! `owner`, `comments` and `capDate` map to their standard header fields; every other standard
-//! OpenEXR attribute name (`channels`, `compression`, …) is reserved and rejected.
+//! EXR header attributes keep their types ([`Attribute`]: text, int, float, double, 4×4
+//! matrix); text is stored as UTF-8 bytes. The standard attributes `software`, `owner`,
+//! `comments`, `capDate` (text), `worldToCamera` and `worldToNDC` (matrices) map to their
+//! standard header fields; every other standard OpenEXR attribute name (`channels`,
+//! `compression`, …) is reserved and rejected.
+//!
+//! PNG previews are 8-bit sRGB with the `sRGB` chunk, tone-mapped by [`ToneMap`].
 
 use crate::film::Image;
-use crate::math::Rgb;
+use crate::math::{Mat3, Mat4, Rgb};
 use exr::meta::header::standard_names;
 use exr::meta::header::Header;
 use exr::prelude as ex;
@@ -106,8 +110,119 @@ pub enum ImageError {
 const MAX_SIDE: usize = 1 << 16;
 const MAX_PIXELS: usize = 1 << 28;
 
-/// Standard text attributes that [`write_exr`] stores in their header fields.
+/// Standard text attributes that [`write_exr_channels`] stores in their header fields.
 const STANDARD_TEXT: [&str; 4] = ["software", "owner", "comments", "capDate"];
+
+/// An EXR header attribute's value, stored with its OpenEXR type.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Attribute {
+    /// `string`, UTF-8.
+    Text(String),
+    /// `int`.
+    Int(i32),
+    /// `float`.
+    Float(f32),
+    /// `double`.
+    Double(f64),
+    /// `m44f`, in the column-vector convention (`m * p`); OpenEXR stores the transpose, as
+    /// Imath multiplies row vectors.
+    Matrix(Mat4),
+}
+
+impl Attribute {
+    /// A whole number that must stay exact (a sample count or index, a seed): an `int` when it
+    /// fits, else its decimal text, so that no value is rounded or refused.
+    pub fn whole(v: u64) -> Self {
+        match i32::try_from(v) {
+            Ok(i) => Attribute::Int(i),
+            Err(_) => Attribute::Text(v.to_string()),
+        }
+    }
+
+    /// The whole number of a non-negative `int`, or of decimal text ([`Self::whole`]).
+    pub fn as_whole(&self) -> Option<u64> {
+        match self {
+            Attribute::Int(i) => u64::try_from(*i).ok(),
+            Attribute::Text(t) => t.trim().parse().ok(),
+            _ => None,
+        }
+    }
+
+    /// The number of an `int`, `float` or `double`, or of numeric text.
+    pub fn as_f64(&self) -> Option<f64> {
+        match self {
+            Attribute::Int(i) => Some(f64::from(*i)),
+            Attribute::Float(f) => Some(f64::from(*f)),
+            Attribute::Double(d) => Some(*d),
+            Attribute::Text(t) => t.trim().parse().ok(),
+            Attribute::Matrix(_) => None,
+        }
+    }
+
+    /// The text of a `string` attribute.
+    pub fn as_text(&self) -> Option<&str> {
+        match self {
+            Attribute::Text(t) => Some(t),
+            _ => None,
+        }
+    }
+
+    fn to_exr(&self) -> AttributeValue {
+        match self {
+            Attribute::Text(t) => AttributeValue::Text(utf8_text(t)),
+            Attribute::Int(i) => AttributeValue::I32(*i),
+            Attribute::Float(f) => AttributeValue::F32(*f),
+            Attribute::Double(d) => AttributeValue::F64(*d),
+            Attribute::Matrix(m) => AttributeValue::Matrix4x4(m.to_cols_array()),
+        }
+    }
+
+    fn from_exr(value: &AttributeValue) -> Option<Self> {
+        Some(match value {
+            AttributeValue::Text(t) => Attribute::Text(text_string(t)),
+            AttributeValue::I32(i) => Attribute::Int(*i),
+            AttributeValue::F32(f) => Attribute::Float(*f),
+            AttributeValue::F64(d) => Attribute::Double(*d),
+            AttributeValue::Matrix4x4(m) => Attribute::Matrix(Mat4::from_cols_array(m)),
+            _ => return None,
+        })
+    }
+}
+
+impl std::fmt::Display for Attribute {
+    /// Text as it is, numbers as Rust prints them (shortest exact form), a matrix as its 16
+    /// entries row by row.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Attribute::Text(t) => f.write_str(t),
+            Attribute::Int(i) => write!(f, "{i}"),
+            Attribute::Float(x) => write!(f, "{x}"),
+            Attribute::Double(x) => write!(f, "{x}"),
+            Attribute::Matrix(m) => {
+                let rows = m.transpose().to_cols_array().map(|v| v.to_string());
+                f.write_str(&rows.join(" "))
+            }
+        }
+    }
+}
+
+/// The samples of one EXR channel, a value per pixel of the data window, row by row.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ChannelSamples {
+    /// 32-bit float samples.
+    F32(Vec<f32>),
+    /// 32-bit unsigned integer samples.
+    U32(Vec<u32>),
+}
+
+impl ChannelSamples {
+    fn len(&self) -> usize {
+        match self {
+            ChannelSamples::F32(v) => v.len(),
+            ChannelSamples::U32(v) => v.len(),
+        }
+    }
+}
 
 /// Reads an RGB image (`.hdr` Radiance RGBE or `.exr` OpenEXR) as `(width, height, pixels)`,
 /// row-major linear RGB with the top row first. For EXR the R, G, B channels of the first layer
@@ -126,7 +241,8 @@ pub fn read_rgb(path: impl AsRef<Path>) -> Result<(u32, u32, Vec<Rgb>), ImageErr
 }
 
 /// Reads an RGB EXR: the data-window pixels placed in the display window (the full film, see
-/// [`Image`]), and the header's text attributes sorted by name.
+/// [`Image`]), and the header's text and numeric attributes as text ([`Attribute`]'s
+/// `Display`), sorted by name; matrices are left out ([`read_exr_attributes`] has them).
 pub fn read_exr(path: impl AsRef<Path>) -> Result<(Image, Vec<(String, String)>), ImageError> {
     let path = path.as_ref();
     check_exists(path)?;
@@ -201,8 +317,9 @@ pub fn read_exr(path: impl AsRef<Path>) -> Result<(Image, Vec<(String, String)>)
         }
     }
     for (name, value) in la.other.iter().chain(image.attributes.other.iter()) {
-        if let AttributeValue::Text(v) = value {
-            attributes.push((text_string(name), text_string(v)));
+        match Attribute::from_exr(value) {
+            Some(Attribute::Matrix(_)) | None => {}
+            Some(a) => attributes.push((text_string(name), a.to_string())),
         }
     }
     attributes.sort();
@@ -222,6 +339,47 @@ pub fn read_exr(path: impl AsRef<Path>) -> Result<(Image, Vec<(String, String)>)
     ))
 }
 
+/// Every header attribute of the first part of an EXR, typed, sorted by name: the standard
+/// text and matrix attributes tress writes ([`write_exr_channels`]) and all others of a type
+/// [`Attribute`] holds.
+pub fn read_exr_attributes(path: impl AsRef<Path>) -> Result<Vec<(String, Attribute)>, ImageError> {
+    let path = path.as_ref();
+    check_exists(path)?;
+    let meta = ex::MetaData::read_from_file(path, false).map_err(|e| exr_read_error(path, e))?;
+    let Some(header) = meta.headers.first() else {
+        return Ok(Vec::new());
+    };
+    let la = &header.own_attributes;
+    let mut attributes: Vec<(String, Attribute)> = Vec::new();
+    for (name, value) in
+        STANDARD_TEXT
+            .iter()
+            .zip([&la.software_name, &la.owner, &la.comments, &la.capture_date])
+    {
+        if let Some(v) = value {
+            attributes.push((name.to_string(), Attribute::Text(text_string(v))));
+        }
+    }
+    for (name, value) in [
+        ("worldToCamera", &la.world_to_camera),
+        ("worldToNDC", &la.world_to_normalized_device),
+    ] {
+        if let Some(m) = value {
+            attributes.push((
+                name.to_string(),
+                Attribute::Matrix(Mat4::from_cols_array(m)),
+            ));
+        }
+    }
+    for (name, value) in la.other.iter().chain(&header.shared_attributes.other) {
+        if let Some(a) = Attribute::from_exr(value) {
+            attributes.push((text_string(name), a));
+        }
+    }
+    attributes.sort_by(|a, b| a.0.cmp(&b.0));
+    Ok(attributes)
+}
+
 /// Writes `image` as a linear f32 RGB EXR (lossless ZIP compression): the display window is the
 /// full film and the data window the image's pixel window, so a crop shows in place. `attributes`
 /// become text attributes of the header (scene, integrator, spp, seed, render time, …).
@@ -231,23 +389,101 @@ pub fn write_exr(
     attributes: &[(&str, String)],
 ) -> Result<(), ImageError> {
     let path = path.as_ref();
+    check_image(image).map_err(|reason| ImageError::InvalidData {
+        origin: path.display().to_string(),
+        reason,
+    })?;
+    let channels = (0..3)
+        .map(|c| {
+            let values = image.pixels.iter().map(|p| p[c]).collect();
+            (["R", "G", "B"][c].to_string(), ChannelSamples::F32(values))
+        })
+        .collect();
+    let attributes: Vec<(&str, Attribute)> = attributes
+        .iter()
+        .map(|(n, v)| (*n, Attribute::Text(v.clone())))
+        .collect();
+    write_exr_channels(
+        path,
+        [
+            image.x0,
+            image.y0,
+            image.x0 + image.width,
+            image.y0 + image.height,
+        ],
+        (image.full_width, image.full_height),
+        channels,
+        &attributes,
+    )
+}
+
+/// Writes a single-part EXR of named channels (lossless ZIP compression), atomically: the
+/// display window is the `film` (width, height) and the data window `window` = `[x0, y0, x1,
+/// y1)`, whose pixels every channel holds row by row. Names follow OpenEXR's layer convention
+/// (`R`, `A`, `depth.Z`, `albedo.R`). `attributes` keep their types; the standard ones go to
+/// their header fields (module notes).
+pub fn write_exr_channels(
+    path: impl AsRef<Path>,
+    window: [u32; 4],
+    film: (u32, u32),
+    channels: Vec<(String, ChannelSamples)>,
+    attributes: &[(&str, Attribute)],
+) -> Result<(), ImageError> {
+    let path = path.as_ref();
     let invalid = |reason: String| ImageError::InvalidData {
         origin: path.display().to_string(),
         reason,
     };
-    check_image(image).map_err(invalid)?;
+    let [x0, y0, x1, y1] = window;
+    let (full_width, full_height) = film;
+    let fits = |a: u32, b: u32, full: u32| a < b && b <= full && full <= i32::MAX as u32;
+    if !fits(x0, x1, full_width) || !fits(y0, y1, full_height) {
+        return Err(invalid(format!(
+            "pixel window [{x0}, {x1})x[{y0}, {y1}) is empty or not inside the \
+             {full_width}x{full_height} film"
+        )));
+    }
+    let (w, h) = ((x1 - x0) as usize, (y1 - y0) as usize);
+    if channels.is_empty() {
+        return Err(invalid("an EXR needs at least one channel".into()));
+    }
+    for (name, samples) in &channels {
+        if samples.len() != w * h {
+            return Err(invalid(format!(
+                "channel {name} of the {w}x{h} image has {} samples instead of {}",
+                samples.len(),
+                w * h
+            )));
+        }
+        if name.is_empty() || name.len() > 255 || name.contains('\0') {
+            return Err(invalid(format!(
+                "EXR channel name {name:?} must be 1 to 255 bytes without NUL"
+            )));
+        }
+    }
 
     let mut la = ex::LayerAttributes {
-        layer_position: ex::Vec2(image.x0 as i32, image.y0 as i32),
+        layer_position: ex::Vec2(x0 as i32, y0 as i32),
         ..Default::default()
     };
     for (name, value) in attributes {
-        let text = utf8_text(value);
+        let text = || match value {
+            Attribute::Text(t) => Ok(utf8_text(t)),
+            _ => Err(invalid(format!("EXR attribute {name:?} must be text"))),
+        };
+        let matrix = || match value {
+            Attribute::Matrix(m) => Ok(m.to_cols_array()),
+            _ => Err(invalid(format!(
+                "EXR attribute {name:?} must be a 4x4 matrix"
+            ))),
+        };
         match *name {
-            "software" => la.software_name = Some(text),
-            "owner" => la.owner = Some(text),
-            "comments" => la.comments = Some(text),
-            "capDate" => la.capture_date = Some(text),
+            "software" => la.software_name = Some(text()?),
+            "owner" => la.owner = Some(text()?),
+            "comments" => la.comments = Some(text()?),
+            "capDate" => la.capture_date = Some(text()?),
+            "worldToCamera" => la.world_to_camera = Some(matrix()?),
+            "worldToNDC" => la.world_to_normalized_device = Some(matrix()?),
             n if n.is_empty() || n.len() > 255 || n.contains('\0') => {
                 return Err(invalid(format!(
                     "EXR attribute name {n:?} must be 1 to 255 bytes without NUL"
@@ -259,27 +495,28 @@ pub fn write_exr(
                 )));
             }
             n => {
-                la.other.insert(utf8_text(n), AttributeValue::Text(text));
+                la.other.insert(utf8_text(n), value.to_exr());
             }
         }
     }
 
-    let width = image.width as usize;
-    let pixels = &image.pixels;
+    let mut list: ex::SmallVec<[ex::AnyChannel<ex::FlatSamples>; 4]> = ex::SmallVec::new();
+    for (name, samples) in channels {
+        let samples = match samples {
+            ChannelSamples::F32(v) => ex::FlatSamples::F32(v),
+            ChannelSamples::U32(v) => ex::FlatSamples::U32(v),
+        };
+        list.push(ex::AnyChannel::new(utf8_text(&name), samples));
+    }
     let layer = ex::Layer::new(
-        (image.width as usize, image.height as usize),
+        (w, h),
         la,
         ex::Encoding::SMALL_LOSSLESS,
-        ex::SpecificChannels::rgb(|pos: ex::Vec2<usize>| {
-            let p = pixels[pos.y() * width + pos.x()];
-            (p.x, p.y, p.z)
-        }),
+        ex::AnyChannels::sort(list),
     );
     let mut exr_image = ex::Image::from_layer(layer);
-    exr_image.attributes.display_window = ex::IntegerBounds::new(
-        ex::Vec2(0, 0),
-        (image.full_width as usize, image.full_height as usize),
-    );
+    exr_image.attributes.display_window =
+        ex::IntegerBounds::new(ex::Vec2(0, 0), (full_width as usize, full_height as usize));
     write_atomically(path, |w| {
         exr_image.write().to_buffered(w).map_err(|e| match e {
             exr::error::Error::Io(source) => ImageError::Io {
@@ -292,12 +529,131 @@ pub fn write_exr(
     })
 }
 
-/// Writes an 8-bit sRGB PNG preview of the image's pixel window: each channel is scaled by
-/// 2^`exposure_stops`, clamped to [0, 1] (NaN becomes 0) and encoded with the sRGB curve.
+/// How a PNG preview maps linear radiance (after exposure) to display values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ToneMap {
+    /// Each channel clamped to [0, 1]: exact below 1, everything brighter clips to white (and
+    /// bright colours shift toward the hue of their clipped channels).
+    Clamp,
+    /// AgX, the view transform Blender uses by default since 4.0 (Troy Sobotka's design in
+    /// Eary Chow's version, as simplified without its gamut guard rails by Allen Pestaluky,
+    /// github.com/allenwp/AgX-GLSL-Shaders): linear Rec. 709 goes to Rec. 2020 and through
+    /// AgX's inset matrix, is log-encoded from 10 stops below to 6.5 stops above middle grey,
+    /// shaped by AgX's sigmoid and brought back through the outset matrix. Middle grey 0.18 stays
+    /// 0.18 and black stays black; highlights roll off smoothly and desaturate toward white,
+    /// which they reach at about 16 (4 stops above 1) instead of clipping at 1.
+    Filmic,
+}
+
+impl ToneMap {
+    /// Both, as `--tonemap` lists them.
+    pub const ALL: [ToneMap; 2] = [ToneMap::Clamp, ToneMap::Filmic];
+
+    /// The name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            ToneMap::Clamp => "clamp",
+            ToneMap::Filmic => "filmic",
+        }
+    }
+
+    /// Display-linear RGB in [0, 1] for linear scene radiance `c` (NaN counts as 0).
+    pub fn apply(self, c: Rgb) -> Rgb {
+        match self {
+            ToneMap::Clamp => {
+                let c = Rgb::select(c.is_nan_mask(), Rgb::ZERO, c);
+                c.clamp(Rgb::ZERO, Rgb::ONE)
+            }
+            ToneMap::Filmic => agx(c),
+        }
+    }
+}
+
+impl std::fmt::Display for ToneMap {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for ToneMap {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        ToneMap::ALL
+            .into_iter()
+            .find(|t| t.name() == s.trim())
+            .ok_or_else(|| format!("unknown tone mapping '{s}' (expected clamp or filmic)"))
+    }
+}
+
+/// The AgX transform of [`ToneMap::Filmic`]: linear Rec. 709 radiance → display-linear Rec. 709
+/// in [0, 1]. The constants are those of the simplified AgX named there.
+fn agx(c: Rgb) -> Rgb {
+    // Linear Rec. 709 → Rec. 2020 → AgX inset, as one matrix (given column by column).
+    const INSET: Mat3 = Mat3::from_cols_array(&[
+        0.544_908_14,
+        0.140_440_06,
+        0.088_827_41,
+        0.373_779_46,
+        0.754_109_6,
+        0.178_877_12,
+        0.081_384_98,
+        0.105_433_58,
+        0.732_25,
+    ]);
+    // AgX outset → linear Rec. 2020 → Rec. 709.
+    const OUTSET: Mat3 = Mat3::from_cols_array(&[
+        1.964_551,
+        -0.299_322_43,
+        -0.164_368_34,
+        -0.855_858_45,
+        1.326_451_1,
+        -0.238_224_64,
+        -0.108_867_11,
+        -0.027_084_02,
+        1.402_665_4,
+    ]);
+    // log2 of middle grey 0.18 times 2^-10 and 2^6.5: the encoded range.
+    const MIN_EV: f32 = -12.473_931;
+    const MAX_EV: f32 = 4.026_069;
+    // The sigmoid: pivot at middle grey (x = 10 / 16.5, y = 0.18^(1/2.4)), slope 2.4, toe and
+    // shoulder powers 1.5; (a, b) below and above the pivot.
+    const X_PIVOT: f32 = 10.0 / 16.5;
+    const Y_PIVOT: f32 = 0.489_437_1;
+    const BOTTOM: (f32, f32) = (-58.337_322, 35.355_953);
+    const TOP: (f32, f32) = (46.141_05, -27.964_273);
+    const SCALE: f32 = 0.019_613_087;
+    // Negative and NaN radiance count as (nearly) zero; the floor keeps log2 finite.
+    let c = INSET * c.max(Rgb::splat(2e-10));
+    let curve = |v: f32| {
+        let x = ((v.log2() - MIN_EV) / (MAX_EV - MIN_EV)).clamp(0.0, 1.0);
+        let (a, b) = if x < X_PIVOT { BOTTOM } else { TOP };
+        let y = Y_PIVOT
+            + 2.4 * (x - X_PIVOT) / (1.0 + SCALE * (b + a * x).abs().powf(1.5)).powf(1.0 / 1.5);
+        y.max(0.0).powf(2.4)
+    };
+    let display = OUTSET * Rgb::new(curve(c.x), curve(c.y), curve(c.z));
+    display.clamp(Rgb::ZERO, Rgb::ONE)
+}
+
+/// Writes an 8-bit sRGB PNG preview of the image's pixel window, each channel scaled by
+/// 2^`exposure_stops` and clamped to [0, 1] ([`ToneMap::Clamp`]).
 pub fn write_png(
     path: impl AsRef<Path>,
     image: &Image,
     exposure_stops: f32,
+) -> Result<(), ImageError> {
+    write_png_tonemapped(path, image, exposure_stops, ToneMap::Clamp)
+}
+
+/// Writes an 8-bit PNG preview of the image's pixel window: the radiance scaled by
+/// 2^`exposure_stops`, mapped to display values by `tonemap`, encoded with the sRGB curve, and
+/// marked as sRGB (the `sRGB` chunk, perceptual intent).
+pub fn write_png_tonemapped(
+    path: impl AsRef<Path>,
+    image: &Image,
+    exposure_stops: f32,
+    tonemap: ToneMap,
 ) -> Result<(), ImageError> {
     let path = path.as_ref();
     let invalid = |reason: String| ImageError::InvalidData {
@@ -314,30 +670,29 @@ pub fn write_png(
     let bytes: Vec<u8> = image
         .pixels
         .iter()
-        .flat_map(|p| [p.x, p.y, p.z])
-        .map(|c| srgb_byte(c * gain))
+        .flat_map(|p| tonemap.apply(*p * gain).to_array())
+        .map(srgb_byte)
         .collect();
+    let encode_error = |e: png::EncodingError| match e {
+        png::EncodingError::IoError(source) => ImageError::Io {
+            path: path.to_owned(),
+            action: "write",
+            source,
+        },
+        e => invalid(format!("cannot encode PNG: {e}")),
+    };
     write_atomically(path, |w| {
-        use image::ImageEncoder;
-        image::codecs::png::PngEncoder::new(w)
-            .write_image(
-                &bytes,
-                image.width,
-                image.height,
-                image::ExtendedColorType::Rgb8,
-            )
-            .map_err(|e| match e {
-                image::ImageError::IoError(source) => ImageError::Io {
-                    path: path.to_owned(),
-                    action: "write",
-                    source,
-                },
-                e => invalid(format!("cannot encode PNG: {e}")),
-            })
+        let mut encoder = png::Encoder::new(w, image.width, image.height);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+        let mut writer = encoder.write_header().map_err(encode_error)?;
+        writer.write_image_data(&bytes).map_err(encode_error)?;
+        writer.finish().map_err(encode_error)
     })
 }
 
-/// Linear value → 8-bit sRGB code, clamping to [0, 1].
+/// Display-linear value in [0, 1] → 8-bit sRGB code (clamped; NaN becomes 0).
 fn srgb_byte(c: f32) -> u8 {
     let c = if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) };
     let s = if c <= 0.003_130_8 {
@@ -913,5 +1268,218 @@ mod tests {
         assert_eq!(files_in(dir.path()), ["preview.png"]);
         let msg = write_png(&path, &img, f32::NAN).unwrap_err().to_string();
         assert!(msg.contains("preview.png"), "{msg}");
+    }
+
+    #[test]
+    fn typed_attributes_and_named_channels_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("layers.exr");
+        let to_camera = Mat4::from_cols_array(&std::array::from_fn(|i| i as f32 - 3.5));
+        let to_ndc = Mat4::from_diagonal(glam::Vec4::new(0.5, -2.0, 0.0, 1.0));
+        let (w, h) = (3usize, 2usize);
+        let ramp = |k: f32| (0..w * h).map(|i| i as f32 * k).collect::<Vec<f32>>();
+        let channels = vec![
+            ("R".to_string(), ChannelSamples::F32(ramp(1.0))),
+            ("G".to_string(), ChannelSamples::F32(ramp(2.0))),
+            ("B".to_string(), ChannelSamples::F32(ramp(3.0))),
+            ("A".to_string(), ChannelSamples::F32(ramp(0.1))),
+            (
+                "depth.Z".to_string(),
+                ChannelSamples::F32(vec![f32::INFINITY; w * h]),
+            ),
+            (
+                "x.count".to_string(),
+                ChannelSamples::U32(vec![u32::MAX; w * h]),
+            ),
+        ];
+        let attributes = [
+            ("software", Attribute::Text("tress 9.9.9".into())),
+            ("worldToCamera", Attribute::Matrix(to_camera)),
+            ("worldToNDC", Attribute::Matrix(to_ndc)),
+            ("tress:spp", Attribute::whole(64)),
+            ("tress:seed", Attribute::whole(1 << 40)),
+            ("tress:render_time_s", Attribute::Double(12.5)),
+            ("tress:gain", Attribute::Float(0.25)),
+            ("tress:scene", Attribute::Text("scènes/a.ron".into())),
+        ];
+        write_exr_channels(&path, [4, 1, 7, 3], (10, 5), channels, &attributes).unwrap();
+
+        let back = read_exr_attributes(&path).unwrap();
+        let mut expected: Vec<(String, Attribute)> = attributes
+            .iter()
+            .map(|(n, a)| (n.to_string(), a.clone()))
+            .collect();
+        expected.sort_by(|a, b| a.0.cmp(&b.0));
+        assert_eq!(back, expected);
+        assert_eq!(
+            Attribute::whole(1 << 40),
+            Attribute::Text("1099511627776".into())
+        );
+        assert_eq!(
+            back.iter()
+                .find(|a| a.0 == "tress:seed")
+                .unwrap()
+                .1
+                .as_whole(),
+            Some(1 << 40)
+        );
+        assert_eq!(Attribute::Int(-1).as_whole(), None);
+        assert_eq!(Attribute::Double(12.5).as_f64(), Some(12.5));
+
+        // Other tools see OpenEXR's types and standard fields; matrices as Imath stores them
+        // (row vectors: the translation in the last row).
+        let meta = ex::MetaData::read_from_file(&path, false).unwrap();
+        let header = &meta.headers[0];
+        let la = &header.own_attributes;
+        assert_eq!(la.world_to_camera, Some(to_camera.to_cols_array()));
+        assert_eq!(la.world_to_camera.unwrap()[12], to_camera.w_axis.x);
+        assert_eq!(la.world_to_normalized_device, Some(to_ndc.to_cols_array()));
+        assert_eq!(
+            la.software_name.as_ref().map(text_string).as_deref(),
+            Some("tress 9.9.9")
+        );
+        let other = |n: &str| la.other.get(&utf8_text(n)).cloned();
+        assert_eq!(other("tress:spp"), Some(AttributeValue::I32(64)));
+        assert_eq!(
+            other("tress:render_time_s"),
+            Some(AttributeValue::F64(12.5))
+        );
+        assert_eq!(other("tress:gain"), Some(AttributeValue::F32(0.25)));
+        let names: Vec<String> = header
+            .channels
+            .list
+            .iter()
+            .map(|c| c.name.to_string())
+            .collect();
+        assert_eq!(names, ["A", "B", "G", "R", "depth.Z", "x.count"]);
+        assert_eq!(header.layer_size, ex::Vec2(3, 2));
+        assert_eq!(header.own_attributes.layer_position, ex::Vec2(4, 1));
+
+        // read_exr: the RGB pixels, the attributes as text without the matrices.
+        let (image, text) = read_exr(&path).unwrap();
+        assert_eq!(image.get(2, 1), Rgb::new(5.0, 10.0, 15.0));
+        let get = |n: &str| text.iter().find(|a| a.0 == n).map(|a| a.1.as_str());
+        assert_eq!(get("tress:spp"), Some("64"));
+        assert_eq!(get("tress:render_time_s"), Some("12.5"));
+        assert_eq!(get("software"), Some("tress 9.9.9"));
+        assert_eq!(get("worldToCamera"), None);
+    }
+
+    #[test]
+    fn bad_channels_and_mistyped_standard_attributes_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.exr");
+        let one = || vec![("R".to_string(), ChannelSamples::F32(vec![0.0; 4]))];
+        let write = |channels, attributes: &[(&str, Attribute)]| {
+            write_exr_channels(&path, [0, 0, 2, 2], (2, 2), channels, attributes)
+                .unwrap_err()
+                .to_string()
+        };
+        let msg = write(one(), &[("worldToNDC", Attribute::Text("identity".into()))]);
+        assert!(
+            msg.contains("bad.exr") && msg.contains("worldToNDC") && msg.contains("matrix"),
+            "{msg}"
+        );
+        let msg = write(one(), &[("software", Attribute::Int(1))]);
+        assert!(msg.contains("\"software\" must be text"), "{msg}");
+        let msg = write(one(), &[("dataWindow", Attribute::Int(1))]);
+        assert!(msg.contains("reserved"), "{msg}");
+        let short = vec![("R".to_string(), ChannelSamples::F32(vec![0.0; 3]))];
+        let msg = write(short, &[]);
+        assert!(
+            msg.contains("channel R") && msg.contains("3 samples instead of 4"),
+            "{msg}"
+        );
+        assert!(write(Vec::new(), &[]).contains("at least one channel"));
+        let msg = write_exr_channels(&path, [0, 0, 3, 2], (2, 2), one(), &[])
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("not inside the 2x2 film"), "{msg}");
+        assert!(!path.exists());
+    }
+
+    /// The filmic curve on grey and on coloured ramps: black stays black, nothing decreases as
+    /// the light grows, middle grey is kept, and the output approaches white without passing 1
+    /// (clamp instead reaches 1 at 1 and clips everything brighter).
+    #[test]
+    fn filmic_curve_is_monotone_keeps_black_and_saturates_below_one() {
+        let filmic = |c: Rgb| ToneMap::Filmic.apply(c);
+        assert_eq!(filmic(Rgb::ZERO), Rgb::ZERO);
+        assert_eq!(filmic(Rgb::splat(-3.0)), Rgb::ZERO);
+        assert_eq!(filmic(Rgb::splat(f32::NAN)), Rgb::ZERO);
+        let grey = filmic(Rgb::splat(0.18));
+        assert!(
+            (grey - Rgb::splat(0.18)).abs().max_element() < 0.005,
+            "{grey}"
+        );
+        for colour in [
+            Rgb::ONE,
+            Rgb::new(1.0, 0.5, 0.2),
+            Rgb::new(0.05, 0.3, 1.0),
+            Rgb::new(1.0, 0.0, 0.0),
+        ] {
+            let mut previous = Rgb::ZERO;
+            // 2^-14 … 2^12 in steps of 1/16 stop.
+            for step in 0..=26 * 16 {
+                let v = filmic(colour * (step as f32 / 16.0 - 14.0).exp2());
+                assert!(
+                    v.min_element() >= 0.0 && v.max_element() <= 1.0,
+                    "{v} for {colour}"
+                );
+                assert!(
+                    crate::math::luminance(v) >= crate::math::luminance(previous) - 1e-6,
+                    "luminance decreases at step {step} of {colour}: {previous} → {v}"
+                );
+                if colour == Rgb::ONE {
+                    assert!(v.cmpge(previous - 1e-6).all(), "grey: {previous} → {v}");
+                }
+                previous = v;
+            }
+        }
+        // Highlights roll off instead of clipping: 1 and 4 stay apart and below white, and
+        // white is approached from below.
+        let (one, four) = (filmic(Rgb::ONE).x, filmic(Rgb::splat(4.0)).x);
+        assert!(one < four && four < 0.99, "{one} {four}");
+        let white = filmic(Rgb::splat(1e6)).x;
+        assert!(white > 0.99 && white <= 1.0, "{white}");
+        assert_eq!(ToneMap::Clamp.apply(Rgb::splat(4.0)), Rgb::ONE);
+        assert_eq!("filmic".parse::<ToneMap>(), Ok(ToneMap::Filmic));
+        assert!("aces"
+            .parse::<ToneMap>()
+            .unwrap_err()
+            .contains("clamp or filmic"));
+    }
+
+    #[test]
+    fn png_previews_carry_the_srgb_chunk() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut img = Image::new(3, 2);
+        img.pixels = (0..6).map(|i| Rgb::splat(i as f32 * 0.5)).collect();
+        for tonemap in ToneMap::ALL {
+            let path = dir.path().join(format!("{tonemap}.png"));
+            write_png_tonemapped(&path, &img, 0.0, tonemap).unwrap();
+            let file = BufReader::new(File::open(&path).unwrap());
+            let reader = png::Decoder::new(file).read_info().unwrap();
+            let info = reader.info();
+            assert_eq!(
+                info.srgb,
+                Some(png::SrgbRenderingIntent::Perceptual),
+                "{tonemap}"
+            );
+            assert_eq!((info.width, info.height), (3, 2));
+            assert_eq!(info.color_type, png::ColorType::Rgb);
+        }
+        let clamp = image::open(dir.path().join("clamp.png"))
+            .unwrap()
+            .into_rgb8();
+        let filmic = image::open(dir.path().join("filmic.png"))
+            .unwrap()
+            .into_rgb8();
+        // 1.0 and 1.5 clip to white with clamp; filmic keeps them apart, below white.
+        assert_eq!(clamp.get_pixel(2, 0).0, [255; 3]);
+        assert_eq!(clamp.get_pixel(0, 1).0, [255; 3]);
+        let (a, b) = (filmic.get_pixel(2, 0).0[0], filmic.get_pixel(0, 1).0[0]);
+        assert!(a < b && b < 255, "{a} {b}");
+        assert_eq!(filmic.get_pixel(0, 0).0, [0; 3]);
     }
 }
