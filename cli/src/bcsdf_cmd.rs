@@ -314,11 +314,13 @@ fn plot(a: PlotArgs) -> Result<()> {
         longitudinal.push(Series {
             name: name.to_string(),
             points: lt,
+            band: None,
             reference: false,
         });
         azimuthal.push(Series {
             name: name.to_string(),
             points: az,
+            band: None,
             reference: false,
         });
     }
@@ -333,6 +335,7 @@ fn plot(a: PlotArgs) -> Result<()> {
             series: longitudinal,
             log_x: false,
             log_y: false,
+            band_label: None,
         },
         Chart {
             title: format!("azimuthal, θ_o = {}°, {h_text}", a.theta_o),
@@ -341,6 +344,7 @@ fn plot(a: PlotArgs) -> Result<()> {
             series: azimuthal,
             log_x: false,
             log_y: false,
+            band_label: None,
         },
     ];
     let stem = a.out.with_extension("");

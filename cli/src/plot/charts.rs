@@ -1,4 +1,5 @@
-//! Line charts: series on linear or log axes, in panels side by side.
+//! Line charts: series on linear or log axes, with optional shaded intervals, in panels side by
+//! side; the legend goes under each panel, so it never hides a curve.
 
 use super::*;
 
@@ -6,7 +7,11 @@ use super::*;
 pub struct Series {
     pub name: String,
     pub points: Vec<(f64, f64)>,
-    /// Drawn dashed-looking (thin, grey) as a reference line rather than data.
+    /// Per point, the low and high ends of an interval around it (a confidence interval of a
+    /// mean, say), shaded in the series' colour; one pair per point. On a log axis a low end
+    /// at or below zero shades down to the bottom of the axis.
+    pub band: Option<Vec<(f64, f64)>>,
+    /// Drawn thin and grey as a reference line rather than data; it does not set the axes.
     pub reference: bool,
 }
 
@@ -18,13 +23,19 @@ pub struct Chart {
     pub series: Vec<Series>,
     pub log_x: bool,
     pub log_y: bool,
+    /// What the shaded bands are, for the legend (e.g. "95 % CI over 8 repetitions"); required
+    /// when a series has a band.
+    pub band_label: Option<String>,
 }
 
 /// A row of charts drawn side by side into `<stem>.png` and `<stem>.svg`, written atomically.
 pub fn write_charts(stem: &Path, charts: &[Chart], panel_width: u32, height: u32) -> Result<()> {
-    ensure_font()?;
+    text::face()?;
     if charts.is_empty() {
         bail!("nothing to plot");
+    }
+    for chart in charts {
+        check(chart).map_err(|e| anyhow!("chart '{}': {e}", chart.title))?;
     }
     let size = (panel_width * charts.len() as u32, height);
     let svg = stem.with_extension("svg");
@@ -33,12 +44,35 @@ pub fn write_charts(stem: &Path, charts: &[Chart], panel_width: u32, height: u32
 
     let mut svg_text = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg_text, size).into_drawing_area();
+        let root =
+            Typeset::vector(SVGBackend::with_string(&mut svg_text, size)).into_drawing_area();
         draw(&root, charts)?;
         root.present()
             .map_err(|e| anyhow!("drawing {}: {e}", svg.display()))?;
     }
     crate::atomic_write(&svg, svg_text.as_bytes())
+}
+
+/// The chart's bands match their series and are labelled.
+fn check(chart: &Chart) -> Result<()> {
+    let mut banded = false;
+    for s in &chart.series {
+        if let Some(band) = &s.band {
+            if band.len() != s.points.len() {
+                bail!(
+                    "series '{}' has {} points but {} band intervals",
+                    s.name,
+                    s.points.len(),
+                    band.len()
+                );
+            }
+            banded = true;
+        }
+    }
+    if banded && chart.band_label.is_none() {
+        bail!("the shaded bands have no legend label");
+    }
+    Ok(())
 }
 
 pub(super) fn draw<DB: DrawingBackend>(
@@ -56,6 +90,7 @@ where
     Ok(())
 }
 
+/// The span of the finite values (positive ones on a log axis), padded; a fallback when empty.
 pub(super) fn range(values: impl Iterator<Item = f64>, log: bool) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for v in values.filter(|v| v.is_finite() && (!log || *v > 0.0)) {
@@ -66,19 +101,37 @@ pub(super) fn range(values: impl Iterator<Item = f64>, log: bool) -> (f64, f64) 
         return if log { (0.1, 1.0) } else { (0.0, 1.0) };
     }
     if log {
-        let (lo, hi) = (lo / 1.5, hi * 1.5);
-        // plotters labels log axes at powers of ten: keep one inside the range.
-        if lo.log10().ceil() > hi.log10().floor() {
-            (10f64.powf(lo.log10().floor()), hi)
-        } else {
-            (lo, hi)
-        }
+        (lo / 1.5, hi * 1.5)
     } else if hi - lo < 1e-12 {
         (lo - 0.5, hi + 0.5)
     } else {
         let pad = 0.05 * (hi - lo);
         (lo - pad, hi + pad)
     }
+}
+
+/// How far (a factor, on a log axis) a band may stretch the y axis beyond the curves: intervals
+/// of a few noisy repetitions can reach near zero, which would squash every curve to a line.
+const BAND_REACH: f64 = 10.0;
+
+/// The y values that set the axis: the data points, and their bands within [`BAND_REACH`].
+fn y_extent(chart: &Chart) -> Vec<f64> {
+    let data = || chart.series.iter().filter(|s| !s.reference);
+    let mut ys: Vec<f64> = data().flat_map(|s| s.points.iter().map(|p| p.1)).collect();
+    let (lo, hi) = range(ys.iter().copied(), chart.log_y);
+    let (lo, hi) = if chart.log_y {
+        (lo / BAND_REACH, hi * BAND_REACH)
+    } else {
+        let reach = (BAND_REACH - 1.0) * (hi - lo);
+        (lo - reach, hi + reach)
+    };
+    let bands = data().filter_map(|s| s.band.as_ref()).flatten();
+    ys.extend(
+        bands
+            .flat_map(|&(a, b)| [a, b])
+            .filter(|v| (lo..=hi).contains(v)),
+    );
+    ys
 }
 
 pub(super) const PALETTE: [RGBColor; 8] = [
@@ -92,6 +145,135 @@ pub(super) const PALETTE: [RGBColor; 8] = [
     RGBColor(23, 190, 207),
 ];
 
+const REFERENCE_GREY: RGBColor = RGBColor(150, 150, 150);
+/// Opacity of the shaded bands: overlapping bands of two series stay distinguishable.
+const BAND_ALPHA: f64 = 0.2;
+/// Series with at most this many points get a marker at each.
+const MAX_MARKED: usize = 16;
+
+const LABEL_SIZE: u32 = 13;
+const LEGEND_ROW: u32 = 18;
+const SWATCH: u32 = 22;
+
+fn series_color(chart: &Chart, i: usize) -> RGBColor {
+    if chart.series[i].reference {
+        REFERENCE_GREY
+    } else {
+        // Data series are numbered without the reference lines, so colours do not shift when
+        // one is added.
+        let k = chart.series[..i].iter().filter(|s| !s.reference).count();
+        PALETTE[k % PALETTE.len()]
+    }
+}
+
+fn line_style(s: &Series, color: RGBColor) -> ShapeStyle {
+    ShapeStyle {
+        color: color.to_rgba(),
+        filled: false,
+        stroke_width: if s.reference { 1 } else { 2 },
+    }
+}
+
+/// One legend entry: a swatch and its text.
+struct Entry {
+    text: String,
+    color: RGBColor,
+    line: Option<ShapeStyle>,
+    shaded: bool,
+    marker: bool,
+}
+
+fn legend_entries(chart: &Chart) -> Vec<Entry> {
+    let mut entries: Vec<Entry> = chart
+        .series
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let color = series_color(chart, i);
+            Entry {
+                text: s.name.clone(),
+                color,
+                line: Some(line_style(s, color)),
+                shaded: s.band.is_some(),
+                marker: !s.reference && s.points.len() <= MAX_MARKED,
+            }
+        })
+        .collect();
+    if let (Some(label), true) = (
+        &chart.band_label,
+        chart.series.iter().any(|s| s.band.is_some()),
+    ) {
+        entries.push(Entry {
+            text: label.clone(),
+            color: REFERENCE_GREY,
+            line: None,
+            shaded: true,
+            marker: false,
+        });
+    }
+    entries
+}
+
+/// Lays the entries out in rows of at most `width` pixels: each entry's (row, x offset).
+fn legend_layout(entries: &[Entry], width: u32) -> Result<Vec<(u32, u32)>> {
+    let face = text::face()?;
+    let mut at = Vec::with_capacity(entries.len());
+    let (mut row, mut x) = (0u32, 0u32);
+    for e in entries {
+        let w = SWATCH + 6 + face.width(&e.text, LABEL_SIZE as f64);
+        if x > 0 && x + w > width {
+            row += 1;
+            x = 0;
+        }
+        at.push((row, x));
+        x += w + 16;
+    }
+    Ok(at)
+}
+
+fn draw_legend<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    entries: &[Entry],
+    layout: &[(u32, u32)],
+    left: u32,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    let label = ("sans-serif", LABEL_SIZE)
+        .into_font()
+        .color(&BLACK)
+        .pos(text_anchor::Pos::new(
+            text_anchor::HPos::Left,
+            text_anchor::VPos::Center,
+        ));
+    for (e, &(row, dx)) in entries.iter().zip(layout) {
+        let x = (left + dx) as i32;
+        let y = (row * LEGEND_ROW + LEGEND_ROW / 2) as i32;
+        if e.shaded {
+            area.draw(&Rectangle::new(
+                [(x, y - 6), (x + SWATCH as i32, y + 6)],
+                e.color.mix(BAND_ALPHA).filled(),
+            ))?;
+        }
+        if let Some(style) = e.line {
+            area.draw(&PathElement::new(
+                vec![(x, y), (x + SWATCH as i32, y)],
+                style,
+            ))?;
+        }
+        if e.marker {
+            area.draw(&Circle::new(
+                (x + SWATCH as i32 / 2, y),
+                3,
+                e.color.filled(),
+            ))?;
+        }
+        area.draw_text(&e.text, &label, (x + SWATCH as i32 + 6, y))?;
+    }
+    Ok(())
+}
+
 pub(super) fn draw_one<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     chart: &Chart,
@@ -99,6 +281,20 @@ pub(super) fn draw_one<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
+    const MARGIN: u32 = 12;
+    const Y_LABEL_AREA: u32 = 70;
+    // The legend sits under the chart, aligned with the plotting area.
+    let (width, height) = area.dim_in_pixel();
+    let entries = legend_entries(chart);
+    let layout = legend_layout(
+        &entries,
+        width.saturating_sub(MARGIN * 2 + Y_LABEL_AREA).max(1),
+    )?;
+    let rows = layout.iter().map(|l| l.0 + 1).max().unwrap_or(0);
+    let legend_h = rows * LEGEND_ROW + MARGIN / 2;
+    let (plot_area, legend_area) = area.split_vertically(height.saturating_sub(legend_h));
+    draw_legend(&legend_area, &entries, &layout, MARGIN + Y_LABEL_AREA)?;
+
     let xs = range(
         chart
             .series
@@ -106,25 +302,20 @@ where
             .flat_map(|s| s.points.iter().map(|p| p.0)),
         chart.log_x,
     );
-    let ys = range(
-        chart
-            .series
-            .iter()
-            .filter(|s| !s.reference)
-            .flat_map(|s| s.points.iter().map(|p| p.1)),
-        chart.log_y,
-    );
-    let mut builder = ChartBuilder::on(area);
+    let ys = range(y_extent(chart).into_iter(), chart.log_y);
+    let x_ticks = Ticks::new(xs, chart.log_x);
+    let y_ticks = Ticks::new(ys, chart.log_y);
+    let mut builder = ChartBuilder::on(&plot_area);
     builder
         .caption(&chart.title, ("sans-serif", 18))
-        .margin(12)
+        .margin(MARGIN)
         .x_label_area_size(40)
-        .y_label_area_size(70);
+        .y_label_area_size(Y_LABEL_AREA);
     macro_rules! finish {
         ($ctx:expr) => {{
             let mut ctx = $ctx;
-            let fx = |v: &f64| tick_label(*v, chart.log_x);
-            let fy = |v: &f64| tick_label(*v, chart.log_y);
+            let fx = |v: &f64| x_ticks.label(*v);
+            let fy = |v: &f64| y_ticks.label(*v);
             ctx.configure_mesh()
                 .x_desc(chart.x_label.as_str())
                 .y_desc(chart.y_label.as_str())
@@ -132,70 +323,176 @@ where
                 .y_label_formatter(&fy)
                 .bold_line_style(RGBColor(215, 215, 215))
                 .light_line_style(RGBColor(244, 244, 244))
-                .label_style(("sans-serif", 13))
+                .label_style(("sans-serif", LABEL_SIZE))
+                .axis_desc_style(("sans-serif", LABEL_SIZE + 1))
                 .draw()?;
+            let on_axes = |p: &(f64, f64)| {
+                p.0.is_finite()
+                    && p.1.is_finite()
+                    && (!chart.log_y || p.1 > 0.0)
+                    && (!chart.log_x || p.0 > 0.0)
+            };
+            // Bands first, so every line stays on top of every band.
             for (i, s) in chart.series.iter().enumerate() {
-                let color = if s.reference {
-                    RGBColor(150, 150, 150)
-                } else {
-                    PALETTE[i % PALETTE.len()]
-                };
-                let mut pts: Vec<(f64, f64)> = s
-                    .points
-                    .iter()
-                    .copied()
-                    .filter(|p| {
-                        p.0.is_finite()
-                            && p.1.is_finite()
-                            && (!chart.log_y || p.1 > 0.0)
-                            && (!chart.log_x || p.0 > 0.0)
-                    })
-                    .collect();
+                let Some(band) = &s.band else { continue };
+                let color = series_color(chart, i);
+                let polygon = band_polygon(&s.points, band, ys, chart.log_x, chart.log_y);
+                if polygon.len() >= 3 {
+                    ctx.draw_series(std::iter::once(Polygon::new(
+                        polygon,
+                        color.mix(BAND_ALPHA).filled(),
+                    )))?;
+                }
+            }
+            for (i, s) in chart.series.iter().enumerate() {
+                let color = series_color(chart, i);
+                let mut pts: Vec<(f64, f64)> = s.points.iter().copied().filter(on_axes).collect();
                 if s.reference {
                     // Reference lines do not set the axis range, and plotters does not clip, so
                     // clip them here lest they run over the labels.
                     pts = clip_polyline(&pts, xs, ys, chart.log_x, chart.log_y);
                 }
-                let style = ShapeStyle {
-                    color: color.to_rgba(),
-                    filled: false,
-                    stroke_width: if s.reference { 1 } else { 2 },
-                };
-                ctx.draw_series(LineSeries::new(pts.clone(), style))?
-                    .label(s.name.as_str())
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
-                if !s.reference && pts.len() <= 16 {
+                ctx.draw_series(LineSeries::new(pts.clone(), line_style(s, color)))?;
+                if !s.reference && s.points.len() <= MAX_MARKED {
                     ctx.draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))?;
                 }
             }
-            ctx.configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .label_font(("sans-serif", 13))
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()?;
         }};
     }
     // Log axes get explicit ticks: plotters' own start at the first power of ten in range.
-    let log_axis = |r: (f64, f64)| {
-        let (bold, light) = log_ticks(r);
+    let log_axis = |r: (f64, f64), t: &Ticks| {
         (r.0..r.1)
             .log_scale()
-            .with_key_points(bold)
-            .with_light_points(light)
+            .with_key_points(t.labelled.clone())
+            .with_light_points(t.minor.clone())
     };
     match (chart.log_x, chart.log_y) {
         (false, false) => finish!(builder.build_cartesian_2d(xs.0..xs.1, ys.0..ys.1)?),
-        (true, false) => finish!(builder.build_cartesian_2d(log_axis(xs), ys.0..ys.1)?),
-        (false, true) => finish!(builder.build_cartesian_2d(xs.0..xs.1, log_axis(ys))?),
-        (true, true) => finish!(builder.build_cartesian_2d(log_axis(xs), log_axis(ys))?),
+        (true, false) => finish!(builder.build_cartesian_2d(log_axis(xs, &x_ticks), ys.0..ys.1)?),
+        (false, true) => finish!(builder.build_cartesian_2d(xs.0..xs.1, log_axis(ys, &y_ticks))?),
+        (true, true) => {
+            finish!(builder.build_cartesian_2d(log_axis(xs, &x_ticks), log_axis(ys, &y_ticks))?)
+        }
     }
     Ok(())
 }
 
+/// The outline of a band (upper edge forward, lower edge back), clamped to the y range in axis
+/// space (log10 on log axes), where its edges are straight like the drawn lines; points off a
+/// log x axis are dropped and low ends at or below zero on a log y axis go to the bottom.
+pub(super) fn band_polygon(
+    points: &[(f64, f64)],
+    band: &[(f64, f64)],
+    ys: (f64, f64),
+    log_x: bool,
+    log_y: bool,
+) -> Vec<(f64, f64)> {
+    let fwd = |v: f64, log: bool| if log { v.log10() } else { v };
+    let inv = |v: f64, log: bool| if log { 10f64.powf(v) } else { v };
+    let (y0, y1) = (fwd(ys.0, log_y), fwd(ys.1, log_y));
+    let mut lower = Vec::new();
+    let mut upper = Vec::new();
+    for (p, &(lo, hi)) in points.iter().zip(band) {
+        if !p.0.is_finite() || (log_x && p.0 <= 0.0) || !(lo.is_finite() && hi.is_finite()) {
+            continue;
+        }
+        let x = fwd(p.0, log_x);
+        let lo = if log_y && lo <= 0.0 {
+            y0
+        } else {
+            fwd(lo, log_y)
+        };
+        let hi = if log_y && hi <= 0.0 {
+            y0
+        } else {
+            fwd(hi, log_y)
+        };
+        lower.push((x, lo.min(hi)));
+        upper.push((x, hi.max(lo)));
+    }
+    let mut outline = clamp_edge(&upper, y0, y1);
+    let mut back = clamp_edge(&lower, y0, y1);
+    back.reverse();
+    outline.extend(back);
+    outline
+        .into_iter()
+        .map(|(x, y)| (inv(x, log_x), inv(y, log_y)))
+        .collect()
+}
+
+/// A polyline clamped to `y0 ≤ y ≤ y1`, with a vertex added wherever it crosses either line,
+/// so the clamped polyline is exactly its part inside the slab pressed onto the slab's edges.
+fn clamp_edge(pts: &[(f64, f64)], y0: f64, y1: f64) -> Vec<(f64, f64)> {
+    let mut out = Vec::with_capacity(pts.len() * 2);
+    for (i, &(x, y)) in pts.iter().enumerate() {
+        if i > 0 {
+            let (px, py) = pts[i - 1];
+            let mut cuts: Vec<f64> = [y0, y1]
+                .iter()
+                .filter(|&&b| (py - b) * (y - b) < 0.0)
+                .map(|&b| (b - py) / (y - py))
+                .collect();
+            cuts.sort_by(f64::total_cmp);
+            for t in cuts {
+                out.push((px + t * (x - px), (py + t * (y - py)).clamp(y0, y1)));
+            }
+        }
+        out.push((x, y.clamp(y0, y1)));
+    }
+    out
+}
+
+/// The ticks of one axis and how their labels are written.
+pub(super) struct Ticks {
+    log: bool,
+    /// Ticks with a label (on a log axis: also the bold grid lines).
+    labelled: Vec<f64>,
+    /// Unlabelled grid lines of a log axis.
+    minor: Vec<f64>,
+    /// Every label of the axis in powers of ten (`2×10⁻³`), or every one as a decimal number.
+    scientific: bool,
+}
+
+impl Ticks {
+    pub(super) fn new(r: (f64, f64), log: bool) -> Ticks {
+        let (labelled, minor) = if log {
+            log_ticks(r)
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        let big = r.0.abs().max(r.1.abs());
+        // One notation per axis: "0.001" beside "5×10⁻⁴" reads as two scales.
+        let scientific = big >= 1e5 || if log { r.0 < 1e-3 } else { big < 1e-3 };
+        Ticks {
+            log,
+            labelled,
+            minor,
+            scientific,
+        }
+    }
+
+    /// The label of tick `v`; empty on a log axis for ticks that get none.
+    pub(super) fn label(&self, v: f64) -> String {
+        if self.log
+            && !self
+                .labelled
+                .iter()
+                .any(|t| (t - v).abs() <= 1e-9 * t.abs())
+        {
+            return String::new();
+        }
+        if self.scientific {
+            scientific(v, 3)
+        } else {
+            decimal(v)
+        }
+    }
+}
+
 /// Labelled and minor ticks of a log axis over `r`: the 1, 2, 5 multiples of each power of ten
-/// with minor ticks at every integer multiple, or over more than four decades the powers of ten
-/// with minor ticks at their 2 and 5 multiples.
+/// with minor ticks at every integer multiple, or over more than 3.5 decades the powers of ten
+/// with minor ticks at their 2 and 5 multiples; every integer multiple is labelled when fewer
+/// than two 1, 2, 5 multiples fall inside `r`.
 pub(super) fn log_ticks(r: (f64, f64)) -> (Vec<f64>, Vec<f64>) {
     let (lo, hi) = r;
     let at = |mults: &[f64]| -> Vec<f64> {
@@ -215,49 +512,67 @@ pub(super) fn log_ticks(r: (f64, f64)) -> (Vec<f64>, Vec<f64>) {
         }
         v
     };
-    if (hi / lo).log10() > 4.0 {
+    let all = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0];
+    if (hi / lo).log10() > 3.5 {
         (at(&[1.0]), at(&[1.0, 2.0, 5.0]))
     } else {
-        (
-            at(&[1.0, 2.0, 5.0]),
-            at(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]),
-        )
+        let labelled = at(&[1.0, 2.0, 5.0]);
+        if labelled.len() >= 2 {
+            (labelled, at(&all))
+        } else {
+            (at(&all), Vec::new())
+        }
     }
 }
 
-/// A short tick label: up to four significant digits, exponent notation for very small or large
-/// values; on log axes only the 1, 2 and 5 multiples of a power of ten are labelled (plotters
-/// puts a tick at every integer multiple, which would overlap).
-pub(super) fn tick_label(v: f64, log: bool) -> String {
+/// Up to four significant digits, without trailing zeros; a true minus sign.
+pub(super) fn decimal(v: f64) -> String {
     if v == 0.0 || !v.is_finite() {
         return format!("{v}");
     }
-    let a = v.abs();
-    let e = a.log10().floor();
-    if log {
-        let m = (a / 10f64.powf(e)).round() as i64;
-        if ![1, 2, 5, 10].contains(&m) {
-            return String::new();
-        }
-    }
-    if (1e-3..1e5).contains(&a) {
-        let decimals = (3.0 - e).clamp(0.0, 6.0) as usize;
-        let s = format!("{v:.decimals$}");
-        if s.contains('.') {
-            s.trim_end_matches('0').trim_end_matches('.').to_string()
-        } else {
-            s
-        }
+    let e = v.abs().log10().floor();
+    let decimals = (3.0 - e).clamp(0.0, 6.0) as usize;
+    let s = format!("{v:.decimals$}");
+    let s = if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
     } else {
-        let s = format!("{v:.2e}");
-        // 2.50e-4 → 2.5e-4, 1.00e-6 → 1e-6
-        match s.split_once('e') {
-            Some((m, x)) if m.contains('.') => {
-                format!("{}e{x}", m.trim_end_matches('0').trim_end_matches('.'))
-            }
-            _ => s,
-        }
+        s
+    };
+    s.replace('-', "−")
+}
+
+/// `v` as `m×10ⁿ` with at most `digits` significant digits in `m`, or `10ⁿ` when `m` is 1.
+pub(super) fn scientific(v: f64, digits: usize) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
     }
+    let s = format!("{:.*e}", digits.saturating_sub(1), v.abs());
+    let (m, e) = s.split_once('e').unwrap_or((&s, "0"));
+    let m = if m.contains('.') {
+        m.trim_end_matches('0').trim_end_matches('.')
+    } else {
+        m
+    };
+    let e: i32 = e.parse().unwrap_or(0);
+    let sign = if v < 0.0 { "−" } else { "" };
+    if m == "1" {
+        format!("{sign}10{}", superscript(e))
+    } else {
+        format!("{sign}{m}×10{}", superscript(e))
+    }
+}
+
+/// An integer in superscript digits (`-3` → `⁻³`).
+fn superscript(n: i32) -> String {
+    const DIGITS: [char; 10] = ['⁰', '¹', '²', '³', '⁴', '⁵', '⁶', '⁷', '⁸', '⁹'];
+    let mut s = String::new();
+    if n < 0 {
+        s.push('⁻');
+    }
+    for c in n.unsigned_abs().to_string().chars() {
+        s.push(DIGITS[c.to_digit(10).unwrap_or(0) as usize]);
+    }
+    s
 }
 
 /// The visible part of a polyline inside the axis ranges (in log space on log axes): its first

@@ -4,41 +4,17 @@
 use anyhow::{anyhow, bail, Context, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor;
 use std::path::Path;
-use std::sync::OnceLock;
+use text::Typeset;
 use tress_core::image_io;
 
 mod charts;
+mod text;
 pub use charts::*;
 
-/// Where Debian (fonts-dejavu-core) and other distributions keep a sans-serif TrueType font.
-const FONT_PATHS: &[&str] = &[
-    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
-    "/usr/share/fonts/TTF/DejaVuSans.ttf",
-    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
-    "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
-];
-
-/// Registers a system font as plotters' "sans-serif" once (plotters draws text with ab_glyph and
-/// ships no font of its own).
-fn ensure_font() -> Result<()> {
-    static FONT: OnceLock<Result<(), String>> = OnceLock::new();
-    FONT.get_or_init(|| {
-        for p in FONT_PATHS {
-            if let Ok(bytes) = std::fs::read(p) {
-                let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
-                return plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
-                    .map_err(|_| format!("{p} is not a usable TrueType font"));
-            }
-        }
-        Err(format!(
-            "no TrueType font found for plot labels (looked in {}); install fonts-dejavu-core",
-            FONT_PATHS.join(", ")
-        ))
-    })
-    .clone()
-    .map_err(|e| anyhow!(e))
-}
+/// The drawing area of a PNG being drawn.
+type Bitmap<'a> = DrawingArea<Typeset<BitMapBackend<'a>>, Shift>;
 
 /// A logarithmic colour scale `[lo, hi]` (values outside are clamped to its ends).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -149,16 +125,19 @@ impl Picture {
     }
 }
 
-/// Linear radiance to an 8-bit sRGB byte: scaled by `gain`, clamped to [0, 1] (NaN → 0).
-pub fn srgb8(c: f32, gain: f32) -> u8 {
-    let v = (c * gain).clamp(0.0, 1.0);
-    let v = if v.is_nan() { 0.0 } else { v };
-    let s = if v <= 0.003_130_8 {
+/// The sRGB encoding of a display-linear value, clamped to [0, 1] (NaN → 0).
+pub fn srgb(c: f32) -> f32 {
+    let v = if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) };
+    if v <= 0.003_130_8 {
         12.92 * v
     } else {
         1.055 * v.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0 + 0.5) as u8
+    }
+}
+
+/// Linear radiance to an 8-bit sRGB byte: scaled by `gain`, clamped to [0, 1] (NaN → 0).
+pub fn srgb8(c: f32, gain: f32) -> u8 {
+    (srgb(c * gain) * 255.0 + 0.5) as u8
 }
 
 /// Display size of a `w × h` picture: enlarged by an integer factor until its long side reaches
@@ -183,14 +162,9 @@ const MARGIN: u32 = 12;
 const GAP: u32 = 12;
 const TITLE_H: u32 = 24;
 
-/// Width of `text` in pixels at `size` (registers the font first).
+/// Width of `text` in pixels at `size`.
 fn text_width(text: &str, size: u32) -> Result<u32> {
-    ensure_font()?;
-    ("sans-serif", size)
-        .into_font()
-        .box_size(text)
-        .map(|(w, _)| w)
-        .map_err(|e| anyhow!("measuring text: {e:?}"))
+    Ok(text::face()?.width(text, size as f64))
 }
 
 fn text_style(size: u32) -> TextStyle<'static> {
@@ -201,9 +175,9 @@ fn text_style(size: u32) -> TextStyle<'static> {
 fn write_bitmap(
     path: &Path,
     size: (u32, u32),
-    draw: impl FnOnce(&DrawingArea<BitMapBackend, Shift>) -> Result<()>,
+    draw: impl FnOnce(&Bitmap) -> Result<()>,
 ) -> Result<()> {
-    ensure_font()?;
+    text::face()?;
     if path.extension().and_then(|e| e.to_str()) != Some("png") {
         bail!("{}: expected a .png file name", path.display());
     }
@@ -214,7 +188,7 @@ fn write_bitmap(
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let tmp = image_io::output_temp_file(dir, ".png")?;
     {
-        let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
+        let root = Typeset::raster(BitMapBackend::new(tmp.path(), size)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| anyhow!("{e:?}"))?;
         draw(&root)?;
         root.present()
@@ -227,18 +201,13 @@ fn write_bitmap(
     Ok(())
 }
 
-fn blit(root: &DrawingArea<BitMapBackend, Shift>, pos: (i32, i32), pic: &Picture) -> Result<()> {
+fn blit(root: &Bitmap, pos: (i32, i32), pic: &Picture) -> Result<()> {
     let element = BitMapElement::with_owned_buffer(pos, (pic.width, pic.height), pic.rgb.clone())
         .ok_or_else(|| anyhow!("picture buffer does not match its size"))?;
     root.draw(&element).map_err(|e| anyhow!("{e:?}"))
 }
 
-fn draw_text(
-    root: &DrawingArea<BitMapBackend, Shift>,
-    text: &str,
-    size: u32,
-    pos: (i32, i32),
-) -> Result<()> {
+fn draw_text(root: &Bitmap, text: &str, size: u32, pos: (i32, i32)) -> Result<()> {
     root.draw_text(text, &text_style(size), pos)
         .map_err(|e| anyhow!("{e:?}"))
 }
@@ -266,8 +235,9 @@ pub fn write_heat_maps(
         .map(|(p, s)| Ok(s.0.max(text_width(&p.title, 15)?)))
         .collect::<Result<Vec<u32>>>()?;
     let caption = format!(
-        "colour: {label}, log scale {:.2e} .. {:.2e} (green: not finite)",
-        scale.lo, scale.hi
+        "colour: {label}, log scale {} to {} (green: not finite)",
+        scientific(scale.lo, 3),
+        scientific(scale.hi, 3)
     );
     const BAR_W: u32 = 18;
     const BAR_LABELS: u32 = 64;
@@ -333,7 +303,12 @@ pub fn write_heat_maps(
             let y = y_of(t);
             root.draw(&PathElement::new(vec![(bx, y), (bx + 4, y)], BLACK))
                 .map_err(|e| anyhow!("{e:?}"))?;
-            draw_text(root, &format!("{t:.0e}"), 13, (bx + 6, y - 7))?;
+            let style = text_style(13).pos(text_anchor::Pos::new(
+                text_anchor::HPos::Left,
+                text_anchor::VPos::Center,
+            ));
+            root.draw_text(&scientific(t, 3), &style, (bx + 6, y))
+                .map_err(|e| anyhow!("{e:?}"))?;
         }
         draw_text(root, &caption, 13, (MARGIN as i32, top + max_h as i32 + 8))
     })
@@ -427,21 +402,132 @@ mod tests {
         let (bold, light) = log_ticks((0.015, 0.3));
         assert_eq!(bold, [0.02, 0.05, 0.1, 0.2]);
         assert_eq!(light.len(), 8 + 3);
-        let (bold, _) = log_ticks((1e-7, 1.0));
+        // Over more than 3.5 decades only the powers of ten are labelled.
+        let (bold, light) = log_ticks((1e-7, 1.0));
         assert_eq!(bold.len(), 8);
+        assert_eq!(light.len(), 8 + 2 * 7);
+        assert_eq!(
+            log_ticks((1.0, 512.0)).0,
+            [1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0]
+        );
+        // Less than a factor 2.5: every integer multiple gets a label.
+        assert_eq!(log_ticks((0.31, 0.58)).0, [0.4, 0.5]);
     }
 
     #[test]
-    fn tick_labels_are_short() {
-        assert_eq!(tick_label(0.30000000000000004, false), "0.3");
-        assert_eq!(tick_label(0.3, true), "");
-        assert_eq!(tick_label(0.5, true), "0.5");
-        assert_eq!(tick_label(20.0, true), "20");
-        assert_eq!(tick_label(2.5e-4, false), "2.5e-4");
-        assert_eq!(tick_label(1e-6, true), "1e-6");
-        assert_eq!(tick_label(1234.0, false), "1234");
-        assert_eq!(tick_label(0.001234, false), "0.001234");
-        assert_eq!(tick_label(0.0, false), "0");
+    fn tick_labels_use_one_notation_per_axis() {
+        assert_eq!(decimal(0.30000000000000004), "0.3");
+        assert_eq!(decimal(1234.0), "1234");
+        assert_eq!(decimal(0.001234), "0.001234");
+        assert_eq!(decimal(-0.5), "−0.5");
+        assert_eq!(decimal(0.0), "0");
+        assert_eq!(scientific(5.27e-4, 3), "5.27×10⁻⁴");
+        assert_eq!(scientific(1e-3, 3), "10⁻³");
+        assert_eq!(scientific(2.5e-12, 3), "2.5×10⁻¹²");
+        assert_eq!(scientific(9.9996e-5, 3), "10⁻⁴");
+        assert_eq!(scientific(-3e5, 3), "−3×10⁵");
+        assert_eq!(scientific(20.0, 3), "2×10¹");
+
+        // spp from 1 to 512: decimals, 1-2-5 multiples labelled, others not.
+        let spp = Ticks::new((0.67, 768.0), true);
+        assert_eq!(spp.label(1.0), "1");
+        assert_eq!(spp.label(200.0), "200");
+        assert_eq!(spp.label(300.0), "");
+        // MSE over four decades: powers of ten only, all as powers.
+        let mse = Ticks::new((3e-5, 0.2), true);
+        assert_eq!(mse.label(1e-4), "10⁻⁴");
+        assert_eq!(mse.label(0.1), "10⁻¹");
+        assert_eq!(mse.label(5e-4), "");
+        // A short log axis reaching below 10⁻³: 1-2-5 multiples as powers of ten.
+        let short = Ticks::new((3e-4, 0.03), true);
+        assert_eq!(short.label(5e-4), "5×10⁻⁴");
+        assert_eq!(short.label(0.02), "2×10⁻²");
+        // Linear axes: decimals unless the values are tiny or huge.
+        assert_eq!(Ticks::new((0.0, 2.5), false).label(0.5), "0.5");
+        assert_eq!(Ticks::new((0.0, 2.5e-4), false).label(1.5e-4), "1.5×10⁻⁴");
+        assert_eq!(Ticks::new((-1e6, 1e6), false).label(-5e5), "−5×10⁵");
+    }
+
+    #[test]
+    fn bands_are_clamped_to_the_axis_in_axis_space() {
+        // Log y over [1e-3, 1]: a band from 1e-4 to 1e-1 at x = 1 and from 1e-2 to 10 at x = 10.
+        let poly = band_polygon(
+            &[(1.0, 1e-2), (10.0, 1.0)],
+            &[(1e-4, 1e-1), (1e-2, 10.0)],
+            (1e-3, 1.0),
+            true,
+            true,
+        );
+        let log: Vec<(f64, f64)> = poly.iter().map(|p| (p.0.log10(), p.1.log10())).collect();
+        let want = [
+            (0.0, -1.0), // upper edge at x = 1
+            (0.5, 0.0),  // it crosses the top of the axis half-way
+            (1.0, 0.0),  // and stays pressed against it
+            (1.0, -2.0), // lower edge back from x = 10
+            (0.5, -3.0), // it crosses the bottom of the axis half-way
+            (0.0, -3.0), // and stays pressed against it
+        ];
+        assert_eq!(log.len(), want.len(), "{log:?}");
+        for (g, w) in log.iter().zip(want) {
+            assert!(
+                (g.0 - w.0).abs() < 1e-9 && (g.1 - w.1).abs() < 1e-9,
+                "{log:?}"
+            );
+        }
+        // A low end at or below zero shades down to the bottom of a log axis.
+        let poly = band_polygon(
+            &[(1.0, 0.1), (2.0, 0.1)],
+            &[(-0.2, 0.2), (0.0, 0.2)],
+            (1e-3, 1.0),
+            false,
+            true,
+        );
+        assert!(
+            poly.iter()
+                .rev()
+                .take(2)
+                .all(|p| (p.1 - 1e-3).abs() < 1e-15),
+            "{poly:?}"
+        );
+    }
+
+    #[test]
+    fn bands_must_match_their_series() {
+        let chart = |band: Option<Vec<(f64, f64)>>, label: Option<&str>| Chart {
+            title: "t".into(),
+            x_label: "x".into(),
+            y_label: "y".into(),
+            series: vec![Series {
+                name: "s".into(),
+                points: vec![(1.0, 1.0), (2.0, 0.5)],
+                band,
+                reference: false,
+            }],
+            log_x: true,
+            log_y: true,
+            band_label: label.map(str::to_string),
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let stem = dir.path().join("c");
+        let e = write_charts(
+            &stem,
+            &[chart(Some(vec![(0.5, 2.0)]), Some("CI"))],
+            300,
+            200,
+        )
+        .unwrap_err();
+        assert!(format!("{e:#}").contains("2 points but 1 band"), "{e:#}");
+        let e =
+            write_charts(&stem, &[chart(Some(vec![(0.5, 2.0); 2]), None)], 300, 200).unwrap_err();
+        assert!(format!("{e:#}").contains("no legend label"), "{e:#}");
+        write_charts(
+            &stem,
+            &[chart(Some(vec![(0.5, 2.0); 2]), Some("CI"))],
+            300,
+            200,
+        )
+        .unwrap();
+        assert!(stem.with_extension("png").exists() && stem.with_extension("svg").exists());
     }
 
     #[test]

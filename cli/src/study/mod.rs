@@ -234,9 +234,16 @@ pub fn run(args: StudyArgs) -> Result<()> {
         });
     }
     let report = write_report(&plan, &res, &outputs)?;
+    let renders = plan.scenes.len() * plan.integrators.len() * plan.spp.len() * plan.reps as usize;
+    // The summary of `--log-format json`.
+    crate::logging::record("output", &plan.out);
+    crate::logging::record("report", &report);
+    crate::logging::record("results_csv", &csv);
+    crate::logging::record("jobs", renders);
+    crate::logging::record("rendered", res.rendered);
+    crate::logging::record("reused", res.reused);
+    crate::logging::record("render_s", res.render_seconds);
     if verbose {
-        let renders =
-            plan.scenes.len() * plan.integrators.len() * plan.spp.len() * plan.reps as usize;
         eprintln!(
             "study '{}': {} scenes × {} integrators × {} spp × {} repetitions = {renders} renders \
              plus references: rendered {}, reused {} ({:.2} s rendering)",

@@ -10,6 +10,7 @@ pub(super) fn slope_line(series: &[Series], name: &str) -> Option<Series> {
     (lo > 0.0 && hi > lo).then(|| Series {
         name: name.into(),
         points: vec![(lo, y0 * x0 / lo), (hi, y0 * x0 / hi)],
+        band: None,
         reference: true,
     })
 }
@@ -33,25 +34,40 @@ pub(super) fn chart(
         series,
         log_x: true,
         log_y: true,
+        band_label: None,
     }
 }
 
-/// Per-integrator series of `f(point)` against spp or time.
+/// Per-integrator series of the mean `y(point)` against spp or time, shaded with its 95 %
+/// confidence interval when there are repetitions.
 pub(super) fn series_of(
     plan: &Plan,
     curves: &[Vec<Point>],
     x: impl Fn(&Point) -> f64,
-    y: impl Fn(&Point) -> f64,
+    y: impl Fn(&Point) -> Stat,
 ) -> Vec<Series> {
     plan.integrators
         .iter()
         .zip(curves)
         .map(|(i, c)| Series {
             name: i.label.clone(),
-            points: c.iter().map(|p| (x(p), y(p))).collect(),
+            points: c.iter().map(|p| (x(p), y(p).mean)).collect(),
+            band: c
+                .iter()
+                .map(|p| y(p).ci.map(|ci| (y(p).mean - ci, y(p).mean + ci)))
+                .collect(),
             reference: false,
         })
         .collect()
+}
+
+/// MSE·spp: flat for 1/N convergence.
+fn mse_x_spp(p: &Point) -> Stat {
+    let spp = p.spp as f64;
+    Stat {
+        mean: p.mse.mean * spp,
+        ci: p.mse.ci.map(|ci| ci * spp),
+    }
 }
 
 pub(super) const PANEL_W: u32 = 430;
@@ -63,7 +79,11 @@ pub(super) fn write_plots(plan: &Plan, res: &Results, si: usize) -> Result<Vec<S
     let mut written = Vec::new();
     let spp_x = |p: &Point| p.spp as f64;
     let time_x = |p: &Point| p.time_s;
-    let mut plot = |stem: String, charts: Vec<Chart>| -> Result<()> {
+    let band_label = format!("95 % CI, {} repetitions", plan.reps);
+    let mut plot = |stem: String, mut charts: Vec<Chart>| -> Result<()> {
+        for c in &mut charts {
+            c.band_label = Some(band_label.clone());
+        }
         plot::write_charts(&plan.out.join(&stem), &charts, PANEL_W, PANEL_H)?;
         written.push(stem);
         Ok(())
@@ -80,28 +100,28 @@ pub(super) fn write_plots(plan: &Plan, res: &Results, si: usize) -> Result<Vec<S
                 format!("{name}: MSE vs spp"),
                 "samples per pixel",
                 "MSE",
-                series_of(plan, &common, spp_x, |p| p.mse.mean),
+                series_of(plan, &common, spp_x, |p| p.mse),
                 Some("1/N"),
             ),
             chart(
                 format!("{name}: relMSE vs spp"),
                 "samples per pixel",
                 "relMSE",
-                series_of(plan, &common, spp_x, |p| p.relmse.mean),
+                series_of(plan, &common, spp_x, |p| p.relmse),
                 Some("1/N"),
             ),
             chart(
                 format!("{name}: relMSE vs CPU time"),
                 "render CPU time (s)",
                 "relMSE",
-                series_of(plan, &common, time_x, |p| p.relmse.mean),
+                series_of(plan, &common, time_x, |p| p.relmse),
                 Some("1/t"),
             ),
             chart(
                 format!("{name}: MSE·spp (flat = 1/N)"),
                 "samples per pixel",
                 "MSE × spp",
-                series_of(plan, &common, spp_x, |p| p.mse.mean * p.spp as f64),
+                series_of(plan, &common, spp_x, mse_x_spp),
                 None,
             ),
         ],
@@ -117,14 +137,14 @@ pub(super) fn write_plots(plan: &Plan, res: &Results, si: usize) -> Result<Vec<S
                     format!("{name}: relMSE vs spp, own reference"),
                     "samples per pixel",
                     "relMSE",
-                    series_of(plan, &own, spp_x, |p| p.relmse.mean),
+                    series_of(plan, &own, spp_x, |p| p.relmse),
                     Some("1/N"),
                 ),
                 chart(
                     format!("{name}: MSE·spp, own reference"),
                     "samples per pixel",
                     "MSE × spp",
-                    series_of(plan, &own, spp_x, |p| p.mse.mean * p.spp as f64),
+                    series_of(plan, &own, spp_x, mse_x_spp),
                     None,
                 ),
             ],
@@ -141,14 +161,14 @@ pub(super) fn write_plots(plan: &Plan, res: &Results, si: usize) -> Result<Vec<S
                     format!("{name}/{region}: relMSE vs spp"),
                     "samples per pixel",
                     "relMSE",
-                    series_of(plan, &c, spp_x, |p| p.relmse.mean),
+                    series_of(plan, &c, spp_x, |p| p.relmse),
                     Some("1/N"),
                 ),
                 chart(
                     format!("{name}/{region}: relMSE vs CPU time"),
                     "render CPU time (s)",
                     "relMSE",
-                    series_of(plan, &c, time_x, |p| p.relmse.mean),
+                    series_of(plan, &c, time_x, |p| p.relmse),
                     Some("1/t"),
                 ),
             ],
