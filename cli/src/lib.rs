@@ -1,6 +1,6 @@
-//! The scene layer of the `tress` binary as a library: scene files, their objects and the
-//! integrator registry. The binary uses it as is, so fuzz targets (`cli/fuzz`) and tests reach
-//! exactly the parser and validation the binary runs.
+//! The `tress` binary as a library: scene files, their objects and the integrator registry,
+//! and [`run_study`]. The binary uses it as is, so fuzz targets (`cli/fuzz`), tests and the
+//! Python bindings (`python/`) reach exactly the parser, validation and commands the binary runs.
 
 #![warn(missing_docs)]
 
@@ -8,11 +8,115 @@ pub mod geometry;
 pub mod integrators;
 pub mod scene_desc;
 
+// The commands. `main.rs` parses the command line and calls into these; they are the binary's
+// internals, not an API, so they stay out of the documentation.
+#[doc(hidden)]
+pub mod bcsdf_cmd;
+#[doc(hidden)]
+pub mod bench;
+#[doc(hidden)]
+pub mod calibrate;
+mod cost;
+#[doc(hidden)]
+pub mod diff;
+#[doc(hidden)]
+pub mod farm;
+#[doc(hidden)]
+pub mod interrupt;
+#[doc(hidden)]
+pub mod logging;
+#[doc(hidden)]
+pub mod merge;
+mod plot;
+#[doc(hidden)]
+pub mod render_cmd;
+mod render_file;
+#[doc(hidden)]
+pub mod study;
+
+use std::path::PathBuf;
+pub use study::StudyArgs;
+
 /// RON options for everything tress parses: newtype variants may omit their inner parentheses,
 /// so `Chiang(beta_m: 0.3)` and `Path(max_depth: 8)` read naturally.
 pub fn ron_options() -> ron::Options {
     ron::Options::default()
         .with_default_extension(ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES)
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so readers
+/// never see a partial file.
+pub fn atomic_write(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
+    use anyhow::Context;
+    use std::io::Write;
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    let mut tmp = tress_core::image_io::output_temp_file(dir, ".tmp")
+        .with_context(|| format!("cannot write in {}", dir.display()))?;
+    tmp.write_all(bytes)
+        .with_context(|| format!("writing {}", path.display()))?;
+    // The bare io::Error: a kept PersistError would hold (and so leave behind) the temporary
+    // file until the error is dropped, and would print the io error twice.
+    tmp.persist(path)
+        .map_err(|e| e.error)
+        .with_context(|| format!("cannot create {}", path.display()))?;
+    Ok(())
+}
+
+/// What a study wrote, and how much of it this run rendered.
+#[derive(Clone, Debug)]
+pub struct StudyOutputs {
+    /// The output folder.
+    pub folder: PathBuf,
+    /// `report.md`: the summary over scenes, then per-scene tables and figures.
+    pub report: PathBuf,
+    /// `results.csv`: one row per render, with its errors and costs.
+    pub results_csv: PathBuf,
+    /// `summary.csv`: one row per scene, integrator, spp and reference, over the repetitions.
+    pub summary_csv: PathBuf,
+    /// Renders done by this run.
+    pub rendered: u64,
+    /// Finished renders of an earlier run that were read back instead.
+    pub reused: u64,
+}
+
+/// Runs a comparative study exactly as `tress study` does (`args` are its command-line
+/// options) and says where it wrote its results.
+pub fn run_study(args: StudyArgs) -> anyhow::Result<StudyOutputs> {
+    use anyhow::Context;
+    // The study reports its outputs as the fields of the command's JSON summary. Making the
+    // summary line takes the fields recorded so far: once to drop any an earlier, failed run
+    // left, once to read this run's.
+    let take_fields = || {
+        let line = logging::summary_line("study", logging::Outcome::Ok);
+        serde_json::from_str::<serde_json::Map<String, serde_json::Value>>(&line)
+            .context("reading the study's summary")
+    };
+    // One study at a time: the fields are the process's.
+    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    take_fields()?;
+    study::run(args)?;
+    let fields = take_fields()?;
+    let path = |key: &str| {
+        fields
+            .get(key)
+            .and_then(|v| v.as_str())
+            .map(PathBuf::from)
+            .with_context(|| format!("the study did not report its {key}"))
+    };
+    let count = |key: &str| fields.get(key).and_then(|v| v.as_u64()).unwrap_or(0);
+    let folder = path("output")?;
+    Ok(StudyOutputs {
+        report: path("report")?,
+        results_csv: path("results_csv")?,
+        summary_csv: folder.join("summary.csv"),
+        folder,
+        rendered: count("rendered"),
+        reused: count("reused"),
+    })
 }
 
 #[cfg(test)]

@@ -1,23 +1,14 @@
 //! `tress`: the command-line renderer.
 
-mod bcsdf_cmd;
-mod bench;
-mod calibrate;
-mod cost;
-mod diff;
-mod farm;
-mod interrupt;
-mod merge;
-mod plot;
-mod render_cmd;
-mod render_file;
-mod study;
-
-// The scene layer lives in the library target so that fuzz targets reach it too.
-use tress_cli::{integrators, ron_options, scene_desc};
+// The commands live in the library target (so that fuzz targets and the Python bindings reach
+// exactly what the binary runs); the binary parses the command line and dispatches.
+use tress_cli::{
+    atomic_write, bcsdf_cmd, bench, calibrate, diff, farm, interrupt, logging, merge, render_cmd,
+    study,
+};
 
 use anyhow::Result;
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
@@ -27,6 +18,10 @@ use std::path::PathBuf;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// How to report: human, or json (no progress bars; the last line on stdout is one JSON
+    /// object with the command's status and results).
+    #[arg(long, global = true, value_enum, default_value_t = logging::LogFormat::Human)]
+    log_format: logging::LogFormat,
 }
 
 #[derive(Subcommand, Debug)]
@@ -37,6 +32,9 @@ enum Command {
     Info {
         /// Scene file (RON).
         scene: PathBuf,
+        /// Values for the scene's `${name}` placeholders: `-D spp=64`.
+        #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = tress_cli::scene_desc::parse_define)]
+        defines: Vec<(String, String)>,
     },
     /// Tools for adding and tuning hair models: furnace, eval.
     #[command(subcommand)]
@@ -62,7 +60,10 @@ enum Command {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let matches = Cli::command().get_matches();
+    let command = matches.subcommand_name().unwrap_or_default().to_string();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    logging::set_format(cli.log_format);
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
@@ -72,7 +73,16 @@ fn main() {
         .with_ansi(std::io::stderr().is_terminal())
         .without_time()
         .init();
-    if let Err(e) = run(cli) {
+    let result = run(cli);
+    logging::finish(
+        &command,
+        match &result {
+            Ok(()) => logging::Outcome::Ok,
+            Err(e) if e.is::<interrupt::Interrupted>() => logging::Outcome::Interrupted,
+            Err(e) => logging::Outcome::Error(e),
+        },
+    );
+    if let Err(e) = result {
         let code = match e.downcast_ref::<interrupt::Interrupted>() {
             Some(stopped) => stopped.exit_code,
             None => {
@@ -87,16 +97,30 @@ fn main() {
 }
 
 fn run(cli: Cli) -> Result<()> {
+    // JSON reports replace the progress bars and the readable summaries.
+    let quiet = logging::json();
     match cli.command {
-        Command::Render(args) => render_cmd::render(args),
-        Command::Info { scene } => render_cmd::info(&scene),
+        Command::Render(mut args) => {
+            args.quiet |= quiet;
+            render_cmd::render(args)
+        }
+        Command::Info { scene, defines } => render_cmd::info(&scene, &defines),
         Command::Bcsdf(cmd) => bcsdf_cmd::run(cmd),
-        Command::Study(args) => study::run(args),
+        Command::Study(mut args) => {
+            args.quiet |= quiet;
+            study::run(args)
+        }
         Command::Diff(args) => diff::run(args),
         Command::Bench(args) => bench::run(args),
-        Command::Merge(args) => merge::run(args),
+        Command::Merge(mut args) => {
+            args.quiet |= quiet;
+            merge::run(args)
+        }
         Command::Farm(args) => farm::run(args),
-        Command::Calibrate(args) => calibrate::run(args),
+        Command::Calibrate(mut args) => {
+            args.quiet |= quiet;
+            calibrate::run(args)
+        }
         Command::Init { path } => init(&path),
     }
 }
@@ -115,26 +139,5 @@ fn init(path: &std::path::Path) -> Result<()> {
         path.display(),
         path.display()
     );
-    Ok(())
-}
-
-/// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so readers
-/// never see a partial file.
-pub fn atomic_write(path: &std::path::Path, bytes: &[u8]) -> Result<()> {
-    use anyhow::Context;
-    use std::io::Write;
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(std::path::Path::new("."));
-    let mut tmp = tress_core::image_io::output_temp_file(dir, ".tmp")
-        .with_context(|| format!("cannot write in {}", dir.display()))?;
-    tmp.write_all(bytes)
-        .with_context(|| format!("writing {}", path.display()))?;
-    // The bare io::Error: a kept PersistError would hold (and so leave behind) the temporary
-    // file until the error is dropped, and would print the io error twice.
-    tmp.persist(path)
-        .map_err(|e| e.error)
-        .with_context(|| format!("cannot create {}", path.display()))?;
     Ok(())
 }

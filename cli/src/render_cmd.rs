@@ -15,6 +15,8 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+use tress_core::film::{Aov, Outputs};
+use tress_core::image_io::Attribute;
 use tress_core::render::{self, RenderStats, SampleSums};
 
 #[derive(Args, Debug)]
@@ -60,11 +62,42 @@ pub struct RenderArgs {
     /// finished so far.
     #[arg(long)]
     pub partial: bool,
+    /// Values for the scene's `${name}` placeholders: `-D spp=64 -D groom=curly`.
+    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = scene_desc::parse_define)]
+    pub defines: Vec<(String, String)>,
+    /// Also write the exact sample sums into the EXR, so that `tress merge` can join it with
+    /// other tiles and sample ranges bit for bit (larger files; `tress farm` jobs use it).
+    #[arg(long)]
+    pub sums: bool,
+    /// Also write an alpha channel A: the fraction of each pixel's camera rays that hit
+    /// geometry, hair or surface (one extra occlusion query per sample, about 4 % of a
+    /// sample's time).
+    #[arg(long)]
+    pub alpha: bool,
+    /// Extra outputs, comma-separated, written as EXR layers: depth (depth.Z: distance to the
+    /// first hit), tangent (tangent.XYZ: fiber tangent there), albedo (albedo.RGB: the first
+    /// hit's directional albedo), variance (variance.RGB: variance of the pixel value).
+    #[arg(long, value_delimiter = ',', value_parser = parse_aov)]
+    pub aov: Vec<Aov>,
     #[command(flatten)]
     pub preview: PreviewArgs,
     /// No progress bar and no summary.
     #[arg(long)]
     pub quiet: bool,
+}
+
+fn parse_aov(s: &str) -> Result<Aov, String> {
+    s.parse()
+}
+
+impl RenderArgs {
+    /// What the render records besides radiance.
+    fn outputs(&self) -> Outputs {
+        Outputs {
+            alpha: self.alpha,
+            aovs: self.aov.iter().copied().collect(),
+        }
+    }
 }
 
 fn parse_seconds(s: &str) -> Result<f64, String> {
@@ -79,7 +112,8 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
 
 /// The scene file with command-line overrides applied.
 fn load_with_overrides(args: &RenderArgs) -> Result<SceneDesc> {
-    let mut desc = scene_desc::load(&args.scene)?;
+    let defines = args.defines.iter().cloned().collect();
+    let mut desc = scene_desc::load_with(&args.scene, &defines)?;
     if let Some(name) = &args.integrator {
         desc.integrator = IntegratorDesc::parse_arg(name).map_err(anyhow::Error::msg)?;
     }
@@ -99,7 +133,7 @@ fn load_with_overrides(args: &RenderArgs) -> Result<SceneDesc> {
         desc.film.crop = args.crop;
     }
     desc.film
-        .validate_for_render()
+        .validate_for_outputs(&args.outputs())
         .map_err(|e| anyhow::anyhow!("{}: film: {e}", args.scene.display()))?;
     if args.spp_offset.checked_add(desc.film.spp as u64).is_none() {
         bail!(
@@ -145,30 +179,46 @@ impl Status {
     }
 }
 
-/// What the outputs need besides the sums.
-struct Outputs<'a> {
+/// What the output files need besides the sums.
+struct OutputFiles<'a> {
     args: &'a RenderArgs,
     desc: &'a SceneDesc,
     out: PathBuf,
     identity: Identity,
+    camera: &'a tress_core::Camera,
 }
 
-impl Outputs<'_> {
+impl OutputFiles<'_> {
     fn write(&self, sums: &SampleSums, stats: &RenderStats, status: Status) -> Result<()> {
         let integrator_ron = ron::to_string(&self.desc.integrator)
             .unwrap_or_else(|_| self.desc.integrator.name().to_string());
+        let film = &self.desc.film;
         let attributes = [
-            ("tress:scene", self.args.scene.display().to_string()),
-            ("tress:integrator", integrator_ron),
-            ("tress:spp_requested", self.desc.film.spp.to_string()),
-            ("tress:status", status.label().to_string()),
+            (
+                "tress:scene",
+                Attribute::Text(self.args.scene.display().to_string()),
+            ),
+            ("tress:integrator", Attribute::Text(integrator_ron)),
+            ("tress:spp_requested", Attribute::whole(film.spp.into())),
+            ("tress:status", Attribute::Text(status.label().into())),
             (
                 "tress:render_time_s",
-                format!("{:.3}", stats.wall.as_secs_f64()),
+                Attribute::Double(stats.wall.as_secs_f64()),
             ),
-            ("tress:rays", stats.rays.to_string()),
+            ("tress:rays", Attribute::Double(stats.rays as f64)),
             // Samples that came out NaN or infinite and were left out of the sums.
-            ("tress:dropped_samples", stats.nonfinite_samples.to_string()),
+            (
+                "tress:dropped_samples",
+                Attribute::Double(stats.nonfinite_samples as f64),
+            ),
+            (
+                "worldToCamera",
+                Attribute::Matrix(self.camera.world_to_camera()),
+            ),
+            (
+                "worldToNDC",
+                Attribute::Matrix(self.camera.world_to_ndc(film.width, film.height)),
+            ),
         ];
         // Renders writing the same outputs at once take turns, so that the EXR and the PNG
         // left behind come from one render (an advisory lock on their folder, released on
@@ -180,7 +230,7 @@ impl Outputs<'_> {
         let turn = std::fs::File::open(folder)
             .and_then(|f| f.lock().map(|()| f))
             .with_context(|| format!("locking {} for writing", folder.display()))?;
-        render_file::write_render(&self.out, sums, &self.identity, &attributes)?;
+        render_file::write_render(&self.out, sums, self.args.sums, &self.identity, &attributes)?;
         // Both outputs or neither: an EXR without its preview would look like a success.
         let written = self
             .args
@@ -256,7 +306,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("creating output folder {}", dir.display()))?;
     }
-    let outputs = Outputs {
+    let files = OutputFiles {
         args: &args,
         desc: &desc,
         out: out.clone(),
@@ -264,7 +314,9 @@ pub fn render(args: RenderArgs) -> Result<()> {
             seed: desc.film.seed,
             scene_hash: scene_hash(&desc)?,
         },
+        camera: &built.scene.camera,
     };
+    let outputs = args.outputs();
 
     let interrupt = Interrupt::install()?;
     let cancel = interrupt.cancel_flag();
@@ -276,17 +328,24 @@ pub fn render(args: RenderArgs) -> Result<()> {
     let progress = |n: u64| bar.inc(n);
     let limit = args.time_limit.map(Duration::from_secs_f64);
     let start = Instant::now();
-    let mut done = SampleSums::empty(desc.film.window(), desc.film.width, desc.film.height, first);
+    let mut done = SampleSums::empty(
+        desc.film.window(),
+        desc.film.width,
+        desc.film.height,
+        first,
+        outputs.clone(),
+    );
     let mut stats = RenderStats::default();
     let mut reached = 0u64;
     let mut status = Status::Complete;
     while reached < target {
         let next = (2 * reached).clamp(1, target);
         let wave = pool.install(|| {
-            render::render_samples(
+            render::render_outputs(
                 &built.scene,
                 integrator.as_ref(),
                 &desc.film,
+                &outputs,
                 first + reached..first + next,
                 cancel,
                 &progress,
@@ -305,7 +364,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
                 break;
             }
             if args.partial {
-                outputs.write(&done, &stats, Status::Partial)?;
+                files.write(&done, &stats, Status::Partial)?;
             }
         }
     }
@@ -317,7 +376,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
         );
         return Err(interrupt.interrupted().into());
     }
-    outputs.write(&done, &stats, status)?;
+    files.write(&done, &stats, status)?;
     let png = out.with_extension("png");
     let wrote = if args.preview.no_preview {
         out.display().to_string()
@@ -349,6 +408,21 @@ pub fn render(args: RenderArgs) -> Result<()> {
         );
         eprintln!("wrote {wrote}");
     }
+    // The summary line of `--log-format json`.
+    let outputs = if args.preview.no_preview {
+        vec![out.clone()]
+    } else {
+        vec![out.clone(), png.clone()]
+    };
+    crate::logging::record("outputs", outputs);
+    crate::logging::record("integrator", desc.integrator.name());
+    crate::logging::record("spp", reached);
+    crate::logging::record("spp_requested", target);
+    crate::logging::record("render_status", status.label());
+    crate::logging::record("time_s", stats.wall.as_secs_f64());
+    crate::logging::record("rays", stats.rays);
+    crate::logging::record("mrays_per_s", stats.rays_per_second() / 1e6);
+    crate::logging::record("nonfinite_samples", stats.nonfinite_samples);
     if stats.nonfinite_samples > 0 {
         let share = stats.nonfinite_samples as f64 / stats.samples.max(1) as f64;
         // A few dropped samples are noise; more than one in 10⁴ biases the image visibly.
@@ -371,8 +445,8 @@ pub fn render(args: RenderArgs) -> Result<()> {
     Ok(())
 }
 
-pub fn info(scene: &Path) -> Result<()> {
-    let desc = scene_desc::load(scene)?;
+pub fn info(scene: &Path, defines: &[(String, String)]) -> Result<()> {
+    let desc = scene_desc::load_with(scene, &defines.iter().cloned().collect())?;
     desc.film
         .validate()
         .map_err(|e| anyhow::anyhow!("{}: film: {e}", scene.display()))?;
