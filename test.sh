@@ -9,3 +9,28 @@ else
     echo "test.sh: clippy is not installed (rustup component add clippy): lints skipped" >&2
 fi
 cargo test --workspace --release "$@"
+
+# The Python package (python/): maturin builds the extension module into a virtualenv kept in
+# the target folder, reusing the crates built above, and pytest runs its suite.
+target_dir="${CARGO_TARGET_DIR:-$PWD/target}"
+venv="$target_dir/python-venv"
+if [ ! -x "$venv/bin/pip" ]; then
+    rm -rf "$venv"
+    if ! python3 -m venv "$venv" >/dev/null 2>&1; then
+        # Debian's python3 leaves venv's pip bootstrap to the python3-venv package.
+        SUDO=""
+        if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+        echo "installing python3-venv with apt-get" >&2
+        $SUDO apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq python3-venv >/dev/null
+        rm -rf "$venv"
+        python3 -m venv "$venv"
+    fi
+fi
+"$venv/bin/pip" install --quiet --disable-pip-version-check "maturin>=1.9.4,<2" numpy pytest
+rm -rf "$target_dir/python-wheels"
+"$venv/bin/maturin" build --release --manifest-path python/Cargo.toml --interpreter "$venv/bin/python" \
+    --out "$target_dir/python-wheels"
+"$venv/bin/pip" install --quiet --disable-pip-version-check --force-reinstall --no-deps \
+    "$target_dir"/python-wheels/tress-*.whl
+"$venv/bin/pytest" -q python/tests

@@ -1,0 +1,45 @@
+//! `tress_cli::run_study`, the library's way to run a study (the Python bindings use it). A test
+//! binary of its own: the study's outputs pass through the process-wide fields of the JSON
+//! summary, which unit tests of `logging` record and take concurrently.
+
+#[test]
+fn run_study_says_where_the_study_wrote_and_what_it_rendered() {
+    let dir = tempfile::tempdir().unwrap();
+    let study = dir.path().join("tiny.ron");
+    std::fs::write(
+        &study,
+        r#"(
+    scenes: [Inline(name: "ball", scene: (
+        camera: (look_from: (0, 0, 4), look_at: (0, 0, 0)),
+        film: (width: 6, height: 6),
+        materials: {"hair": Hair(Chiang())},
+        objects: [Hair(source: Procedural(style: Ball, strands: 50), material: "hair")],
+        lights: [Sky()],
+    ))],
+    integrators: [Path(max_depth: 2)],
+    spp: [1, 2],
+    repetitions: 2,
+    reference: Render(integrator: Path(max_depth: 2), spp: 8),
+)"#,
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    let args = || tress_cli::StudyArgs {
+        study: study.clone(),
+        quick: false,
+        out: Some(out.clone()),
+        threads: Some(1),
+        quiet: true,
+    };
+    let first = tress_cli::run_study(args()).unwrap();
+    assert_eq!(first.folder, out);
+    assert_eq!(first.report, out.join("report.md"));
+    assert_eq!(first.results_csv, out.join("results.csv"));
+    for file in [&first.report, &first.results_csv, &first.summary_csv] {
+        assert!(file.is_file(), "{} is missing", file.display());
+    }
+    // Two spp x two repetitions, and the reference; then all of it read back.
+    assert_eq!((first.rendered, first.reused), (5, 0));
+    let again = tress_cli::run_study(args()).unwrap();
+    assert_eq!((again.rendered, again.reused), (0, 5));
+}

@@ -1,0 +1,40 @@
+//! `tress.study` (its Rust half): runs a study as `tress study` does.
+
+use crate::to_py_err;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+use tress_cli::StudyArgs;
+
+/// Runs the study file `path` as `tress study` does and returns a dict: `folder`, `report`,
+/// `results_csv`, `summary_csv` (paths) and the counts `rendered` and `reused`. The
+/// `tress.study` wrapper adds the summary rows.
+#[pyfunction]
+#[pyo3(signature = (path, quick=false, out=None, threads=None, verbose=false))]
+pub fn run_study<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    quick: bool,
+    out: Option<PathBuf>,
+    threads: Option<usize>,
+    verbose: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let args = StudyArgs {
+        study: path,
+        quick,
+        out,
+        threads,
+        quiet: !verbose,
+    };
+    let outputs = py
+        .detach(|| tress_cli::run_study(args))
+        .map_err(to_py_err)?;
+    let dict = PyDict::new(py);
+    dict.set_item("folder", outputs.folder)?;
+    dict.set_item("report", outputs.report)?;
+    dict.set_item("results_csv", outputs.results_csv)?;
+    dict.set_item("summary_csv", outputs.summary_csv)?;
+    dict.set_item("rendered", outputs.rendered)?;
+    dict.set_item("reused", outputs.reused)?;
+    Ok(dict)
+}

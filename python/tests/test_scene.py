@@ -1,0 +1,174 @@
+"""Scenes from dicts, RON text and files; renders to NumPy arrays; errors as exceptions."""
+
+import _thread
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import tress
+
+
+def test_render_is_a_finite_float32_image_of_the_film(scene):
+    image = scene.render()
+    assert isinstance(image, np.ndarray)
+    assert image.shape == (16, 16, 3)
+    assert image.dtype == np.float32
+    assert np.isfinite(image).all()
+    assert (image >= 0).all()
+    # Sky behind the ball and lit hair in front: nothing is black on average.
+    assert image.mean() > 0.01
+
+
+def test_the_same_seed_gives_the_same_image_and_another_seed_another(scene):
+    a = scene.render(seed=7)
+    b = scene.render(seed=7)
+    c = scene.render(seed=8)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+    # The scene's own seed is the default.
+    np.testing.assert_array_equal(scene.render(), scene.render(seed=scene.seed))
+
+
+def test_threads_and_crop_do_not_change_the_pixels(scene):
+    full = scene.render(threads=2)
+    np.testing.assert_array_equal(full, scene.render(threads=1))
+    window = scene.render(crop=(3, 5, 11, 14))
+    assert window.shape == (9, 8, 3)
+    np.testing.assert_array_equal(window, full[5:14, 3:11])
+
+
+def test_spp_and_size_overrides(scene):
+    image = scene.render(spp=1, width=12, height=8)
+    assert image.shape == (8, 12, 3)
+    assert not np.array_equal(scene.render(spp=1), scene.render(spp=4))
+
+
+def test_integrator_override_by_name_and_by_ron(scene):
+    default = scene.render()
+    # The scene names no integrator: `path` with its defaults is what it renders with.
+    np.testing.assert_array_equal(default, scene.render(integrator="path"))
+    assert scene.integrator.startswith("Path(")
+    # One bounce drops the light scattered among the fibers: blond hair gets darker.
+    single = scene.render(integrator="Path(max_depth: 1)", spp=8)
+    multiple = scene.render(integrator="Path(max_depth: 100)", spp=8)
+    assert single.mean() < 0.9 * multiple.mean()
+
+
+def test_from_ron_and_to_ron_round_trip(scene):
+    again = tress.Scene.from_ron(scene.to_ron())
+    np.testing.assert_array_equal(again.render(), scene.render())
+    assert (again.width, again.height, again.spp, again.seed) == (16, 16, 2, 1)
+
+
+def test_a_scene_file_renders_as_its_dict(tmp_path, scene):
+    path = tmp_path / "ball.ron"
+    path.write_text(scene.to_ron())
+    loaded = tress.load_scene(path)
+    np.testing.assert_array_equal(loaded.render(), scene.render())
+    assert str(path) in repr(loaded)
+    assert "300 strands" in loaded.summary
+
+
+def test_numpy_values_and_tuples_are_accepted_in_dicts(scene_dict, scene):
+    scene_dict["camera"]["look_from"] = np.array([0.0, 0.0, 4.0])
+    scene_dict["camera"]["fov"] = np.float32(35)
+    scene_dict["film"]["width"] = np.int64(16)
+    scene_dict["camera"]["look_at"] = (0, 0, 0)
+    np.testing.assert_array_equal(tress.Scene.from_dict(scene_dict).render(), scene.render())
+
+
+TRIANGLE_OBJ = "v -1 -1 -1\nv 1 -1 -1\nv 0 1 -1\nf 1 2 3\n"
+
+
+def mesh_scene(scene_dict):
+    scene_dict["materials"]["grey"] = {"Diffuse": {"albedo": [0.5, 0.5, 0.5]}}
+    scene_dict["objects"] = [{"Mesh": {"file": "triangle.obj", "material": "grey"}}]
+    return scene_dict
+
+
+def test_relative_paths_resolve_against_base_dir(tmp_path, scene_dict, monkeypatch):
+    (tmp_path / "triangle.obj").write_text(TRIANGLE_OBJ)
+    d = mesh_scene(scene_dict)
+    assert tress.Scene.from_dict(d, base_dir=tmp_path).render().mean() > 0
+    # Without base_dir: the current directory.
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    with pytest.raises(FileNotFoundError, match="triangle.obj"):
+        tress.Scene.from_dict(d)
+    monkeypatch.chdir(tmp_path)
+    tress.Scene.from_dict(d)
+    ron = tress.Scene.from_dict(d).to_ron()
+    monkeypatch.chdir(elsewhere)
+    assert tress.Scene.from_ron(ron, base_dir=tmp_path).render().mean() > 0
+    # A scene file's paths resolve against its own folder, wherever Python runs.
+    (tmp_path / "mesh.ron").write_text(ron)
+    assert tress.load_scene(tmp_path / "mesh.ron").render().mean() > 0
+
+
+def test_missing_files_raise_oserror(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nothing.ron"):
+        tress.load_scene(tmp_path / "nothing.ron")
+    assert issubclass(FileNotFoundError, OSError)
+
+
+def test_malformed_scene_files_name_file_line_and_column(tmp_path, scene):
+    text = scene.to_ron().replace("fov:", "fvo:")
+    line = 1 + next(i for i, l in enumerate(text.splitlines()) if "fvo:" in l)
+    path = tmp_path / "typo.ron"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=rf"typo\.ron:{line}:\d+: .*fvo"):
+        tress.load_scene(path)
+    with pytest.raises(ValueError, match=rf"^<ron>:{line}:\d+: .*fvo"):
+        tress.Scene.from_ron(text)
+
+
+def test_dict_errors_name_where_the_value_sits(scene_dict):
+    scene_dict["objects"][0]["Hair"]["source"] = {"Procedurl": {}}
+    with pytest.raises(ValueError, match=r"objects\[0\]\.Hair\.source: unknown variant `Procedurl`"):
+        tress.Scene.from_dict(scene_dict)
+
+
+def test_invalid_values_are_refused_with_the_cli_messages(scene_dict):
+    scene_dict["objects"][0]["Hair"]["material"] = "auburn"
+    with pytest.raises(ValueError, match=r"<dict>: objects\[0\]: .*auburn"):
+        tress.Scene.from_dict(scene_dict)
+    scene_dict["objects"][0]["Hair"]["material"] = "blond"
+    scene_dict["materials"]["blond"]["Hair"]["Chiang"]["beta_m"] = 7.0
+    with pytest.raises(ValueError, match="material 'blond': beta_m = 7"):
+        tress.Scene.from_dict(scene_dict)
+
+
+def test_values_json_cannot_hold_are_refused(scene_dict):
+    scene_dict["camera"]["fov"] = float("nan")
+    with pytest.raises(ValueError, match=r"camera\.fov: NaN is not a finite number"):
+        tress.Scene.from_dict(scene_dict)
+    scene_dict["camera"]["fov"] = object()
+    with pytest.raises(TypeError, match=r"camera\.fov: a value of type object"):
+        tress.Scene.from_dict(scene_dict)
+
+
+def test_bad_render_settings_raise_valueerror(scene):
+    with pytest.raises(ValueError, match="spp must be at least 1"):
+        scene.render(spp=0)
+    with pytest.raises(ValueError, match="crop window"):
+        scene.render(crop=(0, 0, 17, 16))
+    with pytest.raises(ValueError, match="unknown integrator 'bogus'.*path, dual-uniform"):
+        scene.render(integrator="bogus")
+
+
+def test_ctrl_c_stops_a_render(scene):
+    # About a minute of work at 64x64 and 4096 spp: far longer than a stop takes.
+    timer = threading.Timer(0.5, _thread.interrupt_main)
+    start = time.monotonic()
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            scene.render(spp=4096, width=64, height=64)
+    finally:
+        timer.cancel()
+    assert time.monotonic() - start < 10
+    # The scene still renders afterwards.
+    assert scene.render().shape == (16, 16, 3)
