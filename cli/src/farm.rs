@@ -47,6 +47,10 @@ pub struct FarmArgs {
     /// Extra outputs, passed to every job (see `tress render --aov`).
     #[arg(long, value_delimiter = ',', value_parser = parse_aov)]
     pub aov: Vec<Aov>,
+    /// Values for the scene's `${name}` placeholders, passed to every job (see `tress render
+    /// -D`).
+    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = scene_desc::parse_define)]
+    pub defines: Vec<(String, String)>,
     /// The tress executable the commands run. Default: this one, by absolute path.
     #[arg(long)]
     pub tress: Option<String>,
@@ -77,7 +81,8 @@ fn utf8(p: &Path) -> Result<String> {
 }
 
 pub fn run(args: FarmArgs) -> Result<()> {
-    let mut desc = scene_desc::load(&args.scene)?;
+    let defines = args.defines.iter().cloned().collect();
+    let mut desc = scene_desc::load_with(&args.scene, &defines)?;
     if let Some(spp) = args.spp {
         desc.film.spp = spp;
     }
@@ -125,6 +130,9 @@ pub fn run(args: FarmArgs) -> Result<()> {
         None => utf8(&std::env::current_exe().context("finding the tress executable")?)?,
     };
     let mut common = Vec::new();
+    for (name, value) in &defines {
+        common.push(format!("-D {}", shell_quote(&format!("{name}={value}"))));
+    }
     if let Some(seed) = args.seed {
         common.push(format!("--seed {seed}"));
     }

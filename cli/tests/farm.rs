@@ -95,6 +95,28 @@ fn tiles_times_passes_merge_into_the_full_render() {
         && l.contains("scene-farm/")));
 }
 
+/// `-D` reaches every job: a scene whose seed is a placeholder merges into the render with the
+/// same define.
+#[test]
+fn farm_jobs_carry_the_scene_placeholders() {
+    let (dir, _) = scene_dir(&SCENE.replace("seed: 3)", "seed: ${s})"));
+    let d = dir.path();
+    render_ok(&["--out", "full.exr", "-D", "s=7", "--quiet"], d);
+    let args = ["--tiles", "2", "--passes", "2", "--out", "f", "-D", "s=7"];
+    let jobs = farm(&args, d);
+    assert!(jobs.lines().all(|l| l.contains("-D s=7")), "{jobs}");
+    run_lines(&jobs, d);
+    run_lines(&farm(&[&args[..], &["--merge"]].concat(), d), d);
+    assert_eq!(pixels(&d.join("f/scene.exr")), pixels(&d.join("full.exr")));
+    // Without the define the scene cannot be read, and farm says so.
+    let o = tress(&["farm", "scene.ron", "--tiles", "2"], d);
+    assert!(
+        !o.status.success() && stderr(&o).contains("${s} has no value"),
+        "{}",
+        stderr(&o)
+    );
+}
+
 /// Jobs write sums (the merge needs them) and pass alpha and the AOVs on; the merge rebuilds
 /// every output channel bit for bit, with or without sums of its own.
 #[test]

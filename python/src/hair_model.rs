@@ -147,6 +147,23 @@ fn index(batched: bool, i: usize) -> String {
     }
 }
 
+/// The arguments of `eval` and `pdf` (`wo`, `wi`, `h`) and their common row count.
+type DirectionPairs = (Rows<Vec3>, Rows<Vec3>, Rows<f32>, Option<usize>);
+
+fn direction_pairs(
+    wo: &PyArrayLikeDyn<'_, f32, AllowTypeChange>,
+    wi: &PyArrayLikeDyn<'_, f32, AllowTypeChange>,
+    h: &PyArrayLikeDyn<'_, f32, AllowTypeChange>,
+) -> PyResult<DirectionPairs> {
+    let (wo, wi, h) = (directions("wo", wo)?, directions("wi", wi)?, offsets(h)?);
+    let n = row_count(&[
+        ("wo", wo.batched, wo.values.len()),
+        ("wi", wi.batched, wi.values.len()),
+        ("h", h.batched, h.values.len()),
+    ])?;
+    Ok((wo, wi, h, n))
+}
+
 /// The common row count of the arguments, `None` when none is batched.
 fn row_count(args: &[(&str, bool, usize)]) -> PyResult<Option<usize>> {
     let mut count: Option<(&str, usize)> = None;
@@ -237,12 +254,7 @@ impl HairModel {
         wi: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
         h: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (wo, wi, h) = (directions("wo", &wo)?, directions("wi", &wi)?, offsets(&h)?);
-        let n = row_count(&[
-            ("wo", wo.batched, wo.values.len()),
-            ("wi", wi.batched, wi.values.len()),
-            ("h", h.batched, h.values.len()),
-        ])?;
+        let (wo, wi, h, n) = direction_pairs(&wo, &wi, &h)?;
         let bcsdf = self.bcsdf.as_ref();
         let values = py.detach(|| {
             map_rows(n.unwrap_or(1), |i| {
@@ -260,12 +272,7 @@ impl HairModel {
         wi: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
         h: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (wo, wi, h) = (directions("wo", &wo)?, directions("wi", &wi)?, offsets(&h)?);
-        let n = row_count(&[
-            ("wo", wo.batched, wo.values.len()),
-            ("wi", wi.batched, wi.values.len()),
-            ("h", h.batched, h.values.len()),
-        ])?;
+        let (wo, wi, h, n) = direction_pairs(&wo, &wi, &h)?;
         let bcsdf = self.bcsdf.as_ref();
         let values = py.detach(|| {
             map_rows(n.unwrap_or(1), |i| {
