@@ -43,7 +43,7 @@ const MAX_BLEND: u32 = 16;
 /// children: Some(per_guide: 8, radius: 0.05, seed: 1)
 /// children: Some(per_guide: 16, radius: 0.8, blend: 3, clump: 0.3, thinning: 0.2, radius_jitter: 0.2)
 /// ```
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ChildStrands {
     /// Children grown per guide (at least 1). The guides are kept.

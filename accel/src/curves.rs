@@ -6,7 +6,9 @@ use serde::{Deserialize, Serialize};
 use tress_core::math::Vec3;
 
 /// How a strand's polyline is turned into Embree flat (ray-facing ribbon) curves.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 pub enum CurveBasis {
     /// Straight segments between the input points (Embree flat linear curves). Exact, fastest.
     #[default]
@@ -20,7 +22,9 @@ pub enum CurveBasis {
 }
 
 /// The surface Embree draws a fiber as.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 pub enum CurveShape {
     /// Ribbons of the fiber's width that face every ray (Embree flat curves), hit at the depth
     /// of the axis. Fastest; what hair renderers built on Embree use, and enough for fiber

@@ -22,7 +22,7 @@ const FLAG_TRANSPARENCY: u32 = 1 << 3;
 const FLAG_COLOR: u32 = 1 << 4;
 
 /// A `.hair` file to load.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct HairFile {
     /// Path of the `.hair` file, used as given (resolve relative paths first).

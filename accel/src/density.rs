@@ -137,7 +137,7 @@ const OWN_MAX_SEGMENTS: usize = 64;
 /// ```ron
 /// (resolution: Some(128), direction: true)
 /// ```
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct DensitySettings {
     /// Voxels along the longest axis of the hair bounds, 1 ..= [`MAX_RESOLUTION`]; `None`

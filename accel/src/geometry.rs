@@ -227,14 +227,16 @@ impl HairGeometry {
 }
 
 /// A rotation in a scene file: Euler angles or an axis and an angle, in degrees.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum Rotation {
     /// Rotate about x, then y, then z (fixed world axes), by these angles in degrees.
+    #[schemars(with = "[f32; 3]")]
     Euler(Vec3),
     /// Rotate by `degrees` about `axis` (any non-zero length), right-handed.
     AxisAngle {
         /// Rotation axis, finite and non-zero.
+        #[schemars(with = "[f32; 3]")]
         axis: Vec3,
         /// Angle in degrees.
         degrees: f32,
@@ -250,7 +252,7 @@ impl Default for Rotation {
 /// A similarity transform applied to an object's points: scale, then rotate, then translate.
 ///
 /// The scale is uniform so that fibers stay round: radii are multiplied by it too.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct Transform {
     /// Uniform scale factor, finite and positive (default 1); multiplies the radii too.
@@ -258,6 +260,7 @@ pub struct Transform {
     /// Rotation applied after the scale (default none).
     pub rotate: Rotation,
     /// Offset added last, in world units (default 0).
+    #[schemars(with = "[f32; 3]")]
     pub translate: Vec3,
 }
 

@@ -50,7 +50,7 @@ const MAX_INCLUDE_DEPTH: usize = 32;
 const MAX_REFINE_DEPTH: u32 = 10;
 
 /// A pbrt scene file whose curves to load.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PbrtFile {
     /// Path of the `.pbrt` file, used as given (resolve relative paths first).

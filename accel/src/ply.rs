@@ -45,7 +45,7 @@ use tress_core::math::Vec3;
 const FALLBACK_RADIUS: f32 = 0.00004;
 
 /// A PLY strand file to load.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PlyFile {
     /// Path of the `.ply` file, used as given (resolve relative paths first).

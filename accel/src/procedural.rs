@@ -25,7 +25,7 @@ use tress_core::rng::{mix64, Pcg32};
 use tress_core::sampling::sample_uniform_sphere;
 
 /// The shape of generated hair.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum HairStyle {
     /// Smooth strands hanging from the scalp.
@@ -52,7 +52,7 @@ pub enum HairStyle {
 }
 
 /// Parameters of generated hair (every field has a default).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct ProceduralHair {
     /// Straight, wavy, curly or a ball (default straight).
@@ -68,6 +68,7 @@ pub struct ProceduralHair {
     /// Mean strand length (scalp strands vary by ±15%).
     pub length: f32,
     /// Centre of the scalp sphere or of the ball.
+    #[schemars(with = "[f32; 3]")]
     pub center: Vec3,
     /// Radius of the scalp sphere or of the ball.
     pub sphere_radius: f32,

@@ -30,7 +30,7 @@ use std::path::{Path, PathBuf};
 /// `Hair((path: …))`. The `tress_cli` tests parse these examples.)
 ///
 /// Paths are used as given; resolve relative paths before loading ([`HairSource::path_mut`]).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum HairSource {
     /// A `.hair`, `.tfx`, USC-HairSalon `.data`, `.ply` or `.pbrt` file (by extension,
@@ -118,7 +118,7 @@ impl HairSource {
 ///  strand_fraction: 0.1, strand_seed: 7,
 ///  children: Some(per_guide: 8, radius: 0.05, seed: 1))
 /// ```
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct HairOptions {
     /// How polylines become curves: `Linear` (the default), `CatmullRom` or `BSpline`.

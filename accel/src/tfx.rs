@@ -21,7 +21,7 @@ use tress_core::math::{Rgb, Vec3};
 const HEADER_BYTES: usize = 160;
 
 /// A `.tfx` file to load.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TfxFile {
     /// Path of the `.tfx` file, used as given (resolve relative paths first).

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use tress_core::math::Vec3;
 
 /// A USC-HairSalon `.data` file to load.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct UscFile {
     /// Path of the `.data` file, used as given (resolve relative paths first).

@@ -9,7 +9,7 @@ use tress_accel::{EmbreeAccel, HairOptions, HairSource, SceneBuilder, Transform,
 use tress_core::Material;
 
 /// An object of the scene, referring to a material by name.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum ObjectDesc {
     /// Hair: `Hair(source: File("straight.hair"), material: "brown", options: (...))`.
@@ -35,6 +35,7 @@ pub enum ObjectDesc {
     /// A sphere.
     Sphere {
         /// Centre, in world space.
+        #[schemars(with = "[f32; 3]")]
         center: Vec3,
         /// Radius, in scene units; finite and positive.
         radius: f32,

@@ -13,7 +13,7 @@ macro_rules! integrators {
         /// An integrator and its settings, as written in scene files
         /// (`integrator: Path(max_depth: 64)`) or on the command line (`--integrator path`,
         /// `--integrator 'Path(max_depth: 8)'`).
-        #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+        #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
         pub enum IntegratorDesc {
             $($(#[$doc])* $variant(#[serde(default)] <$kind as IntegratorKind>::Settings),)+
         }

@@ -6,6 +6,7 @@
 
 pub mod geometry;
 pub mod integrators;
+pub mod reference;
 pub mod scene_desc;
 
 // The commands. `main.rs` parses the command line and calls into these; they are the binary's

@@ -18,7 +18,7 @@ use tress_core::{Camera, Material, Scene};
 use tress_materials::HairModel;
 
 /// A whole scene file.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SceneDesc {
     /// The view the image is taken from.
@@ -89,15 +89,18 @@ where
 }
 
 /// Perspective camera.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CameraDesc {
     /// Camera position, in world space.
+    #[schemars(with = "[f32; 3]")]
     pub look_from: Vec3,
     /// Point the camera looks at (the image centre).
+    #[schemars(with = "[f32; 3]")]
     pub look_at: Vec3,
     /// Direction that appears upwards in the image (default +y).
     #[serde(default = "default_up")]
+    #[schemars(with = "[f32; 3]")]
     pub up: Vec3,
     /// Vertical field of view in degrees, in (0, 180).
     #[serde(default = "default_fov")]
@@ -119,7 +122,7 @@ fn default_fov() -> f32 {
 }
 
 /// A material: a hair model for fibers, or a diffuse surface for meshes and spheres.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum MaterialDesc {
     /// A hair scattering model, for hair objects.
@@ -127,12 +130,13 @@ pub enum MaterialDesc {
     /// A Lambertian surface, for meshes and spheres.
     Diffuse {
         /// Reflectance per channel, in [0, 1].
+        #[schemars(with = "[f32; 3]")]
         albedo: Vec3,
     },
 }
 
 /// A light source.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum LightDesc {
     /// Equirectangular HDR environment (Radiance .hdr or OpenEXR).
@@ -158,14 +162,17 @@ pub enum LightDesc {
     /// Uniform radiance from all directions.
     Constant {
         /// Radiance per channel, ≥ 0.
+        #[schemars(with = "[f32; 3]")]
         radiance: Vec3,
     },
     /// A distant light (sun) shining along `direction`, delivering `irradiance` perpendicular to
     /// it, from a disc of angular radius `angular_radius` degrees (0: a delta light).
     Distant {
         /// Direction the light travels (from the sun into the scene); any non-zero length.
+        #[schemars(with = "[f32; 3]")]
         direction: Vec3,
         /// Irradiance per channel on a surface facing the light, ≥ 0.
+        #[schemars(with = "[f32; 3]")]
         irradiance: Vec3,
         /// Angular radius of the sun's disc in degrees, in [0, 90) (default 0: a delta light).
         #[serde(default)]
@@ -174,8 +181,10 @@ pub enum LightDesc {
     /// A point light of the given intensity (W/sr).
     Point {
         /// Position of the light, in world space.
+        #[schemars(with = "[f32; 3]")]
         position: Vec3,
         /// Radiant intensity per channel, in W/sr, ≥ 0.
+        #[schemars(with = "[f32; 3]")]
         intensity: Vec3,
     },
 }

@@ -8,7 +8,7 @@ use std::fmt;
 use std::str::FromStr;
 
 /// Film description: resolution, samples, seed and an optional crop window.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FilmSettings {
     /// Film width in pixels, 1 to 65 536.

@@ -99,11 +99,13 @@ impl Frame {
 }
 
 /// Axis-aligned bounding box.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Aabb {
     /// Lower corner (componentwise minimum).
+    #[schemars(with = "[f32; 3]")]
     pub min: Vec3,
     /// Upper corner (componentwise maximum).
+    #[schemars(with = "[f32; 3]")]
     pub max: Vec3,
 }
 

@@ -96,8 +96,9 @@ const LN_NEGLIGIBLE: f32 = -80.0;
 pub const BETA_MIN: f32 = 1e-3;
 
 /// Parameters of [`Chiang`]; the defaults are pbrt-v4's (module docs).
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
+#[schemars(rename = "ChiangParams")]
 pub struct Params {
     /// Longitudinal roughness β_m, in [10⁻³, 1] (default 0.3).
     pub beta_m: f32,

@@ -79,8 +79,9 @@ const I0_SWITCH: f64 = 3.75;
 const CELL: f32 = std::f32::consts::TAU / N_PHI as f32;
 
 /// Parameters of [`DEon`] (module docs).
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
+#[schemars(rename = "DEonParams")]
 pub struct Params {
     /// r_m in [0, 1]: longitudinal lobe width β_R = r_m·π/2 (default 0.1).
     pub longitudinal_roughness: f32,

@@ -105,7 +105,7 @@ pub const A_F_MAX: f32 = 0.99;
 const MIN_VARIANCE: f32 = 1e-6;
 
 /// Resolution of the tables and of the quadrature that fills them.
-#[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct DualScatteringSettings {
     /// Table nodes over θ ∈ [−π/2, π/2] (cell centres).
@@ -124,7 +124,7 @@ pub struct DualScatteringSettings {
 }
 
 /// Where the multiple-scattering quantities of F come from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, schemars::JsonSchema)]
 pub enum MultipleScattering {
     /// Zinke et al.'s closed forms: `T_f = d_f ā_f^n`, Ā_b, Δ_b, σ_b (eqs. 14–17).
     Paper,
@@ -216,7 +216,7 @@ const DEFAULT_BUILD_SECONDS: f64 = 1.3;
 
 /// The density factors d_f (forward) and d_b (backward), in [0, 1]: the paper's free
 /// parameters, or scales of the measured terms (see [`DensityFactors::for_model`]).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct DensityFactors {
     /// Forward density factor d_f, in [0, 1]: scales the forward-scattered light T_f.

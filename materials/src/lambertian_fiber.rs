@@ -19,8 +19,9 @@ use tress_core::{Bcsdf, BcsdfSample};
 const INV_PI2: f32 = 1.0 / (PI * PI);
 
 /// Parameters of [`LambertianFiber`].
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
+#[schemars(rename = "LambertianFiberParams")]
 pub struct Params {
     /// Fraction of energy scattered per RGB channel, each in [0, 1] (default 0.8).
     pub albedo: (f32, f32, f32),

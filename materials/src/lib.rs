@@ -105,7 +105,7 @@ pub struct TestInstance<P> {
 macro_rules! hair_models {
     ($($variant:ident => $module:ident :: $ty:ident),* $(,)?) => {
         /// A hair scattering model and its parameters, as written in scene files.
-        #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+        #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
         pub enum HairModel {
             $(
                 #[doc = concat!(

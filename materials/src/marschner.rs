@@ -88,8 +88,9 @@ const MIN_ETA: f64 = 1.2;
 const COLOR_BETA_N: f32 = 0.3;
 
 /// Parameters of [`Marschner`] (module docs).
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
+#[schemars(rename = "MarschnerParams")]
 pub struct Params {
     /// α_R in degrees.
     pub alpha_r: f32,

@@ -16,7 +16,7 @@ const EUMELANIN_SIGMA_A: [f32; 3] = [0.419, 0.697, 1.37];
 const PHEOMELANIN_SIGMA_A: [f32; 3] = [0.187, 0.4, 1.05];
 
 /// How a fiber's absorption is specified.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum Pigment {
     /// Absorption coefficient per unit radius, RGB.

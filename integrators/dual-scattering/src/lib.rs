@@ -39,7 +39,7 @@ use tress_materials::dual_scattering::{
 };
 
 /// Settings shared by both dual-scattering integrators.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct DualSettings {
     /// Forward density factor d_f; `None`: the default of the tables' multiple-scattering model
