@@ -35,8 +35,7 @@ mod render_file;
 #[doc(hidden)]
 pub mod study;
 
-use std::path::PathBuf;
-pub use study::StudyArgs;
+pub use study::{StudyArgs, StudyOutputs};
 
 /// RON options for everything tress parses: newtype variants may omit their inner parentheses,
 /// so `Chiang(beta_m: 0.3)` and `Path(max_depth: 8)` read naturally.
@@ -66,58 +65,10 @@ pub fn atomic_write(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> 
     Ok(())
 }
 
-/// What a study wrote, and how much of it this run rendered.
-#[derive(Clone, Debug)]
-pub struct StudyOutputs {
-    /// The output folder.
-    pub folder: PathBuf,
-    /// `report.md`: the summary over scenes, then per-scene tables and figures.
-    pub report: PathBuf,
-    /// `results.csv`: one row per render, with its errors and costs.
-    pub results_csv: PathBuf,
-    /// `summary.csv`: one row per scene, integrator, spp and reference, over the repetitions.
-    pub summary_csv: PathBuf,
-    /// Renders done by this run.
-    pub rendered: u64,
-    /// Finished renders of an earlier run that were read back instead.
-    pub reused: u64,
-}
-
 /// Runs a comparative study exactly as `tress study` does (`args` are its command-line
 /// options) and says where it wrote its results.
 pub fn run_study(args: StudyArgs) -> anyhow::Result<StudyOutputs> {
-    use anyhow::Context;
-    // The study reports its outputs as the fields of the command's JSON summary. Making the
-    // summary line takes the fields recorded so far: once to drop any an earlier, failed run
-    // left, once to read this run's.
-    let take_fields = || {
-        let line = logging::summary_line("study", logging::Outcome::Ok);
-        serde_json::from_str::<serde_json::Map<String, serde_json::Value>>(&line)
-            .context("reading the study's summary")
-    };
-    // One study at a time: the fields are the process's.
-    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    take_fields()?;
-    study::run(args)?;
-    let fields = take_fields()?;
-    let path = |key: &str| {
-        fields
-            .get(key)
-            .and_then(|v| v.as_str())
-            .map(PathBuf::from)
-            .with_context(|| format!("the study did not report its {key}"))
-    };
-    let count = |key: &str| fields.get(key).and_then(|v| v.as_u64()).unwrap_or(0);
-    let folder = path("output")?;
-    Ok(StudyOutputs {
-        report: path("report")?,
-        results_csv: path("results_csv")?,
-        summary_csv: folder.join("summary.csv"),
-        folder,
-        rendered: count("rendered"),
-        reused: count("reused"),
-    })
+    study::run(args)
 }
 
 #[cfg(test)]

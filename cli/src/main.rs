@@ -108,7 +108,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bcsdf(cmd) => bcsdf_cmd::run(cmd),
         Command::Study(mut args) => {
             args.quiet |= quiet;
-            study::run(args)
+            study::run(args).map(|_| ())
         }
         Command::Diff(args) => diff::run(args),
         Command::Bench(args) => bench::run(args),

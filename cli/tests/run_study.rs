@@ -1,6 +1,4 @@
-//! `tress_cli::run_study`, the library's way to run a study (the Python bindings use it). A test
-//! binary of its own: the study's outputs pass through the process-wide fields of the JSON
-//! summary, which unit tests of `logging` record and take concurrently.
+//! `tress_cli::run_study`, the library's way to run a study (the Python bindings use it).
 
 #[test]
 fn run_study_says_where_the_study_wrote_and_what_it_rendered() {

@@ -205,7 +205,24 @@ pub fn load(path: &Path) -> Result<Study> {
         })
 }
 
-pub fn run(args: StudyArgs) -> Result<()> {
+/// What a study wrote, and how much of it this run rendered.
+#[derive(Clone, Debug)]
+pub struct StudyOutputs {
+    /// The output folder.
+    pub folder: PathBuf,
+    /// `report.md`: the summary over scenes, then per-scene tables and figures.
+    pub report: PathBuf,
+    /// `results.csv`: one row per render, with its errors and costs.
+    pub results_csv: PathBuf,
+    /// `summary.csv`: one row per scene, integrator, spp and reference, over the repetitions.
+    pub summary_csv: PathBuf,
+    /// Renders done by this run.
+    pub rendered: u64,
+    /// Finished renders of an earlier run that were read back instead.
+    pub reused: u64,
+}
+
+pub fn run(args: StudyArgs) -> Result<StudyOutputs> {
     let study = load(&args.study)?;
     let plan = Plan::new(study, &args)?;
     let verbose = !args.quiet;
@@ -264,7 +281,14 @@ pub fn run(args: StudyArgs) -> Result<()> {
             plan.out.join("sheets").display()
         );
     }
-    Ok(())
+    Ok(StudyOutputs {
+        folder: plan.out.clone(),
+        report,
+        results_csv: csv,
+        summary_csv: plan.out.join("summary.csv"),
+        rendered: res.rendered as u64,
+        reused: res.reused as u64,
+    })
 }
 
 #[cfg(test)]
