@@ -77,6 +77,18 @@ pub struct HairGeometry {
 }
 
 impl HairGeometry {
+    /// No strands yet, and no colours or transparency: what readers fill strand by strand.
+    pub fn empty(name: impl Into<String>) -> Self {
+        HairGeometry {
+            name: name.into(),
+            points: Vec::new(),
+            radii: Vec::new(),
+            strand_offsets: vec![0],
+            colors: None,
+            transparency: None,
+        }
+    }
+
     /// Number of strands.
     pub fn strand_count(&self) -> usize {
         self.strand_offsets.len().saturating_sub(1)

@@ -79,14 +79,7 @@ impl PbrtFile {
             object_depth: 0,
             skipped_in_objects: 0,
             other_shapes: 0,
-            hair: HairGeometry {
-                name: self.path.display().to_string(),
-                points: Vec::new(),
-                radii: Vec::new(),
-                strand_offsets: vec![0],
-                colors: None,
-                transparency: None,
-            },
+            hair: HairGeometry::empty(self.path.display().to_string()),
             strand_open: false,
         };
         reader.read_file(&self.path, 0)?;

@@ -530,14 +530,7 @@ fn parse(bytes: &[u8], path: &Path, options: &PlyFile) -> Result<HairGeometry> {
         }
     }
 
-    let mut hair = HairGeometry {
-        name: path.display().to_string(),
-        points: Vec::new(),
-        radii: Vec::new(),
-        strand_offsets: vec![0],
-        colors: None,
-        transparency: None,
-    };
+    let mut hair = HairGeometry::empty(path.display().to_string());
     let vertex_radius = vertices.iter().any(|v| v.radius.get().is_some());
     let strand_radius = polylines.iter().any(|(_, r)| r.is_some());
     if options.radius.is_none() && !vertex_radius && !strand_radius {

@@ -8,14 +8,7 @@ use tress_core::sampling::sample_uniform_sphere;
 
 /// Hair made of `strands`, every point of radius `radius`.
 pub(crate) fn hair(strands: &[Vec<Vec3>], radius: f32) -> HairGeometry {
-    let mut g = HairGeometry {
-        name: "test hair".into(),
-        points: Vec::new(),
-        radii: Vec::new(),
-        strand_offsets: vec![0],
-        colors: None,
-        transparency: None,
-    };
+    let mut g = HairGeometry::empty("test hair");
     for s in strands {
         g.points.extend_from_slice(s);
         g.strand_offsets.push(g.points.len() as u32);

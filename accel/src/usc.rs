@@ -64,14 +64,7 @@ fn parse(bytes: &[u8], path: &Path, radius: f32) -> Result<HairGeometry> {
             bytes.len()
         )));
     }
-    let mut hair = HairGeometry {
-        name: path.display().to_string(),
-        points: Vec::new(),
-        radii: Vec::new(),
-        strand_offsets: vec![0],
-        colors: None,
-        transparency: None,
-    };
+    let mut hair = HairGeometry::empty(path.display().to_string());
     let mut at = 4usize;
     for s in 0..strands {
         if at + 4 > bytes.len() {

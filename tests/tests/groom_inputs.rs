@@ -309,14 +309,7 @@ fn bad_pbrt_files_name_the_file_and_place() {
 
 /// Sixteen guides of a small wavy patch.
 fn guides() -> HairGeometry {
-    let mut g = HairGeometry {
-        name: "guides".into(),
-        points: Vec::new(),
-        radii: Vec::new(),
-        strand_offsets: vec![0],
-        colors: None,
-        transparency: None,
-    };
+    let mut g = HairGeometry::empty("guides");
     for s in 0..16 {
         let root = Vec3::new((s % 4) as f32 * 0.3, 0.0, (s / 4) as f32 * 0.3);
         for i in 0..12 {
