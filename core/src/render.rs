@@ -37,6 +37,7 @@
 //! resume and tile bit for bit too.
 
 use crate::accel::{Hit, HitKind};
+use crate::camera::Camera;
 use crate::film::{Aov, FilmSettings, Image, Outputs};
 use crate::integrator::Integrator;
 use crate::math::{Ray, Rgb, Vec3};
@@ -724,6 +725,29 @@ pub fn render_samples(
     )
 }
 
+/// The camera ray of sample `sample_index` of pixel (x, y), and the sampler the integrator
+/// continues it with: the pixel position from `rng::pixel_position`, the lens sample as the
+/// sampler's first draw.
+pub fn camera_sample(
+    camera: &Camera,
+    film: &FilmSettings,
+    x: u32,
+    y: u32,
+    sample_index: u64,
+) -> (Ray, Sampler) {
+    let mut sampler = Sampler::for_pixel_sample(x, y, sample_index, film.seed);
+    let jitter = pixel_position(x, y, sample_index, film.seed);
+    let lens = sampler.next_2d();
+    let ray = camera.generate_ray(
+        x as f32 + jitter.x,
+        y as f32 + jitter.y,
+        film.width,
+        film.height,
+        lens,
+    );
+    (ray, sampler)
+}
+
 /// Renders the sample indices `samples` of every pixel of the film window (`film.spp` is not
 /// used), recording `outputs` besides the radiance, and returns their exact block sums.
 /// Returns `None` as soon as `cancel` is set: workers check it before every sample.
@@ -845,16 +869,7 @@ impl TileJob<'_> {
                     if self.cancel.load(Ordering::Relaxed) {
                         return None;
                     }
-                    let mut sampler = Sampler::for_pixel_sample(x, y, s, film.seed);
-                    let jitter = pixel_position(x, y, s, film.seed);
-                    let lens = sampler.next_2d();
-                    let ray = scene.camera.generate_ray(
-                        x as f32 + jitter.x,
-                        y as f32 + jitter.y,
-                        film.width,
-                        film.height,
-                        lens,
-                    );
+                    let (ray, mut sampler) = camera_sample(&scene.camera, film, x, y, s);
                     let mut record = SampleRecord::default();
                     if closest_hit {
                         if let Some(hit) = scene.intersect(&ray) {
@@ -1258,16 +1273,7 @@ mod tests {
                 let (mut tangent, mut albedo) = ([0.0f64; 3], [0.0f64; 3]);
                 let (mut sum, mut squares) = ([0.0f64; 3], [0.0f64; 3]);
                 for s in 0..13 {
-                    let mut sampler = Sampler::for_pixel_sample(x, y, s, f.seed);
-                    let jitter = pixel_position(x, y, s, f.seed);
-                    let lens = sampler.next_2d();
-                    let ray = scene.camera.generate_ray(
-                        x as f32 + jitter.x,
-                        y as f32 + jitter.y,
-                        37,
-                        21,
-                        lens,
-                    );
+                    let (ray, mut sampler) = camera_sample(&scene.camera, &f, x, y, s);
                     let l = Noise.li(&ray, &scene, &mut sampler);
                     if l.is_finite() {
                         for c in 0..3 {

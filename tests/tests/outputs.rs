@@ -8,8 +8,7 @@ use std::time::{Duration, Instant};
 use tress_cli::integrators::IntegratorDesc;
 use tress_core::film::{Aov, FilmSettings, Outputs};
 use tress_core::light::{EnvironmentMap, Light};
-use tress_core::render::{render, render_outputs, SampleSums};
-use tress_core::rng::{pixel_position, Sampler};
+use tress_core::render::{camera_sample, render, render_outputs, SampleSums};
 use tress_core::Scene;
 use tress_materials::HairModel;
 use tress_tests::{film, hair_ball_scene, shared_data};
@@ -184,19 +183,7 @@ fn measure_the_cost_of_the_alpha_query() {
         for y in (0..height).step_by(2) {
             for x in (0..width).step_by(2) {
                 let rays: Vec<_> = (0..4u64)
-                    .map(|s| {
-                        let mut sampler = Sampler::for_pixel_sample(x, y, s, desc.film.seed);
-                        let jitter = pixel_position(x, y, s, desc.film.seed);
-                        let lens = sampler.next_2d();
-                        let ray = scene.camera.generate_ray(
-                            x as f32 + jitter.x,
-                            y as f32 + jitter.y,
-                            width,
-                            height,
-                            lens,
-                        );
-                        (ray, sampler)
-                    })
+                    .map(|s| camera_sample(&scene.camera, &desc.film, x, y, s))
                     .collect();
                 let t0 = Instant::now();
                 for (ray, sampler) in &rays {
