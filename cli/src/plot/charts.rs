@@ -377,6 +377,24 @@ where
     Ok(())
 }
 
+/// `v` in axis space: log10 on a log axis.
+fn to_axis(v: f64, log: bool) -> f64 {
+    if log {
+        v.log10()
+    } else {
+        v
+    }
+}
+
+/// Back from axis space.
+fn from_axis(v: f64, log: bool) -> f64 {
+    if log {
+        10f64.powf(v)
+    } else {
+        v
+    }
+}
+
 /// The outline of a band (upper edge forward, lower edge back), clamped to the y range in axis
 /// space (log10 on log axes), where its edges are straight like the drawn lines; points off a
 /// log x axis are dropped and low ends at or below zero on a log y axis go to the bottom.
@@ -387,25 +405,23 @@ pub(super) fn band_polygon(
     log_x: bool,
     log_y: bool,
 ) -> Vec<(f64, f64)> {
-    let fwd = |v: f64, log: bool| if log { v.log10() } else { v };
-    let inv = |v: f64, log: bool| if log { 10f64.powf(v) } else { v };
-    let (y0, y1) = (fwd(ys.0, log_y), fwd(ys.1, log_y));
+    let (y0, y1) = (to_axis(ys.0, log_y), to_axis(ys.1, log_y));
     let mut lower = Vec::new();
     let mut upper = Vec::new();
     for (p, &(lo, hi)) in points.iter().zip(band) {
         if !p.0.is_finite() || (log_x && p.0 <= 0.0) || !(lo.is_finite() && hi.is_finite()) {
             continue;
         }
-        let x = fwd(p.0, log_x);
+        let x = to_axis(p.0, log_x);
         let lo = if log_y && lo <= 0.0 {
             y0
         } else {
-            fwd(lo, log_y)
+            to_axis(lo, log_y)
         };
         let hi = if log_y && hi <= 0.0 {
             y0
         } else {
-            fwd(hi, log_y)
+            to_axis(hi, log_y)
         };
         lower.push((x, lo.min(hi)));
         upper.push((x, hi.max(lo)));
@@ -416,7 +432,7 @@ pub(super) fn band_polygon(
     outline.extend(back);
     outline
         .into_iter()
-        .map(|(x, y)| (inv(x, log_x), inv(y, log_y)))
+        .map(|(x, y)| (from_axis(x, log_x), from_axis(y, log_y)))
         .collect()
 }
 
@@ -584,14 +600,12 @@ pub(super) fn clip_polyline(
     log_x: bool,
     log_y: bool,
 ) -> Vec<(f64, f64)> {
-    let fwd = |v: f64, log: bool| if log { v.log10() } else { v };
-    let inv = |v: f64, log: bool| if log { 10f64.powf(v) } else { v };
-    let (x0, x1) = (fwd(xs.0, log_x), fwd(xs.1, log_x));
-    let (y0, y1) = (fwd(ys.0, log_y), fwd(ys.1, log_y));
+    let (x0, x1) = (to_axis(xs.0, log_x), to_axis(xs.1, log_x));
+    let (y0, y1) = (to_axis(ys.0, log_y), to_axis(ys.1, log_y));
     let mut out: Vec<(f64, f64)> = Vec::new();
     for w in pts.windows(2) {
-        let (ax, ay) = (fwd(w[0].0, log_x), fwd(w[0].1, log_y));
-        let (bx, by) = (fwd(w[1].0, log_x), fwd(w[1].1, log_y));
+        let (ax, ay) = (to_axis(w[0].0, log_x), to_axis(w[0].1, log_y));
+        let (bx, by) = (to_axis(w[1].0, log_x), to_axis(w[1].1, log_y));
         // Liang–Barsky: the parameter interval [t0, t1] of the segment inside the box.
         let (dx, dy) = (bx - ax, by - ay);
         let (mut t0, mut t1) = (0.0f64, 1.0f64);
@@ -616,7 +630,7 @@ pub(super) fn clip_polyline(
             }
             continue;
         }
-        let at = |t: f64| (inv(ax + t * dx, log_x), inv(ay + t * dy, log_y));
+        let at = |t: f64| (from_axis(ax + t * dx, log_x), from_axis(ay + t * dy, log_y));
         if out.is_empty() {
             out.push(at(t0));
         }

@@ -69,6 +69,29 @@ pub struct Pixels {
     pub channels: Vec<(String, Vec<u32>)>,
 }
 
+/// The channel names, in the EXR's (alphabetical) order.
+pub fn channel_names(p: &Pixels) -> Vec<&str> {
+    p.channels.iter().map(|c| c.0.as_str()).collect()
+}
+
+/// The channels of a render with `--alpha --aov depth,tangent,albedo,variance`, in order.
+pub const EVERY_OUTPUT_CHANNEL: [&str; 14] = [
+    "A",
+    "B",
+    "G",
+    "R",
+    "albedo.B",
+    "albedo.G",
+    "albedo.R",
+    "depth.Z",
+    "tangent.X",
+    "tangent.Y",
+    "tangent.Z",
+    "variance.B",
+    "variance.G",
+    "variance.R",
+];
+
 pub fn pixels(path: &Path) -> Pixels {
     use exr::prelude::*;
     let image = read_first_flat_layer_from_file(path).unwrap();
