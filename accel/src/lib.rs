@@ -106,7 +106,7 @@ pub use pbrt::PbrtFile;
 pub use ply::PlyFile;
 pub use procedural::{HairStyle, ProceduralHair};
 pub use scene::raw;
-pub use scene::{AccelInfo, EmbreeAccel, ObjectInfo, ObjectKind, SceneBuilder};
+pub use scene::{AccelInfo, EmbreeAccel, HairSegment, ObjectInfo, ObjectKind, SceneBuilder};
 pub use source::{HairOptions, HairSource};
 pub use tfx::TfxFile;
 pub use usc::UscFile;

@@ -30,16 +30,22 @@
 //! property `radius`, or `width`, `thickness` or `diameter` (full widths, halved), gives
 //! per-point radii; failing that, the same names on the per-strand element give per-strand
 //! radii; failing that, the radius is 0.00004 (80 µm hair in metres, as for USC-HairSalon).
-//! Colours are not read (tress shades hair by its material).
+//!
+//! **Colour.** Vertex properties `red`, `green`, `blue` (or `diffuse_red`, … or `r`, `g`, `b`)
+//! give per-point colours (what a hair object's `variation` can take as pigments): integer
+//! types are 8-bit-style display colours, scaled by the type's largest value (255 for
+//! `uchar`) and decoded from sRGB to linear, as exporters write them; `float` and `double`
+//! are linear values, taken as they are. Colours need all three channels: a vertex element
+//! with only some is read without colours (with a warning).
 
 use crate::error::{format_error, Result};
-use crate::geometry::HairGeometry;
+use crate::geometry::{HairAttribute, HairGeometry};
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{ElementDef, Encoding, Header, PropertyAccess, PropertyAccessResult};
 use serde::{Deserialize, Serialize};
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
-use tress_core::math::Vec3;
+use tress_core::math::{Rgb, Vec3};
 
 /// Fiber radius used when neither the option nor the file gives one: 80 µm hair in metres.
 const FALLBACK_RADIUS: f32 = 0.00004;
@@ -131,6 +137,12 @@ const VERTEX_COUNT_NAMES: [&str; 6] = [
 ];
 const SEGMENT_COUNT_NAMES: [&str; 4] = ["nsegs", "segments", "num_segments", "segment_count"];
 const INDEX_LIST_NAMES: [&str; 3] = ["vertex_indices", "vertex_index", "indices"];
+/// Per channel (red, green, blue): the names of a vertex colour property.
+const COLOR_NAMES: [[&str; 3]; 3] = [
+    ["red", "diffuse_red", "r"],
+    ["green", "diffuse_green", "g"],
+    ["blue", "diffuse_blue", "b"],
+];
 const STRAND_ELEMENT_NAMES: [&str; 6] = ["strand", "strands", "curve", "curves", "hair", "hairs"];
 
 /// The rank of `name` among the radius names (radius first, then full widths), and whether it
@@ -174,26 +186,55 @@ impl Ranked {
     }
 }
 
-/// Implements every numeric scalar setter of [`PropertyAccess`] through `set_number`.
-macro_rules! numeric_setters {
-    ($($method:ident: $t:ty),*) => {
-        $(fn $method(&mut self, name: &str, value: $t) -> PropertyAccessResult {
-            self.set_number(name, value as f64)
+/// The value of a PLY scalar type that stands for full intensity in a colour channel: the
+/// type's largest value for integers, 1 for floating-point types (see the module docs).
+trait FullIntensity {
+    const FULL: f64;
+}
+
+macro_rules! full_intensity {
+    ($($t:ty => $full:expr),*) => {
+        $(impl FullIntensity for $t {
+            const FULL: f64 = $full;
         })*
     };
 }
 
-/// One `vertex` record: position, radius (already halved if the file gave a width) and strand
-/// id, where present.
+full_intensity!(i8 => i8::MAX as f64, u8 => u8::MAX as f64, i16 => i16::MAX as f64,
+                u16 => u16::MAX as f64, i32 => i32::MAX as f64, u32 => u32::MAX as f64,
+                f32 => 1.0, f64 => 1.0);
+
+/// Implements every numeric scalar setter of [`PropertyAccess`] through `set_number`, which
+/// also gets the type's [`FullIntensity`].
+macro_rules! numeric_setters {
+    ($($method:ident: $t:ty),*) => {
+        $(fn $method(&mut self, name: &str, value: $t) -> PropertyAccessResult {
+            self.set_number(name, value as f64, <$t as FullIntensity>::FULL)
+        })*
+    };
+}
+
+/// The linear value of an sRGB-encoded channel in [0, 1] (IEC 61966-2-1).
+fn srgb_to_linear(c: f64) -> f64 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// One `vertex` record: position, radius (already halved if the file gave a width), strand
+/// id and linear colour, where present.
 #[derive(Clone, Copy, Debug)]
 struct VertexRecord {
     p: [f32; 3],
     radius: Ranked,
     strand: Ranked,
+    color: [Ranked; 3],
 }
 
 impl VertexRecord {
-    fn set_number(&mut self, name: &str, v: f64) -> PropertyAccessResult {
+    fn set_number(&mut self, name: &str, v: f64, full: f64) -> PropertyAccessResult {
         match name {
             "x" => self.p[0] = v as f32,
             "y" => self.p[1] = v as f32,
@@ -204,12 +245,27 @@ impl VertexRecord {
                         .offer(rank, if full_width { 0.5 * v } else { v });
                 } else if let Some(rank) = rank_in(&STRAND_ID_NAMES, name) {
                     self.strand.offer(rank, v);
+                } else if let Some((channel, rank)) =
+                    (0..3).find_map(|c| rank_in(&COLOR_NAMES[c], name).map(|r| (c, r)))
+                {
+                    let linear = if full == 1.0 {
+                        v
+                    } else {
+                        srgb_to_linear(v / full)
+                    };
+                    self.color[channel].offer(rank, linear);
                 } else {
                     return PropertyAccessResult::Ignored;
                 }
             }
         }
         PropertyAccessResult::Set
+    }
+
+    /// The vertex's colour, if the file gives one (all three channels; see [`vertex_colors`]).
+    fn color(&self) -> Option<Rgb> {
+        let [r, g, b] = self.color.map(|c| c.get());
+        Some(Rgb::new(r? as f32, g? as f32, b? as f32))
     }
 }
 
@@ -219,6 +275,7 @@ impl PropertyAccess for VertexRecord {
             p: [0.0; 3],
             radius: Ranked::NONE,
             strand: Ranked::NONE,
+            color: [Ranked::NONE; 3],
         }
     }
     numeric_setters!(set_char: i8, set_uchar: u8, set_short: i16, set_ushort: u16,
@@ -237,7 +294,7 @@ struct StrandRecord {
 }
 
 impl StrandRecord {
-    fn set_number(&mut self, name: &str, v: f64) -> PropertyAccessResult {
+    fn set_number(&mut self, name: &str, v: f64, _full: f64) -> PropertyAccessResult {
         if let Some(rank) = rank_in(&VERTEX_COUNT_NAMES, name) {
             self.points.offer(rank, v);
         } else if let Some(rank) = rank_in(&SEGMENT_COUNT_NAMES, name) {
@@ -292,7 +349,7 @@ struct EdgeRecord {
 }
 
 impl EdgeRecord {
-    fn set_number(&mut self, name: &str, v: f64) -> PropertyAccessResult {
+    fn set_number(&mut self, name: &str, v: f64, _full: f64) -> PropertyAccessResult {
         match name {
             "vertex1" => self.ends[0] = v,
             "vertex2" => self.ends[1] = v,
@@ -334,6 +391,24 @@ enum Layout {
 
 fn has_property(element: &ElementDef, names: &[&str]) -> bool {
     names.iter().any(|n| element.properties.contains_key(*n))
+}
+
+/// Whether the `vertex` element has colours: all three channels (some alone are ignored, with
+/// a warning naming the file).
+fn vertex_colors(vertex: &ElementDef, path: &Path) -> bool {
+    let present = COLOR_NAMES.map(|names| has_property(vertex, &names));
+    if present.iter().any(|&p| p) && !present.iter().all(|&p| p) {
+        let missing: Vec<&str> = (0..3)
+            .filter(|&c| !present[c])
+            .map(|c| COLOR_NAMES[c][0])
+            .collect();
+        tracing::warn!(
+            "{}: vertex colours ignored: the `vertex` element has no {}",
+            path.display(),
+            missing.join(" or ")
+        );
+    }
+    present.iter().all(|&p| p)
 }
 
 fn choose_layout(header: &Header, options: &PlyFile) -> std::result::Result<Layout, String> {
@@ -409,6 +484,10 @@ fn parse(bytes: &[u8], path: &Path, options: &PlyFile) -> Result<HairGeometry> {
         .read_header(&mut reader)
         .map_err(|e| fail(crate_error("the header", &e.to_string(), Encoding::Ascii)))?;
     let layout = choose_layout(&header, options).map_err(&fail)?;
+    let has_colors = header
+        .elements
+        .get("vertex")
+        .is_some_and(|v| vertex_colors(v, path));
     let encoding = header.encoding;
 
     let mut vertices: Vec<VertexRecord> = Vec::new();
@@ -531,6 +610,7 @@ fn parse(bytes: &[u8], path: &Path, options: &PlyFile) -> Result<HairGeometry> {
     }
 
     let mut hair = HairGeometry::empty(path.display().to_string());
+    let mut colors: Vec<Rgb> = Vec::new();
     let vertex_radius = vertices.iter().any(|v| v.radius.get().is_some());
     let strand_radius = polylines.iter().any(|(_, r)| r.is_some());
     if options.radius.is_none() && !vertex_radius && !strand_radius {
@@ -556,6 +636,9 @@ fn parse(bytes: &[u8], path: &Path, options: &PlyFile) -> Result<HairGeometry> {
                 }
             });
             hair.radii.push(r as f32);
+            // Every record has all the header's properties, so a colour file gives each
+            // vertex one.
+            colors.extend(v.color());
         }
         hair.strand_offsets.push(hair.points.len() as u32);
     }
@@ -564,6 +647,9 @@ fn parse(bytes: &[u8], path: &Path, options: &PlyFile) -> Result<HairGeometry> {
             "no strand has two points or more ({} vertices)",
             n
         )));
+    }
+    if has_colors {
+        hair.colors = Some(HairAttribute::PerPoint(colors));
     }
     hair.validate()?;
     Ok(hair)
@@ -764,6 +850,75 @@ mod tests {
             property float y\nproperty float z\nelement edge 3\nproperty int vertex1\n\
             property int vertex2\nend_header\n0 0 0\n0 1 0\n1 1 0\n0 1\n1 2\n2 0\n";
         assert!(read(ring).unwrap_err().to_string().contains("loop"));
+    }
+
+    #[test]
+    fn vertex_colours_are_read_per_point() {
+        // uchar channels: display colours, decoded from sRGB.
+        let text = b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\n\
+            property float y\nproperty float z\nproperty uchar red\nproperty uchar green\n\
+            property uchar blue\nproperty uchar alpha\nelement strand 2\n\
+            property int vertex_count\nend_header\n\
+            0 0 0 255 0 128 255\n0 1 0 255 0 128 255\n1 0 0 10 200 30 0\n1 1 0 11 201 31 0\n2\n2\n";
+        let g = read(text).unwrap();
+        let Some(HairAttribute::PerPoint(c)) = &g.colors else {
+            panic!("expected colours per point, got {:?}", g.colors)
+        };
+        assert_eq!(c.len(), 4);
+        // sRGB 128/255 is 0.2158605 linear; 10/255 is on the linear toe (÷ 12.92).
+        assert!(
+            (c[0] - Rgb::new(1.0, 0.0, 0.2158605)).abs().max_element() < 1e-6,
+            "{}",
+            c[0]
+        );
+        assert!((c[2].x - 10.0 / 255.0 / 12.92).abs() < 1e-7, "{}", c[2]);
+        assert!(c[3].y > c[2].y && c[3].y < 1.0);
+        // Float channels are linear and taken as they are; they follow the vertices when
+        // edges put them in another order than the file's.
+        let text = b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n\
+            property float y\nproperty float z\nproperty float r\nproperty float g\n\
+            property float b\nelement edge 2\nproperty int vertex1\nproperty int vertex2\n\
+            end_header\n0 0 0 0.1 0.2 0.3\n0 2 0 0.5 0.25 0.125\n0 1 0 0.7 0.8 0.9\n1 2\n2 0\n";
+        let g = read(text).unwrap();
+        assert_eq!(g.points[1], Vec3::Y);
+        assert_eq!(
+            g.colors,
+            Some(HairAttribute::PerPoint(vec![
+                Rgb::new(0.1, 0.2, 0.3),
+                Rgb::new(0.7, 0.8, 0.9),
+                Rgb::new(0.5, 0.25, 0.125)
+            ]))
+        );
+        // No colour properties: no colours.
+        let plain = b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\n\
+            property float y\nproperty float z\nproperty int strand_id\nend_header\n\
+            0 0 0 1\n0 1 0 1\n";
+        assert!(read(plain).unwrap().colors.is_none());
+        // Some channels but not all: no colours (and a warning).
+        let partial = b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\n\
+            property float y\nproperty float z\nproperty uchar red\nproperty int strand_id\n\
+            end_header\n0 0 0 1 1\n0 1 0 1 1\n";
+        let g = read(partial).unwrap();
+        assert!(g.colors.is_none() && g.strand_count() == 1);
+    }
+
+    #[test]
+    fn binary_vertex_colours() {
+        let mut bytes = b"ply\nformat binary_little_endian 1.0\nelement vertex 2\n\
+            property float x\nproperty float y\nproperty float z\nproperty uchar red\n\
+            property uchar green\nproperty uchar blue\nend_header\n"
+            .to_vec();
+        for (y, rgb) in [(0.0f32, [255u8, 255, 255]), (1.0, [0, 0, 255])] {
+            for v in [0.0f32, y, 0.0] {
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+            bytes.extend_from_slice(&rgb);
+        }
+        let g = read_with(&bytes, |o| o.points_per_strand = Some(2)).unwrap();
+        assert_eq!(
+            g.colors,
+            Some(HairAttribute::PerPoint(vec![Rgb::ONE, Rgb::Z]))
+        );
     }
 
     #[test]

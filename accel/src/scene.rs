@@ -16,11 +16,12 @@ use embree3::{
 use glam::Vec4;
 use std::borrow::Cow;
 use std::fmt;
+use std::ops::Range;
 use std::sync::atomic::{AtomicIsize, Ordering};
 use std::sync::Arc;
 use tress_core::accel::{Accel, BuildError, FiberDensity, Hit, HitKind, PrimId};
 use tress_core::bcsdf::FiberFrame;
-use tress_core::math::{Aabb, Ray, Vec3};
+use tress_core::math::{Aabb, Ray, Rgb, Vec3};
 
 const NO_ID: u32 = u32::MAX;
 
@@ -43,7 +44,7 @@ struct Exclude {
 #[derive(Debug)]
 pub(crate) struct CurveData {
     basis: CurveBasis,
-    material: u32,
+    materials: SegmentMaterials,
     /// Per primitive (segment): its `basis.order()` control points (position and radius),
     /// copied out of the strand's so that a hit finds them from the primitive id alone: one
     /// cache miss instead of two in a row through an index.
@@ -55,6 +56,31 @@ pub(crate) struct CurveData {
     capsules: Vec<Capsule>,
     /// Per strand slot: what hits and the filter need of a strand, in one record.
     strands: Vec<StrandRecord>,
+}
+
+/// Which material each primitive of a hair object has.
+#[derive(Debug)]
+enum SegmentMaterials {
+    /// One material for the whole object.
+    Uniform(u32),
+    /// One per primitive (per-strand variation): a separate array, so hair without variation
+    /// pays nothing for it.
+    PerSegment(Vec<u32>),
+}
+
+/// A curve segment of a hair object, as [`SceneBuilder::add_hair_varied`] shows it to the
+/// caller choosing the segment's material.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HairSegment {
+    /// The strand's index in the hair object, as hits report it (`HitKind::Fiber::strand`):
+    /// its index in the file, children following the file's strands, also when strands are
+    /// subsampled.
+    pub strand: u32,
+    /// Where the middle of the segment lies along the strand: 0 at the root, 1 at the tip.
+    pub v: f32,
+    /// The colour the file stores there (the mean of the segment's two end points' colours
+    /// when it stores them per point), or `None` when it stores none.
+    pub color: Option<Rgb>,
 }
 
 /// A primitive's strand slot and the index of the segment in the strand's polyline (for `v`).
@@ -145,8 +171,21 @@ impl CurveData {
         }
     }
 
+    /// The material of primitive `prim`.
+    fn material(&self, prim: u32) -> u32 {
+        match &self.materials {
+            SegmentMaterials::Uniform(m) => *m,
+            SegmentMaterials::PerSegment(m) => m[prim as usize],
+        }
+    }
+
     fn memory_bytes(&self) -> usize {
-        self.seg_cps.len() * 16
+        let materials = match &self.materials {
+            SegmentMaterials::Uniform(_) => 0,
+            SegmentMaterials::PerSegment(m) => m.len() * 4,
+        };
+        materials
+            + self.seg_cps.len() * 16
             + self.segs.len() * std::mem::size_of::<SegmentRecord>()
             + self.capsules.len() * std::mem::size_of::<Capsule>()
             + self.strands.len() * std::mem::size_of::<StrandRecord>()
@@ -213,8 +252,9 @@ pub struct ObjectInfo {
     pub name: String,
     /// What the object is, with its size.
     pub kind: ObjectKind,
-    /// Index of its material in `Scene::materials`.
-    pub material: u32,
+    /// Indices of its materials in `Scene::materials`: one, or for hair with per-strand
+    /// variation ([`SceneBuilder::add_hair_varied`]) the span of those its segments use.
+    pub materials: Range<u32>,
     /// World bounds, padded by the fiber or sphere radius.
     pub bounds: Aabb,
 }
@@ -265,7 +305,12 @@ impl fmt::Display for AccelInfo {
             self.memory_bytes as f64 / (1024.0 * 1024.0)
         )?;
         for o in &self.objects {
-            write!(f, "\n  {} (material {}): ", o.name, o.material)?;
+            let (start, end) = (o.materials.start, o.materials.end);
+            if end - start == 1 {
+                write!(f, "\n  {} (material {start}): ", o.name)?;
+            } else {
+                write!(f, "\n  {} (materials {start}–{}): ", o.name, end - 1)?;
+            }
             match &o.kind {
                 ObjectKind::Hair {
                     strands,
@@ -292,6 +337,16 @@ impl fmt::Display for AccelInfo {
 
 fn embree_error(object: &str, what: &str, e: embree3::Error) -> Error {
     Error::Embree(format!("{object}: {what}: {e}"))
+}
+
+/// The caller's choice of a material per segment ([`SceneBuilder::add_hair_varied`]).
+type ChooseMaterials<'a> =
+    Box<dyn FnOnce(&[HairSegment]) -> std::result::Result<Vec<u32>, String> + 'a>;
+
+/// The material of a hair object: one, or one per segment chosen by the caller.
+enum Materials<'a> {
+    One(u32),
+    PerSegment(ChooseMaterials<'a>),
 }
 
 /// Builds an [`EmbreeAccel`]: add objects, then [`SceneBuilder::build`].
@@ -372,10 +427,32 @@ impl SceneBuilder {
     /// the polylines to the chosen basis and attaches flat or round curves with material
     /// `material`.
     pub fn add_hair(
-        mut self,
+        self,
         hair: &HairGeometry,
         options: &HairOptions,
         material: u32,
+    ) -> Result<Self> {
+        self.add_curves(hair, options, Materials::One(material))
+    }
+
+    /// [`SceneBuilder::add_hair`] with a material per curve segment: once the strands are
+    /// grown, subsampled and cut into segments, `materials` is shown every segment (in
+    /// primitive order) and returns each one's material index, or a reason to give up, which
+    /// becomes an [`Error::InvalidGeometry`] naming the object.
+    pub fn add_hair_varied(
+        self,
+        hair: &HairGeometry,
+        options: &HairOptions,
+        materials: impl FnOnce(&[HairSegment]) -> std::result::Result<Vec<u32>, String>,
+    ) -> Result<Self> {
+        self.add_curves(hair, options, Materials::PerSegment(Box::new(materials)))
+    }
+
+    fn add_curves(
+        mut self,
+        hair: &HairGeometry,
+        options: &HairOptions,
+        materials: Materials,
     ) -> Result<Self> {
         hair.validate()?;
         options.validate(&hair.name)?;
@@ -396,7 +473,7 @@ impl SceneBuilder {
         let radius_scale = options.radius_scale * options.transform.scale;
         let mut data = CurveData {
             basis,
-            material,
+            materials: SegmentMaterials::Uniform(0),
             seg_cps: Vec::new(),
             segs: Vec::new(),
             capsules: Vec::new(),
@@ -407,8 +484,12 @@ impl SceneBuilder {
         let mut seg_first_cp: Vec<u32> = Vec::new();
         let mut points = 0;
         let mut bounds = Aabb::EMPTY;
+        // What the caller choosing per-segment materials sees, one per primitive.
+        let mut segments: Vec<HairSegment> = Vec::new();
+        let per_segment = matches!(materials, Materials::PerSegment(_));
         for (slot, &id) in ids.iter().enumerate() {
             let range = hair.strand(slot);
+            let first_point = range.start;
             let n = range.len();
             if n < 2 {
                 continue;
@@ -445,6 +526,17 @@ impl SceneBuilder {
                     index: j as u32,
                 });
                 data.capsules.push(cap);
+                if per_segment {
+                    let color = hair.colors.as_ref().map(|c| {
+                        let at = first_point + j;
+                        0.5 * (c.at(slot, at) + c.at(slot, at + 1))
+                    });
+                    segments.push(HairSegment {
+                        strand: id,
+                        v: (j as f32 + 0.5) / (n - 1) as f32,
+                        color,
+                    });
+                }
             }
             if seg_first_cp.len() == before {
                 cps.truncate(base);
@@ -464,6 +556,31 @@ impl SceneBuilder {
                 reason: "no strand has a segment of non-zero length".into(),
             });
         }
+        let material_span = match materials {
+            Materials::One(m) => {
+                data.materials = SegmentMaterials::Uniform(m);
+                m..m + 1
+            }
+            Materials::PerSegment(choose) => {
+                let fail = |reason: String| Error::InvalidGeometry {
+                    object: hair.name.clone(),
+                    reason,
+                };
+                let chosen = choose(&segments).map_err(fail)?;
+                if chosen.len() != segments.len() {
+                    return Err(fail(format!(
+                        "{} materials chosen for {} curve segments",
+                        chosen.len(),
+                        segments.len()
+                    )));
+                }
+                let lo = chosen.iter().copied().min().unwrap_or(0);
+                let hi = chosen.iter().copied().max().unwrap_or(0);
+                data.materials = SegmentMaterials::PerSegment(chosen);
+                lo..hi.saturating_add(1)
+            }
+        };
+        drop(segments);
         if cps.len() > u32::MAX as usize {
             return Err(Error::InvalidGeometry {
                 object: hair.name.clone(),
@@ -503,7 +620,7 @@ impl SceneBuilder {
                 basis,
                 curve: options.curve,
             },
-            material,
+            materials: material_span,
             bounds,
         };
         self.attach(geometry, GeomData::Hair(data));
@@ -562,7 +679,7 @@ impl SceneBuilder {
                 triangles: mesh.triangles.len(),
                 vertices: positions.len(),
             },
-            material,
+            materials: material..material + 1,
             bounds,
         };
         self.attach(geometry, GeomData::Mesh { material });
@@ -593,7 +710,7 @@ impl SceneBuilder {
         self.objects.push(ObjectInfo {
             name,
             kind: ObjectKind::Sphere { center, radius },
-            material,
+            materials: material..material + 1,
             bounds: Aabb {
                 min: center - Vec3::splat(radius),
                 max: center + Vec3::splat(radius),
@@ -874,7 +991,7 @@ impl Accel for EmbreeAccel {
             }
         };
         let (kind, material) = match &self.geoms[geom as usize] {
-            GeomData::Hair(c) => (c.fiber_hit(prim, rh.hit.u, ray, p), c.material),
+            GeomData::Hair(c) => (c.fiber_hit(prim, rh.hit.u, ray, p), c.material(prim)),
             GeomData::Mesh { material } => (surface(), *material),
             GeomData::Spheres { materials } => (surface(), materials[prim as usize]),
         };
@@ -934,3 +1051,7 @@ pub mod raw;
 #[cfg(test)]
 #[path = "scene_tests.rs"]
 mod tests;
+
+#[cfg(test)]
+#[path = "scene_variation_tests.rs"]
+mod variation_tests;

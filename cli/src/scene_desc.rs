@@ -402,8 +402,13 @@ pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
         .collect::<Result<Vec<_>>>()?;
 
     let t1 = Instant::now();
-    let (accel, geometry_summary) =
-        crate::geometry::build_accel(&desc.objects, scene_path, &material_index, &materials)?;
+    let (accel, geometry_summary) = crate::geometry::build_accel(
+        &desc.objects,
+        scene_path,
+        &desc.materials,
+        &material_index,
+        &mut materials,
+    )?;
     let geometry_time = t1.elapsed();
     let summary = format!(
         "{geometry_summary}\nmaterials: {} built in {:.1} ms; lights: {}; geometry built in {:.2} s",

@@ -85,7 +85,7 @@ const RAMP: f64 = 15.0 * PI / 180.0;
 /// Lowest effective TRT index accepted; the root solver relies on η' ≥ 1.2.
 const MIN_ETA: f64 = 1.2;
 /// β_n at which a `Pigment::Color` is converted (Chiang's fit needs one).
-const COLOR_BETA_N: f32 = 0.3;
+pub(crate) const COLOR_BETA_N: f32 = 0.3;
 
 /// Parameters of [`Marschner`] (module docs).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
