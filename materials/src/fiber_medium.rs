@@ -44,10 +44,13 @@
 //!
 //! # What it leaves out
 //! The hair around a shading point is a homogeneous layer whose fibers are parallel and face
-//! the light head-on: real grooms are neither. Measured against the path tracer (converged, mean
-//! over hair pixels, README "Dual scattering and hair colour"), this brings blond hair from
-//! 58–65 % of the path tracer's red to 83–100 %, and a white furnace ball returns 0.48–1.13 of
-//! the light (path: 1) over β = 0.01…0.9; `tress calibrate` fits d_f and d_b to a groom.
+//! the light head-on: real grooms are neither. And each point is treated as the top of its
+//! layer: light that the hair below returns and the fibers above reflect back down is missing,
+//! so a white furnace returns 0.95 at a fiber on the surface of a half-space but 0.83 for the
+//! fibers a camera sees a fiber or two deep (a slab), 0.62–0.92 on a ball of fibers over
+//! β = 0.001…0.9 (path: 1). Against the path tracer (converged, mean over hair pixels, README
+//! "Dual scattering and hair colour") light hair is 5–27 % dark; brown and dark hair within
+//! 1–8 %.
 //!
 //! Every θ node walks its own seeded stream, so the tables do not depend on the thread count.
 

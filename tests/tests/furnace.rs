@@ -54,9 +54,9 @@ fn absorbing_fibers_are_darker_than_the_furnace() {
 }
 
 /// Every registered integrator in the white furnace (non-absorbing Chiang fibers, β = 0.3):
-/// unbiased ones must return 1 within 1.5 %; approximations must not create more than 25 % nor
-/// lose more than 75 % (measured: path 0.996; dual-uniform 1.16 and dual-mis 1.19 with the
-/// coarse test tables, 1.13 with 32 θ nodes below).
+/// unbiased ones must return 1 within 1.5 %; approximations must not create energy nor lose more
+/// than 75 % (measured: path 0.996; dual-uniform 0.913 and dual-mis 0.926 with the coarse test
+/// tables).
 #[test]
 fn every_registered_integrator_in_a_white_furnace() {
     use tress_cli::integrators::IntegratorDesc;
@@ -78,7 +78,7 @@ fn every_registered_integrator_in_a_white_furnace() {
         if desc.unbiased() {
             assert!((mean - 1.0).abs() < 0.015, "{}: mean {mean}", desc.name());
         } else {
-            assert!(mean > 0.25 && mean < 1.25, "{}: mean {mean}", desc.name());
+            assert!(mean > 0.25 && mean < 1.0, "{}: mean {mean}", desc.name());
         }
     }
 }
@@ -92,18 +92,20 @@ fn spp() -> u32 {
 
 /// Dual scattering in the white furnace, over the roughness range, for both integrators and both
 /// multiple-scattering models. The approximation is not exact (the path tracer is), but it must
-/// not blow up: the paper's closed forms lose energy (measured 0.44–0.48 at β ≥ 0.3, less for
-/// narrower fibers, whose light mostly crosses the ball unscattered), and the fiber medium's
-/// half-space/layer model returns 0.48–1.13 (its largest excess at β = 0.3; its layers are slabs,
-/// the ball is not). Uniform directions miss narrow lobes for a few spp (variance, not bias), so
-/// the bound is on both integrators' mean and on their agreement where lobes are broad.
+/// not create energy: the paper's closed forms lose much (measured 0.42–0.44 at β ≥ 0.3, less
+/// for narrower fibers, whose light mostly crosses the ball unscattered), the fiber medium's
+/// half-space/layer model less (0.53–0.92; it returned up to 1.19 before its lobes were read
+/// for the reciprocal path, see `DualScatteringShading::eval`). β = 0.001 is the near-specular
+/// case that once returned 2.03 (max 480) with uniform directions. Uniform directions miss
+/// narrow lobes for a few spp (variance, not bias), so the bound is on both integrators' mean
+/// and on their agreement where lobes are broad.
 #[test]
-fn dual_scattering_does_not_blow_up_in_a_white_furnace() {
+fn dual_scattering_does_not_create_energy_in_a_white_furnace() {
     use tress_dual_mis::{DualMis, MisDirections};
     use tress_dual_uniform::{DualSettings, DualUniform, UniformDirections};
     use tress_materials::dual_scattering::{DualScatteringSettings, MultipleScattering};
     let unwrap = ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES;
-    for beta in [0.01f32, 0.1, 0.3, 0.9] {
+    for beta in [0.001f32, 0.01, 0.1, 0.3, 0.9] {
         let model: HairModel = ron::Options::default()
             .with_default_extension(unwrap)
             .from_str(&format!(
@@ -113,7 +115,7 @@ fn dual_scattering_does_not_blow_up_in_a_white_furnace() {
         let scene = hair_ball_scene(model.build().unwrap(), 3000, white_environment());
         for (ms, bound) in [
             (MultipleScattering::Paper, 1.0),
-            (MultipleScattering::FiberMedium, 1.2),
+            (MultipleScattering::FiberMedium, 1.0),
         ] {
             let settings = DualSettings {
                 tables: DualScatteringSettings {
