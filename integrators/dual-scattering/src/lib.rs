@@ -138,13 +138,14 @@ impl HairPoint<'_> {
     /// visibility resolved by shadow rays and the fibers crossed from the density grid.
     pub fn transport(&self, scene: &Scene, wi: tress_core::math::Vec3, distance: f32) -> Rgb {
         let ray = self.sp.spawn(wi).with_t_max(distance);
-        if scene.occluded_by_surfaces(&ray) {
-            return Rgb::ZERO;
-        }
-        let (n, direct) = if scene.occluded(&ray) {
-            (self.density.fibers_crossed(&ray), 0.0)
-        } else {
+        // One ray for the directions that reach the light; a second only for the blocked ones,
+        // to tell a surface (nothing arrives) from hair (scattered light arrives).
+        let (n, direct) = if !scene.occluded(&ray) {
             (0.0, 1.0)
+        } else if scene.occluded_by_surfaces(&ray) {
+            return Rgb::ZERO;
+        } else {
+            (self.density.fibers_crossed(&ray), 0.0)
         };
         self.shading.eval_layered(
             self.wo_local,
