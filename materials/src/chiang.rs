@@ -466,6 +466,7 @@ pub fn test_instances() -> Vec<TestInstance<Params>> {
                 pigment: Pigment::Melanin {
                     eumelanin: 0.3,
                     pheomelanin: 0.15,
+                    tint: crate::pigment::NO_TINT,
                 },
             },
             white_furnace: false,
@@ -648,6 +649,7 @@ mod tests {
         let brown = Pigment::Melanin {
             eumelanin: 1.3,
             pheomelanin: 0.0,
+            tint: crate::pigment::NO_TINT,
         };
         let cases: [(Params, [f32; 4], [f64; 3], f64); 5] = [
             (
@@ -817,6 +819,7 @@ mod tests {
                         p.pigment = Pigment::Melanin {
                             eumelanin: -1.0,
                             pheomelanin: 0.0,
+                            tint: crate::pigment::NO_TINT,
                         }
                     },
                     "eumelanin",
@@ -843,6 +846,7 @@ mod tests {
             pigment: Pigment::Melanin {
                 eumelanin: 1.3,
                 pheomelanin: 0.2,
+                tint: crate::pigment::NO_TINT,
             },
             ..Params::default()
         };

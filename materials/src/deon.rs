@@ -763,6 +763,7 @@ pub fn test_instances() -> Vec<TestInstance<Params>> {
                 pigment: Pigment::Melanin {
                     eumelanin: 1.3,
                     pheomelanin: 0.0,
+                    tint: crate::pigment::NO_TINT,
                 },
                 ..Params::default()
             },
@@ -777,6 +778,7 @@ pub fn test_instances() -> Vec<TestInstance<Params>> {
                 pigment: Pigment::Melanin {
                     eumelanin: 0.3,
                     pheomelanin: 0.1,
+                    tint: crate::pigment::NO_TINT,
                 },
                 ..Params::default()
             },

@@ -513,6 +513,7 @@ pub fn test_instances() -> Vec<TestInstance<Params>> {
                 pigment: Pigment::Melanin {
                     eumelanin: 8.0,
                     pheomelanin: 0.0,
+                    tint: crate::pigment::NO_TINT,
                 },
                 ..Params::default()
             },
@@ -850,6 +851,7 @@ mod tests {
             pigment: Pigment::Melanin {
                 eumelanin: 0.4,
                 pheomelanin: 0.0,
+                tint: crate::pigment::NO_TINT,
             },
             eccentricity: 0.9,
             ..Params::default()

@@ -26,7 +26,8 @@ const PHEOMELANIN_SIGMA_A: [f32; 3] = [0.187, 0.4, 1.05];
 pub enum Pigment {
     /// Absorption coefficient per unit radius, RGB.
     SigmaA((f32, f32, f32)),
-    /// Melanin concentrations (≈0 blond … ≈8 black for eumelanin; pheomelanin adds red).
+    /// Melanin concentrations (≈0 blond … ≈8 black for eumelanin; pheomelanin adds red), and
+    /// an optional dye.
     Melanin {
         /// Eumelanin concentration, ≥ 0 (default 0).
         #[serde(default)]
@@ -34,10 +35,21 @@ pub enum Pigment {
         /// Pheomelanin concentration, ≥ 0 (default 0).
         #[serde(default)]
         pheomelanin: f32,
+        /// A dye over the melanin (Cycles' Tint): its absorption is that of `Color(tint)`,
+        /// added to the melanin's; each channel in (0, 1], default (1, 1, 1): none.
+        #[serde(default = "no_tint")]
+        tint: (f32, f32, f32),
     },
     /// Target multiple-scattering colour of a hair volume, each channel in (0, 1]; mapped to σ_a
     /// through Chiang et al.'s fit, which depends on the azimuthal roughness β_n.
     Color((f32, f32, f32)),
+}
+
+/// The tint that adds no absorption.
+pub const NO_TINT: (f32, f32, f32) = (1.0, 1.0, 1.0);
+
+fn no_tint() -> (f32, f32, f32) {
+    NO_TINT
 }
 
 impl Default for Pigment {
@@ -46,6 +58,7 @@ impl Default for Pigment {
         Pigment::Melanin {
             eumelanin: 1.3,
             pheomelanin: 0.0,
+            tint: crate::pigment::NO_TINT,
         }
     }
 }
@@ -69,32 +82,41 @@ impl Pigment {
             Pigment::Melanin {
                 eumelanin,
                 pheomelanin,
+                tint,
             } => {
                 for (field, v) in [("eumelanin", eumelanin), ("pheomelanin", pheomelanin)] {
                     if !(v.is_finite() && v >= 0.0) {
                         return Err(ParamError::new(field, v, "must be finite and non-negative"));
                     }
                 }
-                Ok(Rgb::from_array(std::array::from_fn(|i| {
+                let melanin = Rgb::from_array(std::array::from_fn(|i| {
                     eumelanin * EUMELANIN_SIGMA_A[i] + pheomelanin * PHEOMELANIN_SIGMA_A[i]
-                })))
-            }
-            Pigment::Color((r, g, b)) => {
-                let mut out = [0.0; 3];
-                for (o, c) in out.iter_mut().zip([r, g, b]) {
-                    if !(c.is_finite() && c > 0.0 && c <= 1.0) {
-                        return Err(ParamError::new(
-                            "color",
-                            c,
-                            "each channel must lie in (0, 1]",
-                        ));
-                    }
-                    *o = sigma_a_from_reflectance(c, beta_n);
+                }));
+                // Without a tint the melanin's absorption is returned as it is (no `+ 0`).
+                if tint == NO_TINT {
+                    return Ok(melanin);
                 }
-                Ok(Rgb::from_array(out))
+                Ok(melanin + colour_sigma_a("tint", tint, beta_n)?)
             }
+            Pigment::Color(c) => colour_sigma_a("color", c, beta_n),
         }
     }
+}
+
+/// σ_a of a target colour through Chiang's fit; `field` names it in errors.
+fn colour_sigma_a(
+    field: &'static str,
+    (r, g, b): (f32, f32, f32),
+    beta_n: f32,
+) -> Result<Rgb, ParamError> {
+    let mut out = [0.0; 3];
+    for (o, c) in out.iter_mut().zip([r, g, b]) {
+        if !(c.is_finite() && c > 0.0 && c <= 1.0) {
+            return Err(ParamError::new(field, c, "each channel must lie in (0, 1]"));
+        }
+        *o = sigma_a_from_reflectance(c, beta_n);
+    }
+    Ok(Rgb::from_array(out))
 }
 
 /// Chiang et al. 2016 eq. 9: σ_a giving multiple-scattering colour `c` at azimuthal roughness β_n.
@@ -156,8 +178,8 @@ impl HairModel {
 #[serde(deny_unknown_fields, default)]
 pub struct StrandVariation {
     /// Random melanin (Cycles' *Random Color*): each strand's absorption — its melanin
-    /// concentrations — is multiplied by 1 + random·(2ξ − 1), ξ uniform in [0, 1) per strand;
-    /// in [0, 1] (default 0: none).
+    /// concentrations, and a `tint`'s absorption with them — is multiplied by
+    /// 1 + random·(2ξ − 1), ξ uniform in [0, 1) per strand; in [0, 1] (default 0: none).
     pub random: f32,
     /// Seed of the per-strand random numbers (default 0).
     pub seed: u64,
@@ -545,6 +567,7 @@ mod tests {
         let s = Pigment::Melanin {
             eumelanin: 2.0,
             pheomelanin: 1.0,
+            tint: crate::pigment::NO_TINT,
         }
         .sigma_a(0.3)
         .unwrap();
@@ -552,6 +575,34 @@ mod tests {
             (s - Rgb::new(2.0 * 0.419 + 0.187, 2.0 * 0.697 + 0.4, 2.0 * 1.37 + 1.05)).length()
                 < 1e-6
         );
+    }
+
+    #[test]
+    fn a_tint_adds_the_absorption_of_its_colour_to_the_melanin() {
+        let melanin = |tint| Pigment::Melanin {
+            eumelanin: 0.3,
+            pheomelanin: 0.1,
+            tint,
+        };
+        let plain = melanin(NO_TINT).sigma_a(0.3).unwrap();
+        let red = (0.9, 0.4, 0.3);
+        let dyed = melanin(red).sigma_a(0.3).unwrap();
+        let dye = Pigment::Color(red).sigma_a(0.3).unwrap();
+        assert!((dyed - plain - dye).abs().max_element() < 1e-6);
+        // Red dye absorbs green and blue more than red.
+        assert!(dye.y > dye.x && dye.z > dye.x && dye.x > 0.0);
+        // RON: the tint is optional and defaults to none.
+        let parsed: Pigment =
+            ron::from_str("Melanin(eumelanin: 0.3, pheomelanin: 0.1, tint: (0.9, 0.4, 0.3))")
+                .unwrap();
+        assert_eq!(parsed, melanin(red));
+        let parsed: Pigment = ron::from_str("Melanin(eumelanin: 0.3, pheomelanin: 0.1)").unwrap();
+        assert_eq!(parsed, melanin(NO_TINT));
+        let e = melanin((0.0, 0.5, 0.5))
+            .sigma_a(0.3)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("tint"), "{e}");
     }
 
     #[test]
@@ -567,7 +618,8 @@ mod tests {
         assert!(Pigment::SigmaA((-1.0, 0.0, 0.0)).sigma_a(0.3).is_err());
         assert!(Pigment::Melanin {
             eumelanin: f32::NAN,
-            pheomelanin: 0.0
+            pheomelanin: 0.0,
+            tint: crate::pigment::NO_TINT,
         }
         .sigma_a(0.3)
         .is_err());
@@ -586,6 +638,7 @@ mod tests {
         Pigment::Melanin {
             eumelanin: 1.3,
             pheomelanin: 0.2,
+            tint: crate::pigment::NO_TINT,
         }
     }
 
@@ -709,6 +762,7 @@ mod tests {
         let blond = Pigment::Melanin {
             eumelanin: 0.2,
             pheomelanin: 0.1,
+            tint: crate::pigment::NO_TINT,
         };
         let tip = blond.sigma_a(0.4).unwrap();
         let v = StrandVariation {

@@ -17,6 +17,7 @@ fn scene() -> Scene {
         pigment: Pigment::Melanin {
             eumelanin: 8.0,
             pheomelanin: 0.5,
+            tint: tress_materials::pigment::NO_TINT,
         },
         ..Default::default()
     })
