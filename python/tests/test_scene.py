@@ -1,6 +1,7 @@
 """Scenes from dicts, RON text and files; renders to NumPy arrays; errors as exceptions."""
 
 import _thread
+import signal
 import threading
 import time
 
@@ -160,6 +161,9 @@ def test_bad_render_settings_raise_valueerror(scene):
 
 
 def test_ctrl_c_stops_a_render(scene):
+    # A process started in the background (`cmd &` in a script) inherits SIGINT ignored, and
+    # Python then installs no handler, so `interrupt_main` would do nothing: install Python's.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     # About a minute of work at 64x64 and 4096 spp: far longer than a stop takes.
     timer = threading.Timer(0.5, _thread.interrupt_main)
     start = time.monotonic()
@@ -169,6 +173,7 @@ def test_ctrl_c_stops_a_render(scene):
             scene.render(spp=4096, width=64, height=64)
     finally:
         timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     assert time.monotonic() - start < 10
     # The scene still renders afterwards.
     assert scene.render().shape == (16, 16, 3)
