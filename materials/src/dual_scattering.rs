@@ -1031,6 +1031,21 @@ impl DualScatteringShading {
         }
     }
 
+    /// The inclination at which F's lobes (their shapes and energies, tabulated per light
+    /// inclination) are read for light at `theta_i` seen at `theta_o`. The fiber medium's are
+    /// read at θ_o, i.e. for the reciprocal path (light from ω_o, seen from ω_i): they then do
+    /// not vary with θ_i, so each term is a normalised density over ω_i and its integral over
+    /// the light's directions is exactly its tabulated energy. Read at θ_i instead, the
+    /// back-scattering lobe's centre moves with θ_i (its mean θ_h grows with the light's
+    /// inclination) and the density over ω_i integrated to up to 1.5× its energy: a
+    /// half-space of white fibers returned 1.36 of the light. The paper's forms keep θ_i.
+    pub(crate) fn shape_theta(&self, theta_i: f32, theta_o: f32) -> f32 {
+        match self.tables.multiple_scattering() {
+            MultipleScattering::Paper => theta_i,
+            MultipleScattering::FiberMedium => theta_o,
+        }
+    }
+
     /// Whether [`Self::eval_layered`] uses the depth of hair behind the shading point.
     pub fn uses_depth_behind(&self) -> bool {
         self.tables.medium.is_some()
@@ -1101,14 +1116,7 @@ impl DualScatteringShading {
         let theta_i = safe_asin(wi.x);
         let theta_o = safe_asin(wo.x);
         let medium = self.tables.multiple_scattering() == MultipleScattering::FiberMedium;
-        // The lobes' shapes and energies, tabulated per light inclination. The fiber medium's
-        // are read at θ_o, i.e. for the reciprocal path (light from ω_o, seen from ω_i): they
-        // then do not vary with θ_i, so each term is a normalised density over ω_i and its
-        // integral over the light's directions is exactly its tabulated energy. Read at θ_i
-        // instead, the back-scattering lobe's centre moves with θ_i (its mean θ_h grows with
-        // the light's inclination) and the density over ω_i integrated to up to 1.5× its
-        // energy: a half-space of white fibers returned 1.36 of the light.
-        let shape_theta = if medium { theta_o } else { theta_i };
+        let shape_theta = self.shape_theta(theta_i, theta_o);
         let b = self.tables.back_scattering(shape_theta, d_b, behind);
         let backward = wi.z > 0.0;
         // Longitudinal density in sin θ_i of a Gaussian in θ_h (see `longitudinal_density`).

@@ -87,14 +87,12 @@ impl DualScatteringShading {
         let g = self.tables().globals(-theta_o);
         let d = self.factors();
         let e_direct = luminance(g.a_f + g.a_b).max(1e-4);
-        // F's back-scattering lobe: read at θ_o with the fiber medium (see `eval_layered`).
-        let back_theta = match self.tables().multiple_scattering() {
-            MultipleScattering::Paper => -theta_o,
-            MultipleScattering::FiberMedium => theta_o,
-        };
-        let b = self
-            .tables()
-            .back_scattering(back_theta, d.d_b, f32::INFINITY);
+        // F's back-scattering lobe, as F reads it for light on the specular cone.
+        let b = self.tables().back_scattering(
+            self.shape_theta(-theta_o, theta_o),
+            d.d_b,
+            f32::INFINITY,
+        );
         let (e_back, back_mean, back_var) =
             (d.d_b * luminance(b.energy).max(0.0), b.mean, b.variance);
         let e_forward = match self.tables().multiple_scattering() {
