@@ -41,6 +41,16 @@ pub fn hair_scene(
     )
 }
 
+/// Runs `f` on a fresh pool of `threads` workers, as the CLI builds and renders: whatever
+/// building leaves behind on a worker thread is then part of a test.
+pub fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
+}
+
 /// A constant white environment of radiance 1.
 pub fn white_environment() -> Vec<Light> {
     vec![Light::Constant { radiance: Rgb::ONE }]

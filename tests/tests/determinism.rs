@@ -8,7 +8,7 @@ use tress_core::render::render;
 use tress_core::Scene;
 use tress_materials::pigment::Pigment;
 use tress_materials::HairModel;
-use tress_tests::{film, hair_ball_scene};
+use tress_tests::{film, hair_ball_scene, on_threads};
 
 /// Dark hair under a sky so dim (scale 1e-36) that most radiance values are denormal floats, so
 /// any thread computing in another floating-point mode (flush-to-zero) shows in the bits.
@@ -40,11 +40,7 @@ fn render_with(
     integrator: &IntegratorDesc,
     film: &tress_core::film::FilmSettings,
 ) -> tress_core::Image {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    pool.install(|| {
+    on_threads(threads, || {
         let scene = scene();
         let integrator = integrator.build(&scene, &Default::default()).unwrap();
         render(&scene, integrator.as_ref(), film, &|_| {}).image

@@ -11,7 +11,7 @@ use tress_core::light::{EnvironmentMap, Light};
 use tress_core::render::{camera_sample, render, render_outputs, SampleSums};
 use tress_core::Scene;
 use tress_materials::HairModel;
-use tress_tests::{film, hair_ball_scene, shared_data};
+use tress_tests::{film, hair_ball_scene, on_threads, shared_data};
 
 fn scene() -> Scene {
     let model = HairModel::Chiang(Default::default()).build().unwrap();
@@ -28,11 +28,7 @@ fn everything() -> Outputs {
 
 /// Renders on a fresh pool of `threads` workers, as the CLI does.
 fn render_with(threads: usize, integrator: &IntegratorDesc, film: &FilmSettings) -> SampleSums {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    pool.install(|| {
+    on_threads(threads, || {
         let scene = scene();
         let integrator = integrator.build(&scene, &Default::default()).unwrap();
         let never = AtomicBool::new(false);

@@ -12,7 +12,7 @@ use tress_core::{HitKind, Image, Material};
 use tress_materials::dual_scattering::{fingerprint, DualScatteringSettings, DualScatteringTables};
 use tress_materials::pigment::Pigment;
 use tress_materials::HairModel;
-use tress_tests::film;
+use tress_tests::{film, on_threads};
 
 /// Procedural hair (a ball of 400 strands) with a Chiang material and the object's
 /// `variation` (RON, or empty), seen from +z.
@@ -39,32 +39,6 @@ fn build_in(text: &str, dir: &Path) -> BuiltScene {
 /// Builds a scene that reads no files.
 fn build_text(text: &str) -> BuiltScene {
     build_in(text, Path::new("."))
-}
-
-/// A fresh folder under the system's temporary folder, removed when dropped.
-struct TempDir(std::path::PathBuf);
-
-impl TempDir {
-    fn new(name: &str) -> Self {
-        let dir = std::env::temp_dir().join(format!("tress-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        TempDir(dir)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-/// Runs `f` on a fresh pool of `threads` workers (as the CLI builds and renders).
-fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap()
-        .install(f)
 }
 
 /// The material of the first hit of every ray of a 64 × 64 grid across the view.
@@ -130,8 +104,8 @@ fn write_hair(path: &Path, strands: &[Vec<[f32; 3]>], colors: &[[f32; 3]]) {
 
 #[test]
 fn hair_file_colours_reach_the_shaded_material() {
-    let dir = TempDir::new("file-colours");
-    let dir = dir.0.as_path();
+    let dir = tempfile::tempdir().unwrap();
+    let dir = dir.path();
     // Three vertical strands of 4 segments at x = −0.6, 0, 0.6. Strand 0 changes colour from
     // root to tip (colours per point); strands 1 and 2 are one colour each.
     let strands: Vec<Vec<[f32; 3]>> = [-0.6f32, 0.0, 0.6]
