@@ -378,6 +378,14 @@ mod tests {
         }
         assert!(matches!(reach(&unbiased, 2.0), Reach::AtOnce(1, _)));
         assert!(matches!(reach(&unbiased, 1e-3), Reach::Never(_)));
+        // Short of it, 1/N from the last setting (relMSE 1/64 at 64 spp and 64 s) gets there at
+        // 1000 spp and 1000 s; a reached target is not extrapolated.
+        let (spp, t) = extrapolated_reach(&unbiased, 1e-3).unwrap();
+        assert!(
+            (spp - 1000.0).abs() < 1e-6 && (t - 1000.0).abs() < 1e-6,
+            "{spp} {t}"
+        );
+        assert!(extrapolated_reach(&unbiased, 0.1).is_none());
     }
 
     #[test]

@@ -107,6 +107,61 @@ pub(super) fn error_table(s: &mut String, plan: &Plan, curves: &[Vec<Point>]) {
 }
 
 /// `summary.csv`: the report's numbers per (scene, integrator, spp, reference).
+/// Time to the target relMSE against each integrator's own reference — its noise alone, the
+/// cost of converging whatever it converges to — and the baseline's time ÷ each one's (above
+/// 1: sooner than the baseline). A curve that stops short is extrapolated at 1/N from its
+/// highest spp, and says so.
+pub(super) fn own_reach_table(s: &mut String, plan: &Plan, own: &[Vec<Point>]) {
+    let target = plan.target_relmse;
+    let _ = writeln!(
+        s,
+        "\n### Time to relMSE = {target:.1e} against each integrator's own reference\n"
+    );
+    let times: Vec<Option<(f64, f64, bool)>> = own
+        .iter()
+        .map(|c| match reach(c, target) {
+            Reach::AtOnce(spp, t) => Some((spp as f64, t, false)),
+            Reach::At(spp, t) => Some((spp, t, false)),
+            Reach::Never(_) => extrapolated_reach(c, target).map(|(spp, t)| (spp, t, true)),
+        })
+        .collect();
+    let base = plan.integrators[0].label.as_str();
+    table_header(
+        s,
+        &[
+            "integrator",
+            "spp",
+            "CPU time (s)",
+            &format!("`{base}`'s time ÷ this"),
+        ],
+    );
+    for ((i, c), t) in plan.integrators.iter().zip(own).zip(&times) {
+        let Some((spp, time, extrapolated)) = *t else {
+            let _ = writeln!(s, "| {} | not reached | | |", i.label);
+            continue;
+        };
+        let ratio = match times[0] {
+            Some((_, base_time, base_extrapolated)) => format!(
+                "{}{:.2}",
+                if extrapolated || base_extrapolated {
+                    "≈ "
+                } else {
+                    ""
+                },
+                base_time / time
+            ),
+            None => String::new(),
+        };
+        let how = match c.last() {
+            Some(last) if extrapolated => {
+                format!(" (extrapolated at 1/N from {} spp)", last.spp)
+            }
+            _ => String::new(),
+        };
+        let _ = writeln!(s, "| {} | {spp:.1}{how} | {time:.4} | {ratio} |", i.label);
+    }
+}
+
 pub(super) fn write_summary(plan: &Plan, res: &Results) -> Result<PathBuf> {
     let mut s = String::from(
         "scene,integrator,spp,reference,repetitions,mse,mse_ci95,relmse,relmse_ci95,bias2,cpu_s,mse_x_spp,efficiency\n",
@@ -391,6 +446,10 @@ pub(super) fn write_report(
                     i.label
                 ),
             };
+        }
+
+        if let Some(own) = &own {
+            own_reach_table(&mut s, plan, own);
         }
 
         let _ = writeln!(s, "\n### Convergence verdicts (MSE·spp)\n");

@@ -152,6 +152,15 @@ pub(super) fn reach(points: &[Point], target: f64) -> Reach {
     )
 }
 
+/// Where a curve that never reaches relMSE ≤ `target` would, if it went on converging as 1/N
+/// from its highest spp (relMSE ∝ 1/spp, time ∝ spp): (spp, seconds). Meaningful only for an
+/// unbiased estimator against its own reference; `None` if the target was reached.
+pub(super) fn extrapolated_reach(points: &[Point], target: f64) -> Option<(f64, f64)> {
+    let last = points.last()?;
+    let factor = last.relmse.mean / target;
+    (factor > 1.0 && factor.is_finite()).then_some((last.spp as f64 * factor, last.time_s * factor))
+}
+
 /// One line on how MSE·spp evolves: flat for unbiased 1/N convergence, rising for an error
 /// floor, which the bias estimate then attributes to bias or to heavy-tailed variance. `noise`
 /// is the reference's own noise (an spp-independent additive term of every MSE and bias², the
