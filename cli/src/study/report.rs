@@ -106,7 +106,6 @@ pub(super) fn error_table(s: &mut String, plan: &Plan, curves: &[Vec<Point>]) {
     s.push('\n');
 }
 
-/// `summary.csv`: the report's numbers per (scene, integrator, spp, reference).
 /// Time to the target relMSE against each integrator's own reference — its noise alone, the
 /// cost of converging whatever it converges to — and the baseline's time ÷ each one's (above
 /// 1: sooner than the baseline). A curve that stops short is extrapolated at 1/N from its
@@ -162,6 +161,7 @@ pub(super) fn own_reach_table(s: &mut String, plan: &Plan, own: &[Vec<Point>]) {
     }
 }
 
+/// `summary.csv`: the report's numbers per (scene, integrator, spp, reference).
 pub(super) fn write_summary(plan: &Plan, res: &Results) -> Result<PathBuf> {
     let mut s = String::from(
         "scene,integrator,spp,reference,repetitions,mse,mse_ci95,relmse,relmse_ci95,bias2,cpu_s,mse_x_spp,efficiency\n",
