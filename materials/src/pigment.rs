@@ -765,15 +765,15 @@ mod tests {
             tint: crate::pigment::NO_TINT,
         };
         let tip = blond.sigma_a(0.4).unwrap();
-        let v = StrandVariation {
-            gradient: Some(Gradient {
-                tip: TipPigment::Pigment(blond),
-                start: 0.25,
-            }),
-            ..Default::default()
-        }
-        .for_model(&m)
-        .unwrap();
+        let graded = |tip, start| {
+            StrandVariation {
+                gradient: Some(Gradient { tip, start }),
+                ..Default::default()
+            }
+            .for_model(&m)
+            .unwrap()
+        };
+        let v = graded(TipPigment::Pigment(blond), 0.25);
         let at = |x| v.sigma_a(3, x, None).unwrap();
         assert_eq!(at(0.0), base);
         assert_eq!(at(0.25), base);
@@ -781,28 +781,12 @@ mod tests {
         // Halfway through the change, halfway in absorption (linear in melanin).
         assert!((at(0.625) - 0.5 * (base + tip)).abs().max_element() < 1e-6);
         // A scale of 1 and no randomness change nothing, to the bit.
-        let v1 = StrandVariation {
-            gradient: Some(Gradient {
-                tip: TipPigment::Scale(1.0),
-                start: 0.1,
-            }),
-            ..Default::default()
-        }
-        .for_model(&m)
-        .unwrap();
+        let v1 = graded(TipPigment::Scale(1.0), 0.1);
         for x in [0.0, 0.3, 0.77, 1.0] {
             assert_eq!(v1.sigma_a(9, x, None).unwrap(), base);
         }
         // A scale multiplies the root's absorption at the tip.
-        let v = StrandVariation {
-            gradient: Some(Gradient {
-                tip: TipPigment::Scale(0.3),
-                start: 0.0,
-            }),
-            ..Default::default()
-        }
-        .for_model(&m)
-        .unwrap();
+        let v = graded(TipPigment::Scale(0.3), 0.0);
         assert_eq!(v.sigma_a(0, 0.0, None).unwrap(), base);
         assert!(
             (v.sigma_a(0, 1.0, None).unwrap() - 0.3 * base)

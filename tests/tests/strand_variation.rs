@@ -163,11 +163,15 @@ fn hair_file_colours_reach_the_shaded_material() {
     let mut black = colors.clone();
     black[10..15].fill([0.0, 0.2, 0.2]);
     write_hair(&dir.join("black.hair"), &strands, &black);
-    let desc = parse(&text.replace("coloured.hair", "black.hair")).unwrap();
-    let e = build(&desc, &dir.join("scene.ron"))
-        .err()
-        .expect("a black channel")
-        .to_string();
+    // The scene's error with its HAIR file replaced by `file`.
+    let error_with = |file: &str| {
+        let desc = parse(&text.replace("coloured.hair", file)).unwrap();
+        match build(&desc, &dir.join("scene.ron")) {
+            Ok(_) => panic!("{file}: the scene built"),
+            Err(e) => e.to_string(),
+        }
+    };
+    let e = error_with("black.hair");
     assert!(
         e.contains("objects[0]")
             && e.contains("black.hair")
@@ -181,11 +185,7 @@ fn hair_file_colours_reach_the_shaded_material() {
     let mut no_colors = plain.clone();
     no_colors[12..16].copy_from_slice(&3u32.to_le_bytes());
     std::fs::write(dir.join("plain.hair"), no_colors).unwrap();
-    let desc = parse(&text.replace("coloured.hair", "plain.hair")).unwrap();
-    let e = build(&desc, &dir.join("scene.ron"))
-        .err()
-        .expect("file_colors without colours")
-        .to_string();
+    let e = error_with("plain.hair");
     assert!(
         e.contains("objects[0]")
             && e.contains("variation.file_colors")
