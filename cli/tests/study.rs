@@ -316,41 +316,44 @@ fn shipped_quick_study_runs() {
     assert!(out.join("plots/ball_heatmap_4spp.png").exists());
 }
 
-/// The hair-colour study's quick variant (24², 1…4 spp; about 15 s): every colour and groom
-/// renders and reaches the report. Needs ../shared/data for straight.hair.
+/// The hair-colour studies' quick variants (24², 1…4 spp; about 15 s each), under the sunset
+/// and under a directional light: every colour and groom renders and reaches the report.
+/// Needs ../shared/data for straight.hair.
 #[test]
-fn hair_colour_quick_study_runs() {
+fn hair_colour_quick_studies_run() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     if !root.join("../shared/data/hair/straight.hair").exists() {
-        eprintln!("note: ../shared/data not found; skipping the hair-colour study");
+        eprintln!("note: ../shared/data not found; skipping the hair-colour studies");
         return;
     }
-    let dir = tempfile::tempdir().unwrap();
-    let study = root.join("scenes/studies/hair_colour.ron");
-    let o = tress(
-        &[
-            "study",
-            study.to_str().unwrap(),
-            "--out",
-            "hc",
-            "--quick",
-            "--quiet",
-        ],
-        dir.path(),
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
-    let report = std::fs::read_to_string(dir.path().join("hc/report.md")).unwrap();
-    for groom in ["straight", "head"] {
-        for colour in ["platinum", "blond", "brown", "dark"] {
-            assert!(
-                report.contains(&format!("## Scene `{groom}_{colour}`")),
-                "{groom}_{colour} missing"
-            );
+    for name in ["hair_colour", "hair_colour_sun"] {
+        let dir = tempfile::tempdir().unwrap();
+        let study = root.join(format!("scenes/studies/{name}.ron"));
+        let o = tress(
+            &[
+                "study",
+                study.to_str().unwrap(),
+                "--out",
+                "hc",
+                "--quick",
+                "--quiet",
+            ],
+            dir.path(),
+        );
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let report = std::fs::read_to_string(dir.path().join("hc/report.md")).unwrap();
+        for groom in ["straight", "head"] {
+            for colour in ["platinum", "blond", "brown", "dark"] {
+                assert!(
+                    report.contains(&format!("## Scene `{groom}_{colour}`")),
+                    "{name}: {groom}_{colour} missing"
+                );
+            }
         }
+        let (header, rows) = read_csv(&dir.path().join("hc/summary.csv"));
+        let integrator = column(&header, "integrator");
+        assert!(rows.iter().any(|r| r[integrator] == "dual-mis"), "{name}");
     }
-    let (header, rows) = read_csv(&dir.path().join("hc/summary.csv"));
-    let integrator = column(&header, "integrator");
-    assert!(rows.iter().any(|r| r[integrator] == "dual-mis"));
 }
 
 #[test]

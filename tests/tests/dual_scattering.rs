@@ -184,3 +184,66 @@ fn with_no_fibers_to_cross_and_no_back_scattering_dual_scattering_is_single_scat
     eprintln!("DS {m_ds:.5} ± {s_ds:.5}, path single scattering {m_pt:.5} ± {s_pt:.5}");
     assert!((m_ds - m_pt).abs() < 3.0 * (s_ds * s_ds + s_pt * s_pt).sqrt() + 1e-6);
 }
+
+/// Zinke et al.'s setting: light hair under one directional light. A dual-scattering sample then
+/// has no light integral to estimate (one shadow ray toward the sun), so its noise is only
+/// which fibers a pixel's rays hit, while the path tracer samples every bounce of the multiple
+/// scattering: at equal spp its noise must be far below the path tracer's (measured on this
+/// ball: 11–17× less variance over four seeds; under an environment, whose light integral both
+/// estimate with the same shadow rays, the two come within 2× of each other: README).
+#[test]
+fn under_a_directional_light_dual_mis_is_far_less_noisy_than_the_path_tracer_on_light_hair() {
+    let model = HairModel::Chiang(tress_materials::chiang::Params {
+        pigment: tress_materials::pigment::Pigment::Melanin {
+            eumelanin: 0.3,
+            pheomelanin: 0.0,
+            tint: tress_materials::pigment::NO_TINT,
+        },
+        ..Default::default()
+    })
+    .build()
+    .unwrap();
+    let sun = Light::distant(
+        glam::Vec3::new(-0.45, -0.55, -0.7),
+        glam::Vec3::splat(3.0),
+        0.0,
+    )
+    .unwrap();
+    let scene = hair_ball_scene(model, 1500, vec![sun]);
+    let mis = DualMis::new(settings(), &scene, MisDirections, &Default::default()).unwrap();
+    let path = tress_path::PathTracer::new(tress_path::PathSettings {
+        max_depth: 100,
+        rr_depth: 5,
+    });
+    // Per-pixel variance over independent renders, averaged over the image.
+    let variance = |integ: &dyn Integrator| -> f64 {
+        let images: Vec<Image> = (0..8)
+            .map(|s| render(&scene, integ, &film(16, 16, 4, SEED + s), &|_| {}).image)
+            .collect();
+        let pixels = images[0].pixels.len();
+        (0..pixels)
+            .map(|i| {
+                let values: Vec<f64> = images
+                    .iter()
+                    .map(|img| {
+                        let p = img.pixels[i];
+                        (p.x + p.y + p.z) as f64 / 3.0
+                    })
+                    .collect();
+                let mean = values.iter().sum::<f64>() / values.len() as f64;
+                values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (values.len() - 1) as f64
+            })
+            .sum::<f64>()
+            / pixels as f64
+    };
+    const SEED: u64 = 300;
+    let (v_mis, v_path) = (variance(&mis), variance(&path));
+    eprintln!(
+        "variance per pixel at 4 spp: dual-mis {v_mis:.3e}, path {v_path:.3e} (ratio {:.1})",
+        v_path / v_mis
+    );
+    assert!(
+        v_path > 5.0 * v_mis,
+        "dual-mis {v_mis:.3e}, path {v_path:.3e}"
+    );
+}
