@@ -25,7 +25,7 @@
 //!
 //! # Fiber orientation ([`DensitySettings::direction`])
 //!
-//! Without direction a voxel stores σ alone and `s = π/4`, the mean of sin∠(t, ω) over
+//! Without direction `s = π/4`, the mean of sin∠(t, ω) over
 //! isotropic ω: unbiased on average over light directions, not for a given one (aligned fibers
 //! seen broadside are undercounted by π/4, seen end-on overcounted).
 //!
@@ -42,13 +42,29 @@
 //! for every voxel. Measured worst errors of `s` over ω (unit test): bundle within 15°: 0.021
 //! (sqrt alone 0.022), within 40°: 0.031 (0.047), fibers spread in a plane: 0.048 (0.071), two
 //! crossing bundles: 0.126 (0.146) — second moments cannot tell crossing bundles from a
-//! spread. A record is 7 floats: σκ and T̄.
+//! spread. Without direction the record holds the isotropic tensor `I/3`, for which the model
+//! is `s = π/4`.
+//!
+//! # The density within a voxel
+//!
+//! A constant density per voxel spreads the hair of a voxel at the hair's surface over the
+//! empty part of the voxel too, so rays leaving the hair outward — the light queries of the
+//! points a camera sees — count fibers that are not there. Each voxel therefore also stores
+//! the centroid of its fiber area and takes the linear profile `σ·(1 + g·(x − c))` with that
+//! centroid (`g` per axis = 12·offset/h², clamped so that the profile stays non-negative across
+//! the voxel), whose integral along a segment is its value at the segment's middle. Against
+//! Embree's count of every fiber crossed, for 20 000 rays leaving hair points hit from outside
+//! (unit test): on the procedural head of the studies the squared error falls from 15.6 to
+//! 9.4 and the mean of `e^{−n}` − `e^{−N}` from −0.107 to −0.078; for grid counts between 1
+//! and 2 the true mean is 1.19 instead of 0.99. A record is 20 bytes: σκ (f32), T̄ (six i16,
+//! 2⁻¹⁵ apart) and `g·h` (three i8 in [−2, 2], 1/63.5 apart).
 //!
 //! # Queries
 //!
 //! [`FiberDensity::fibers_crossed`] walks the voxels along the ray over `(0, t_max)` (clipped
 //! to the grid) with an exact voxel traversal (Amanatides–Woo), adding `σ·s(ω)·(length in
-//! voxel)`: piecewise constant per voxel, so there is no step size to choose.
+//! voxel)` with σ the profile's value at the middle of the ray's part in the voxel: exact for
+//! the linear profile, so there is no step size to choose.
 //!
 //! A ray leaving a fiber (`ray.exclude` names a hair segment of the grid's scene) is treated
 //! like Embree treats it:
@@ -125,9 +141,11 @@ const BRICK_SHIFT: u32 = 3;
 const BRICK_MASK: u32 = (1 << BRICK_SHIFT) - 1;
 const BRICK_VOXELS: usize = 1 << (3 * BRICK_SHIFT);
 const EMPTY: u32 = u32::MAX;
-/// Floats per voxel with direction while building: the ribbon area and its orientation
-/// moments (xx, yy, zz, xy, xz, yz).
-const DIRECTION_STRIDE: usize = 7;
+/// Floats per voxel while building: the ribbon area, its orientation moments (xx, yy, zz, xy,
+/// xz, yz) and its centroid's coordinates, each area-weighted.
+const BUILD_STRIDE: usize = 10;
+/// Fixed-point scale of [`VoxelRecord::slope`]: `g·h` in [−2, 2].
+const SLOPE_SCALE: f32 = 63.5;
 /// Distinct voxels of the own strand subtracted per query (a ray rarely meets more than a few).
 const OWN_CELLS: usize = 64;
 /// Segments of the own strand walked each way from the one the ray leaves.
@@ -362,17 +380,17 @@ fn ribbon_area(a: Vec4, b: Vec4, len: f32, s0: f32, s1: f32) -> f32 {
 /// The voxel hair-density grid; implements [`FiberDensity`]. See the module docs.
 pub struct DensityGrid {
     lattice: Lattice,
-    /// Floats per voxel in `data`: 1 (σ), or [`DIRECTION_STRIDE`] while building with direction.
-    stride: usize,
+    /// Whether records hold the fibers' orientation (else the isotropic tensor).
+    direction: bool,
     /// Bricks per axis.
     top_dims: [u32; 3],
     /// Per brick (x fastest): its index in `data`, or `EMPTY`.
     top: Vec<u32>,
-    /// Per occupied brick, `BRICK_VOXELS` records of `stride` floats: σ, or while building the
-    /// areas and orientation moments that become `directions`.
+    /// While building: per occupied brick, `BRICK_VOXELS` sums of [`BUILD_STRIDE`] floats, which
+    /// become `records` (then empty).
     data: Vec<f32>,
-    /// With direction: per occupied brick, `BRICK_VOXELS` records (`data` is then empty).
-    directions: Vec<DirectionRecord>,
+    /// Per occupied brick, `BRICK_VOXELS` records.
+    records: Vec<VoxelRecord>,
     /// Hair data by Embree geometry id, to find the strand a ray leaves.
     hair: Vec<Option<Arc<CurveData>>>,
     info: DensityInfo,
@@ -413,11 +431,6 @@ impl DensityGrid {
             total_length += len as f64;
             total_area += ribbon_area(a, b, len, 0.0, len) as f64;
         });
-        let stride = if settings.direction {
-            DIRECTION_STRIDE
-        } else {
-            1
-        };
         if bounds.is_empty() {
             return Ok(DensityGrid {
                 lattice: Lattice {
@@ -425,11 +438,11 @@ impl DensityGrid {
                     h: 1.0,
                     dims: [0; 3],
                 },
-                stride,
+                direction: settings.direction,
                 top_dims: [0; 3],
                 top: Vec::new(),
                 data: Vec::new(),
-                directions: Vec::new(),
+                records: Vec::new(),
                 hair,
                 info: DensityInfo {
                     resolution: 0,
@@ -480,7 +493,7 @@ impl DensityGrid {
         // The grid is sparse, but hair may fill its bounds: refuse a lattice whose bricks,
         // all occupied, would not fit the memory limit (1024³ with orientations is 28 GiB).
         let dense_gib = lattice.dims.iter().map(|&n| n as f64).product::<f64>()
-            * (stride * std::mem::size_of::<f32>()) as f64
+            * std::mem::size_of::<VoxelRecord>() as f64
             / (1u64 << 30) as f64;
         let limit_gib = tress_core::film::memory_limit_gib();
         if dense_gib > limit_gib {
@@ -499,11 +512,11 @@ impl DensityGrid {
         let top_dims = lattice.dims.map(|n| (n + BRICK_MASK) >> BRICK_SHIFT);
         let mut grid = DensityGrid {
             lattice,
-            stride,
+            direction: settings.direction,
             top_dims,
             top: vec![EMPTY; top_dims.iter().map(|&n| n as usize).product()],
             data: Vec::new(),
-            directions: Vec::new(),
+            records: Vec::new(),
             hair,
             info: DensityInfo {
                 resolution,
@@ -537,8 +550,7 @@ impl DensityGrid {
         )
     }
 
-    /// Index of the record of voxel `c` (in `directions`, or in `data` without direction), if
-    /// its brick is occupied.
+    /// Index in `records` of the record of voxel `c`, if its brick is occupied.
     #[inline]
     fn record_at(&self, c: [u32; 3]) -> Option<usize> {
         let (b, local) = self.brick_of(c);
@@ -550,12 +562,12 @@ impl DensityGrid {
     fn record_mut(&mut self, c: [u32; 3]) -> &mut [f32] {
         let (b, local) = self.brick_of(c);
         if self.top[b] == EMPTY {
-            self.top[b] = (self.data.len() / (BRICK_VOXELS * self.stride)) as u32;
+            self.top[b] = (self.data.len() / (BRICK_VOXELS * BUILD_STRIDE)) as u32;
             self.data
-                .resize(self.data.len() + BRICK_VOXELS * self.stride, 0.0);
+                .resize(self.data.len() + BRICK_VOXELS * BUILD_STRIDE, 0.0);
         }
-        let at = (self.top[b] as usize * BRICK_VOXELS + local) * self.stride;
-        &mut self.data[at..at + self.stride]
+        let at = (self.top[b] as usize * BRICK_VOXELS + local) * BUILD_STRIDE;
+        &mut self.data[at..at + BUILD_STRIDE]
     }
 
     /// Adds a piece's ribbon area (and orientation moments) to the voxels it passes through.
@@ -567,58 +579,72 @@ impl DensityGrid {
         let lattice = self.lattice;
         lattice.traverse(a.truncate(), t, 0.0, len, |c, s0, s1| {
             let area = ribbon_area(a, b, len, s0, s1);
+            let centre = a.truncate() + t * (0.5 * (s0 + s1));
             let rec = self.record_mut(c);
             rec[0] += area;
-            if rec.len() > 1 {
-                for (m, v) in rec[1..].iter_mut().zip(moments) {
-                    *m += area * v;
-                }
+            for (m, v) in rec[1..7].iter_mut().zip(moments) {
+                *m += area * v;
+            }
+            for (m, v) in rec[7..10].iter_mut().zip(centre.to_array()) {
+                *m += area * v;
             }
         });
     }
 
-    /// Turns the accumulated areas (and moments) into the records the queries read.
+    /// Turns the accumulated sums into the records the queries read.
     fn finish(&mut self) {
         let inv_volume = self.lattice.h.powi(-3);
-        let mut occupied = 0;
-        if self.stride == 1 {
-            for sigma in self.data.iter_mut() {
-                if *sigma > 0.0 {
-                    occupied += 1;
-                    *sigma *= inv_volume;
-                }
+        let (lattice, top_dims) = (self.lattice, self.top_dims);
+        // The first voxel of each occupied brick, to place its records.
+        let mut brick_origin = vec![UVec3::ZERO; self.data.len() / (BRICK_VOXELS * BUILD_STRIDE)];
+        for (b, &slot) in self.top.iter().enumerate() {
+            if slot != EMPTY {
+                let b = b as u32;
+                let brick = UVec3::new(
+                    b % top_dims[0],
+                    (b / top_dims[0]) % top_dims[1],
+                    b / (top_dims[0] * top_dims[1]),
+                );
+                brick_origin[slot as usize] = brick << BRICK_SHIFT;
             }
-            self.info.bricks = self.data.len() / BRICK_VOXELS;
-        } else {
-            self.directions = self
-                .data
-                .chunks_exact(self.stride)
-                .map(|rec| {
-                    let area = rec[0];
-                    if area <= 0.0 {
-                        return DirectionRecord::EMPTY;
-                    }
-                    occupied += 1;
-                    let moments: [f32; 6] = std::array::from_fn(|i| rec[i + 1] / area);
-                    DirectionRecord::new(area * inv_volume, moments)
-                })
-                .collect();
-            self.data = Vec::new();
-            self.info.bricks = self.directions.len() / BRICK_VOXELS;
         }
+        let isotropic = [1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0, 0.0, 0.0, 0.0];
+        let mut occupied = 0;
+        self.records = self
+            .data
+            .chunks_exact(BUILD_STRIDE)
+            .enumerate()
+            .map(|(i, rec)| {
+                let area = rec[0];
+                if area <= 0.0 {
+                    return VoxelRecord::EMPTY;
+                }
+                occupied += 1;
+                let moments = if self.direction {
+                    std::array::from_fn(|k| rec[k + 1] / area)
+                } else {
+                    isotropic
+                };
+                let local = i as u32 % BRICK_VOXELS as u32;
+                let cell = brick_origin[i / BRICK_VOXELS]
+                    + UVec3::new(
+                        local & BRICK_MASK,
+                        (local >> BRICK_SHIFT) & BRICK_MASK,
+                        local >> (2 * BRICK_SHIFT),
+                    );
+                let centre = lattice.origin + lattice.h * (cell.as_vec3() + 0.5);
+                let centroid = Vec3::new(rec[7], rec[8], rec[9]) / area;
+                // The linear profile with this centroid has g = 12·offset/h² per axis; g·h in
+                // [−2, 2] keeps it non-negative across the voxel along each axis.
+                let slope = (centroid - centre) * (12.0 / lattice.h);
+                VoxelRecord::new(area * inv_volume, moments, slope)
+            })
+            .collect();
+        self.data = Vec::new();
+        self.info.bricks = self.records.len() / BRICK_VOXELS;
         self.info.occupied_voxels = occupied;
-        self.info.memory_bytes = self.data.len() * 4
-            + self.directions.len() * std::mem::size_of::<DirectionRecord>()
-            + self.top.len() * 4;
-    }
-
-    /// `σ · s(ω)` of record `at`: the expected crossings per unit length along `d`.
-    #[inline]
-    fn crossings_per_length(&self, at: usize, d: Vec3) -> f32 {
-        if self.stride == 1 {
-            return self.data[at] * FRAC_PI_4;
-        }
-        self.directions[at].crossings(d)
+        self.info.memory_bytes =
+            self.records.len() * std::mem::size_of::<VoxelRecord>() + self.top.len() * 4;
     }
 
     /// For a ray leaving segment `exclude` of a hair object: where counting starts (one
@@ -661,10 +687,10 @@ impl DensityGrid {
                 if clip_to_box(ray.origin, inv_d, own.start, t_max, lo, hi).is_none() {
                     return;
                 }
-                let factor = if self.stride == 1 {
-                    FRAC_PI_4
-                } else {
+                let factor = if self.direction {
                     t.cross(d).length()
+                } else {
+                    FRAC_PI_4
                 };
                 lattice.traverse(a.truncate(), t, 0.0, len, |c, u0, u1| {
                     let (lo, hi) = cell_box(c, c);
@@ -702,22 +728,29 @@ impl FiberDensity for DensityGrid {
 
     fn fibers_crossed(&self, ray: &Ray) -> f32 {
         let len = ray.dir.length();
-        if (self.data.is_empty() && self.directions.is_empty()) || len.is_nan() || len <= 0.0 {
+        if self.records.is_empty() || len.is_nan() || len <= 0.0 {
             return 0.0;
         }
         let (d, t_max) = (ray.dir / len, ray.t_max * len);
         let own = self.own_strand(ray, d, t_max);
+        // The ray in lattice units (voxel sides from the lattice's corner), for the profiles.
+        let inv_h = 1.0 / self.lattice.h;
+        let (o_cells, d_cells) = ((ray.origin - self.lattice.origin) * inv_h, d * inv_h);
         let mut n = 0.0;
         self.lattice
             .traverse(ray.origin, d, own.start, t_max, |c, t0, t1| {
                 let Some(at) = self.record_at(c) else {
                     return;
                 };
-                let mut per_length = self.crossings_per_length(at, d);
+                let mut per_length = self.records[at].crossings(d);
                 if own.len > 0 && t0 < own.reach {
                     per_length -= own.at(self.lattice.linear(c));
                 }
-                n += per_length.max(0.0) * (t1 - t0);
+                // The own strand's share takes the voxel's profile too: a voxel that holds only
+                // the own strand then counts nothing anywhere.
+                let middle = o_cells + d_cells * (0.5 * (t0 + t1));
+                let offset = middle - (UVec3::from(c).as_vec3() + 0.5);
+                n += per_length.max(0.0) * self.records[at].profile(offset) * (t1 - t0);
             });
         n
     }
@@ -874,7 +907,7 @@ fn occupied_voxels(lattice: &Lattice, curves: &[(u32, &Arc<CurveData>)]) -> usiz
 }
 
 /// The orientation moments `[xx, yy, zz, xy, xz, yz]` of a unit tangent `t`, in the order of
-/// [`DirectionRecord::new`]'s `m`.
+/// [`VoxelRecord::new`]'s `m`.
 fn orientation_moments(t: Vec3) -> [f32; 6] {
     [
         t.x * t.x,
@@ -886,29 +919,31 @@ fn orientation_moments(t: Vec3) -> [f32; 6] {
     ]
 }
 
-/// A voxel's record with direction, in 16 bytes where seven floats took 28: `straight.hair`'s
-/// grid shrinks from 5.28 to 3.02 MiB (a million-strand groom's by hundreds of MiB), at no
-/// measurable cost per query. `sigma_kappa` = σ·κ; `moments` = T̄'s `[xx, yy, zz, xy, xz, yz]`
-/// (trace 1, each in [−1, 1]) in fixed point, 2⁻¹⁵ apart.
+/// A voxel's record, in 20 bytes: `sigma_kappa` = σ·κ; `moments` = T̄'s `[xx, yy, zz, xy, xz,
+/// yz]` (trace 1, each in [−1, 1]) in fixed point, 2⁻¹⁵ apart; `slope` = the linear profile's
+/// `g·h` per axis (see the module docs) in fixed point, 1/[`SLOPE_SCALE`] apart.
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[repr(C, align(16))]
-struct DirectionRecord {
+#[repr(C)]
+struct VoxelRecord {
     sigma_kappa: f32,
     moments: [i16; 6],
+    slope: [i8; 3],
 }
 
-/// Fixed-point scale of [`DirectionRecord::moments`].
+/// Fixed-point scale of [`VoxelRecord::moments`].
 const MOMENT_SCALE: f32 = 32767.0;
 
-impl DirectionRecord {
-    const EMPTY: DirectionRecord = DirectionRecord {
+impl VoxelRecord {
+    const EMPTY: VoxelRecord = VoxelRecord {
         sigma_kappa: 0.0,
         moments: [0; 6],
+        slope: [0; 3],
     };
 
-    /// The record of a voxel with cross-section density `sigma` and normalised orientation
-    /// moments `m = [xx, yy, zz, xy, xz, yz]` of T̄ (trace 1).
-    fn new(sigma: f32, m: [f32; 6]) -> Self {
+    /// The record of a voxel with cross-section density `sigma`, normalised orientation
+    /// moments `m = [xx, yy, zz, xy, xz, yz]` of T̄ (trace 1) and profile slope `g·h` (clamped
+    /// to [−2, 2] per axis).
+    fn new(sigma: f32, m: [f32; 6], slope: Vec3) -> Self {
         let t = m.map(f64::from);
         let lambda = sym_eigenvalues([[t[0], t[3], t[4]], [t[3], t[1], t[5]], [t[4], t[5], t[2]]]);
         // μ = eigenvalues of I − T̄, ascending; R_G wants the middle one (≥ 1/2, as λ₂ ≤ 1/2)
@@ -920,13 +955,17 @@ impl DirectionRecord {
         } else {
             0.0
         };
-        DirectionRecord {
+        VoxelRecord {
             sigma_kappa: sigma * kappa,
             moments: m.map(|v| (v.clamp(-1.0, 1.0) * MOMENT_SCALE).round() as i16),
+            // NaN (no offset to speak of) saturates to 0.
+            slope: slope
+                .to_array()
+                .map(|v| (v.clamp(-2.0, 2.0) * SLOPE_SCALE).round() as i8),
         }
     }
 
-    /// `σ · s(ω)` for unit `d`: `σκ·sqrt(1 − dᵀT̄d)`.
+    /// Mean crossings per unit length over the voxel along unit `d`: `σκ·sqrt(1 − dᵀT̄d)`.
     #[inline]
     fn crossings(&self, d: Vec3) -> f32 {
         let m = self.moments.map(|v| v as f32);
@@ -935,6 +974,13 @@ impl DirectionRecord {
             + m[2] * d.z * d.z
             + 2.0 * (m[3] * d.x * d.y + m[4] * d.x * d.z + m[5] * d.y * d.z);
         self.sigma_kappa * (1.0 - quad * (1.0 / MOMENT_SCALE)).max(0.0).sqrt()
+    }
+
+    /// The density at `offset` from the voxel's centre (in voxel sides) relative to its mean.
+    #[inline]
+    fn profile(&self, offset: Vec3) -> f32 {
+        let g = self.slope.map(|v| v as f32);
+        (1.0 + (g[0] * offset.x + g[1] * offset.y + g[2] * offset.z) / SLOPE_SCALE).max(0.0)
     }
 }
 
@@ -1286,14 +1332,17 @@ mod tests {
         let along = grid(&accel, Some(32), true);
         let isotropic = grid(&accel, Some(32), false);
         let mut rng = Pcg32::new(9, 9);
+        let mut isotropic_sum = 0.0;
         for _ in 0..100 {
             let p = Vec3::new(-0.5, rng.next_f32(), 0.38 * rng.next_f32());
             let r = Ray::new(p, Vec3::X);
             let n = along.fibers_crossed(&r);
             assert!(n < 1e-3, "{n}");
-            // Without direction the same ray crosses a full slab width of density.
-            assert!(isotropic.fibers_crossed(&r) > 0.5);
+            isotropic_sum += isotropic.fibers_crossed(&r);
         }
+        // Without direction the same rays cross a full slab width of density, on average (a
+        // ray outside the layers' profile counts none).
+        assert!(isotropic_sum / 100.0 > 0.5, "{isotropic_sum}");
     }
 
     /// Rays leaving hair: from hits of rays cast from a sphere around the bounds at points
@@ -1584,7 +1633,7 @@ mod tests {
                 *a += b / n;
             }
         }
-        let model = DirectionRecord::new(1.0, m).crossings(w);
+        let model = VoxelRecord::new(1.0, m, Vec3::ZERO).crossings(w);
         let quad = m[0] * w.x * w.x
             + m[1] * w.y * w.y
             + m[2] * w.z * w.z
@@ -1671,7 +1720,7 @@ mod tests {
                     *a += b / k as f32;
                 }
             }
-            let record = DirectionRecord::new(2.5, m);
+            let record = VoxelRecord::new(2.5, m, Vec3::ZERO);
             // Every fourth direction along the first fiber of the mix.
             let w = if rng.next_u32().is_multiple_of(4) {
                 fibers[0]
@@ -1693,7 +1742,7 @@ mod tests {
                 "{m:?} along {w}: {compact} vs {exact}"
             );
         }
-        assert_eq!(std::mem::size_of::<DirectionRecord>(), 16);
+        assert_eq!(std::mem::size_of::<VoxelRecord>(), 20);
     }
 
     #[test]
@@ -1837,5 +1886,65 @@ mod tests {
             let build = start.elapsed().as_secs_f64();
             report("procedural 100k strands", &accel, &grid, build, 2000);
         }
+    }
+
+    /// The linear profile within voxels, against Embree's count of every fiber crossed, for
+    /// rays leaving hair points hit from outside (as a camera sees them) on a procedural head
+    /// (the studies' groom): closer than the constant profile it replaced, both in squared
+    /// error and in the mean of `e^{−n}` (measured: squared error 9.4 against 15.6, mean
+    /// `e^{−n}` − `e^{−N}` −0.078 against −0.107 over 20 000 rays).
+    #[test]
+    fn the_profile_within_voxels_counts_closer_to_the_fibers() {
+        let head = ProceduralHair {
+            style: HairStyle::Wavy {
+                amplitude: 0.05,
+                frequency: 2.0,
+            },
+            seed: 7,
+            strands: 6000,
+            points_per_strand: 24,
+            radius: 0.004,
+            length: 1.6,
+            center: Vec3::ZERO,
+            sphere_radius: 1.0,
+        }
+        .generate()
+        .unwrap();
+        let accel = accel(&head);
+        let linear = grid(&accel, None, true);
+        let mut constant = grid(&accel, None, true);
+        for r in &mut constant.records {
+            r.slope = [0; 3];
+        }
+        let rays = leaving_rays(&accel, 5000, 9);
+        let truth: Vec<f32> = rays
+            .iter()
+            .map(|r| accel.count_fibers_crossed(r) as f32)
+            .collect();
+        let errors = |g: &DensityGrid| {
+            let (mut squared, mut transmitted) = (0.0f64, 0.0f64);
+            for (r, &t) in rays.iter().zip(&truth) {
+                let n = g.fibers_crossed(r);
+                squared += ((n - t) as f64).powi(2);
+                transmitted += ((-n).exp() - (-t).exp()) as f64;
+            }
+            let m = rays.len() as f64;
+            (squared / m, transmitted / m)
+        };
+        let (linear_mse, linear_t) = errors(&linear);
+        let (constant_mse, constant_t) = errors(&constant);
+        eprintln!(
+            "head, {} rays leaving it: squared error {linear_mse:.2} (constant profile \
+             {constant_mse:.2}), mean e^-n - e^-N {linear_t:+.4} ({constant_t:+.4})",
+            rays.len()
+        );
+        assert!(
+            linear_mse < 0.8 * constant_mse,
+            "{linear_mse} vs {constant_mse}"
+        );
+        assert!(
+            linear_t.abs() < 0.85 * constant_t.abs(),
+            "{linear_t} vs {constant_t}"
+        );
     }
 }
