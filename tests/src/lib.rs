@@ -98,10 +98,16 @@ pub fn hair_ball(strands: u32) -> tress_accel::HairGeometry {
     .expect("procedural hair")
 }
 
-/// Mean and standard error of `values`.
-pub fn mean_and_standard_error(values: &[f64]) -> (f64, f64) {
+/// Mean and sample variance (n − 1 in the denominator) of `values`.
+pub fn mean_and_variance(values: &[f64]) -> (f64, f64) {
     let n = values.len() as f64;
     let mean = values.iter().sum::<f64>() / n;
     let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
-    (mean, (var / n).sqrt())
+    (mean, var)
+}
+
+/// Mean and standard error of `values`.
+pub fn mean_and_standard_error(values: &[f64]) -> (f64, f64) {
+    let (mean, var) = mean_and_variance(values);
+    (mean, (var / values.len() as f64).sqrt())
 }

@@ -8,7 +8,7 @@ use tress_core::{Image, Integrator, Scene};
 use tress_dual_mis::{DualMis, MisDirections};
 use tress_dual_uniform::{DualSettings, DualUniform, UniformDirections};
 use tress_materials::HairModel;
-use tress_tests::{film, hair_ball_scene, hair_scene, mean_and_standard_error};
+use tress_tests::{film, hair_ball_scene, hair_scene, mean_and_standard_error, mean_and_variance};
 
 /// A smooth, strongly directional environment (bright warm top-left, dark blue bottom): no sun
 /// disc, whose rare hits would make the uniform estimator's variance too heavy-tailed for a
@@ -230,8 +230,7 @@ fn under_a_directional_light_dual_mis_is_far_less_noisy_than_the_path_tracer_on_
                         (p.x + p.y + p.z) as f64 / 3.0
                     })
                     .collect();
-                let mean = values.iter().sum::<f64>() / values.len() as f64;
-                values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (values.len() - 1) as f64
+                mean_and_variance(&values).1
             })
             .sum::<f64>()
             / pixels as f64
