@@ -143,7 +143,8 @@ const BRICK_MASK: u32 = (1 << BRICK_SHIFT) - 1;
 const BRICK_VOXELS: usize = 1 << (3 * BRICK_SHIFT);
 const EMPTY: u32 = u32::MAX;
 /// Floats per voxel while building: the ribbon area, its orientation moments (xx, yy, zz, xy,
-/// xz, yz) and its centroid's coordinates, each area-weighted.
+/// xz, yz) and its centroid's offset from the voxel's centre (in voxel sides), each
+/// area-weighted.
 const BUILD_STRIDE: usize = 10;
 /// Fixed-point scale of [`VoxelRecord::slope`]: `g·h` in [−2, 2].
 const SLOPE_SCALE: f32 = 63.5;
@@ -261,6 +262,18 @@ impl Lattice {
             (((p[i] - self.origin[i]) / self.h).floor() as i64).clamp(0, self.dims[i] as i64 - 1)
                 as u32
         })
+    }
+
+    /// `p` in voxel sides from the lattice's corner.
+    fn in_cells(&self, p: Vec3) -> Vec3 {
+        (p - self.origin) / self.h
+    }
+
+    /// A point given in voxel sides from the lattice's corner (see [`Lattice::in_cells`]) as an
+    /// offset from the centre of voxel `c`, in voxel sides.
+    #[inline]
+    fn from_centre(cells: Vec3, c: [u32; 3]) -> Vec3 {
+        cells - (UVec3::from(c).as_vec3() + 0.5)
     }
 
     fn linear(&self, c: [u32; 3]) -> u32 {
@@ -580,13 +593,14 @@ impl DensityGrid {
         let lattice = self.lattice;
         lattice.traverse(a.truncate(), t, 0.0, len, |c, s0, s1| {
             let area = ribbon_area(a, b, len, s0, s1);
-            let centre = a.truncate() + t * (0.5 * (s0 + s1));
+            let middle = lattice.in_cells(a.truncate() + t * (0.5 * (s0 + s1)));
+            let offset = Lattice::from_centre(middle, c);
             let rec = self.record_mut(c);
             rec[0] += area;
             for (m, v) in rec[1..7].iter_mut().zip(moments) {
                 *m += area * v;
             }
-            for (m, v) in rec[7..10].iter_mut().zip(centre.to_array()) {
+            for (m, v) in rec[7..10].iter_mut().zip(offset.to_array()) {
                 *m += area * v;
             }
         });
@@ -595,27 +609,12 @@ impl DensityGrid {
     /// Turns the accumulated sums into the records the queries read.
     fn finish(&mut self) {
         let inv_volume = self.lattice.h.powi(-3);
-        let (lattice, top_dims) = (self.lattice, self.top_dims);
-        // The first voxel of each occupied brick, to place its records.
-        let mut brick_origin = vec![UVec3::ZERO; self.data.len() / (BRICK_VOXELS * BUILD_STRIDE)];
-        for (b, &slot) in self.top.iter().enumerate() {
-            if slot != EMPTY {
-                let b = b as u32;
-                let brick = UVec3::new(
-                    b % top_dims[0],
-                    (b / top_dims[0]) % top_dims[1],
-                    b / (top_dims[0] * top_dims[1]),
-                );
-                brick_origin[slot as usize] = brick << BRICK_SHIFT;
-            }
-        }
         let isotropic = [1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0, 0.0, 0.0, 0.0];
         let mut occupied = 0;
         self.records = self
             .data
             .chunks_exact(BUILD_STRIDE)
-            .enumerate()
-            .map(|(i, rec)| {
+            .map(|rec| {
                 let area = rec[0];
                 if area <= 0.0 {
                     return VoxelRecord::EMPTY;
@@ -626,18 +625,11 @@ impl DensityGrid {
                 } else {
                     isotropic
                 };
-                let local = i as u32 % BRICK_VOXELS as u32;
-                let cell = brick_origin[i / BRICK_VOXELS]
-                    + UVec3::new(
-                        local & BRICK_MASK,
-                        (local >> BRICK_SHIFT) & BRICK_MASK,
-                        local >> (2 * BRICK_SHIFT),
-                    );
-                let centre = lattice.origin + lattice.h * (cell.as_vec3() + 0.5);
-                let centroid = Vec3::new(rec[7], rec[8], rec[9]) / area;
-                // The linear profile with this centroid has g = 12·offset/h² per axis; g·h in
-                // [−2, 2] keeps it non-negative across the voxel along each axis.
-                let slope = (centroid - centre) * (12.0 / lattice.h);
+                // The centroid's offset from the voxel's centre, in voxel sides; the linear
+                // profile with that centroid has g·h = 12·offset per axis, and g·h in [−2, 2]
+                // keeps it non-negative across the voxel along each axis.
+                let offset = Vec3::new(rec[7], rec[8], rec[9]) / area;
+                let slope = offset * 12.0;
                 VoxelRecord::new(area * inv_volume, moments, slope)
             })
             .collect();
@@ -734,9 +726,8 @@ impl FiberDensity for DensityGrid {
         }
         let (d, t_max) = (ray.dir / len, ray.t_max * len);
         let own = self.own_strand(ray, d, t_max);
-        // The ray in lattice units (voxel sides from the lattice's corner), for the profiles.
-        let inv_h = 1.0 / self.lattice.h;
-        let (o_cells, d_cells) = ((ray.origin - self.lattice.origin) * inv_h, d * inv_h);
+        // The ray in voxel sides from the lattice's corner, for the profiles.
+        let (o_cells, d_cells) = (self.lattice.in_cells(ray.origin), d / self.lattice.h);
         let mut n = 0.0;
         self.lattice
             .traverse(ray.origin, d, own.start, t_max, |c, t0, t1| {
@@ -750,8 +741,8 @@ impl FiberDensity for DensityGrid {
                 // The own strand's share takes the voxel's profile too: a voxel that holds only
                 // the own strand then counts nothing anywhere.
                 let middle = o_cells + d_cells * (0.5 * (t0 + t1));
-                let offset = middle - (UVec3::from(c).as_vec3() + 0.5);
-                n += per_length.max(0.0) * self.records[at].profile(offset) * (t1 - t0);
+                let profile = self.records[at].profile(Lattice::from_centre(middle, c));
+                n += per_length.max(0.0) * profile * (t1 - t0);
             });
         n
     }
@@ -1624,6 +1615,15 @@ mod tests {
             .collect()
     }
 
+    /// `wᵀT̄w` for the moments `m = [xx, yy, zz, xy, xz, yz]` of T̄, in f32: what the records'
+    /// fixed-point moments are checked against.
+    fn quadratic_form(m: [f32; 6], w: Vec3) -> f32 {
+        m[0] * w.x * w.x
+            + m[1] * w.y * w.y
+            + m[2] * w.z * w.z
+            + 2.0 * (m[3] * w.x * w.y + m[4] * w.x * w.z + m[5] * w.y * w.z)
+    }
+
     /// Exact mean sine, the model's, and sqrt(1 − ωᵀT̄ω), for unit-weight fibers `ts`.
     fn mean_sines(ts: &[Vec3], w: Vec3) -> (f32, f32, f32) {
         let n = ts.len() as f32;
@@ -1635,10 +1635,7 @@ mod tests {
             }
         }
         let model = VoxelRecord::new(1.0, m, Vec3::ZERO).crossings(w);
-        let quad = m[0] * w.x * w.x
-            + m[1] * w.y * w.y
-            + m[2] * w.z * w.z
-            + 2.0 * (m[3] * w.x * w.y + m[4] * w.x * w.z + m[5] * w.y * w.z);
+        let quad = quadratic_form(m, w);
         (exact, model, (1.0 - quad).max(0.0).sqrt())
     }
 
@@ -1701,7 +1698,7 @@ mod tests {
         }
     }
 
-    /// The 16-byte record's fixed-point moments (2⁻¹⁵ apart) change `1 − ωᵀT̄ω` by at most
+    /// The record's fixed-point moments (2⁻¹⁵ apart) change `1 − ωᵀT̄ω` by at most
     /// 3·2⁻¹⁶ ≈ 5e-5, so the crossings by at most √(5e-5) ≈ 0.7 % of σκ (along a voxel's only
     /// fiber direction, where the exact value is 0) and far less elsewhere; random orientation
     /// mixes and directions, and the aligned case.
@@ -1728,10 +1725,7 @@ mod tests {
             } else {
                 unit(&mut rng)
             };
-            let quad = m[0] * w.x * w.x
-                + m[1] * w.y * w.y
-                + m[2] * w.z * w.z
-                + 2.0 * (m[3] * w.x * w.y + m[4] * w.x * w.z + m[5] * w.y * w.z);
+            let quad = quadratic_form(m, w);
             let (s2, exact) = (
                 record.sigma_kappa.powi(2),
                 record.sigma_kappa * (1.0 - quad).max(0.0).sqrt(),
