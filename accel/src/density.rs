@@ -124,6 +124,7 @@ use serde::{Deserialize, Serialize};
 use std::collections::HashSet;
 use std::f32::consts::FRAC_PI_4;
 use std::fmt;
+use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use tress_core::accel::FiberDensity;
@@ -281,14 +282,15 @@ impl Lattice {
     }
 
     /// Calls `visit(voxel, t_in, t_out)` for each voxel the line `o + t·d` (unit `d`) passes
-    /// through over `t ∈ [t0, t1]` clipped to the lattice, in order (Amanatides & Woo).
+    /// through over `t ∈ [t0, t1]` clipped to the lattice, in order (Amanatides & Woo), until
+    /// `visit` returns [`ControlFlow::Break`].
     fn traverse(
         &self,
         o: Vec3,
         d: Vec3,
         t0: f32,
         t1: f32,
-        mut visit: impl FnMut([u32; 3], f32, f32),
+        mut visit: impl FnMut([u32; 3], f32, f32) -> ControlFlow<()>,
     ) {
         let dims = self.dims.map(|n| n as i64);
         let size = Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) * self.h;
@@ -326,7 +328,9 @@ impl Lattice {
             let t_next = next[axis];
             let t_end = t_next.min(t1);
             if t_end > t {
-                visit(cell.map(|c| c as u32), t, t_end);
+                if visit(cell.map(|c| c as u32), t, t_end).is_break() {
+                    return;
+                }
                 t = t_end;
             }
             if t_next >= t1 {
@@ -603,6 +607,7 @@ impl DensityGrid {
             for (m, v) in rec[7..10].iter_mut().zip(offset.to_array()) {
                 *m += area * v;
             }
+            ControlFlow::Continue(())
         });
     }
 
@@ -687,14 +692,15 @@ impl DensityGrid {
                 };
                 lattice.traverse(a.truncate(), t, 0.0, len, |c, u0, u1| {
                     let (lo, hi) = cell_box(c, c);
-                    let Some((_, exit)) = clip_to_box(ray.origin, inv_d, own.start, t_max, lo, hi)
-                    else {
-                        return;
-                    };
-                    touched = true;
-                    own.reach = own.reach.max(exit);
-                    let w = ribbon_area(a, b, len, u0, u1) * factor * inv_volume;
-                    own.add(lattice.linear(c), w);
+                    if let Some((_, exit)) =
+                        clip_to_box(ray.origin, inv_d, own.start, t_max, lo, hi)
+                    {
+                        touched = true;
+                        own.reach = own.reach.max(exit);
+                        let w = ribbon_area(a, b, len, u0, u1) * factor * inv_volume;
+                        own.add(lattice.linear(c), w);
+                    }
+                    ControlFlow::Continue(())
                 });
             });
             touched
@@ -719,7 +725,7 @@ impl FiberDensity for DensityGrid {
         self.info().to_string()
     }
 
-    fn fibers_crossed(&self, ray: &Ray) -> f32 {
+    fn fibers_crossed_up_to(&self, ray: &Ray, limit: f32) -> f32 {
         let len = ray.dir.length();
         if self.records.is_empty() || len.is_nan() || len <= 0.0 {
             return 0.0;
@@ -732,17 +738,26 @@ impl FiberDensity for DensityGrid {
         self.lattice
             .traverse(ray.origin, d, own.start, t_max, |c, t0, t1| {
                 let Some(at) = self.record_at(c) else {
-                    return;
+                    return ControlFlow::Continue(());
                 };
-                let mut per_length = self.records[at].crossings(d);
+                let record = &self.records[at];
+                if record.sigma_kappa == 0.0 {
+                    return ControlFlow::Continue(());
+                }
+                let mut per_length = record.crossings(d);
                 if own.len > 0 && t0 < own.reach {
                     per_length -= own.at(self.lattice.linear(c));
                 }
                 // The own strand's share takes the voxel's profile too: a voxel that holds only
                 // the own strand then counts nothing anywhere.
                 let middle = o_cells + d_cells * (0.5 * (t0 + t1));
-                let profile = self.records[at].profile(Lattice::from_centre(middle, c));
+                let profile = record.profile(Lattice::from_centre(middle, c));
                 n += per_length.max(0.0) * profile * (t1 - t0);
+                if n >= limit {
+                    ControlFlow::Break(())
+                } else {
+                    ControlFlow::Continue(())
+                }
             });
         n
     }
@@ -854,7 +869,10 @@ fn occupied_voxels(lattice: &Lattice, curves: &[(u32, &Arc<CurveData>)]) -> usiz
     let visit = |c: &CurveData, prim: usize, mark: &mut dyn FnMut(u32)| {
         for_each_piece(c, prim, |a, b| {
             if let Some((t, len)) = piece_line(a, b) {
-                lattice.traverse(a.truncate(), t, 0.0, len, |v, _, _| mark(lattice.linear(v)));
+                lattice.traverse(a.truncate(), t, 0.0, len, |v, _, _| {
+                    mark(lattice.linear(v));
+                    ControlFlow::Continue(())
+                });
             }
         });
     };
@@ -1461,6 +1479,43 @@ mod tests {
         }
     }
 
+    /// Counting up to a limit gives the full count, bit for bit, where it stays below the
+    /// limit, and otherwise stops within a voxel of it, for rays through and leaving the hair.
+    #[test]
+    fn counting_up_to_a_limit_stops_within_a_voxel_of_it() {
+        let accel = accel(&ball(2, 3000, 16));
+        let grid = grid(&accel, None, true);
+        let mut rng = Pcg32::new(4, 4);
+        let mut rays: Vec<Ray> = (0..500).map(|_| ray_through_ball(&mut rng)).collect();
+        rays.extend(leaving_rays(&accel, 500, 9));
+        // The most one voxel can add: its densest crossings over its diagonal, at the profile's
+        // peak (4 at most: 1 + 2 · ½ per axis, see `VoxelRecord::profile`).
+        let per_voxel = grid
+            .records
+            .iter()
+            .map(|r| r.sigma_kappa)
+            .fold(0.0, f32::max)
+            * grid.lattice.h
+            * 3f32.sqrt()
+            * 4.0;
+        let mut stopped_early = 0;
+        for limit in [0.5, 2.0, 8.0] {
+            for r in &rays {
+                let (full, up_to) = (grid.fibers_crossed(r), grid.fibers_crossed_up_to(r, limit));
+                if full < limit {
+                    assert_eq!(up_to.to_bits(), full.to_bits(), "limit {limit}");
+                } else {
+                    assert!(
+                        up_to >= limit && up_to <= full && up_to < limit + per_voxel,
+                        "limit {limit}: {up_to} of {full} (a voxel adds at most {per_voxel})"
+                    );
+                    stopped_early += usize::from(up_to < full);
+                }
+            }
+        }
+        assert!(stopped_early > 100, "{stopped_early}");
+    }
+
     /// The automatic resolution counts occupied voxels in parallel: the grid (resolution and
     /// every count) must not depend on the number of threads, and the parallel bitmap count
     /// must equal the serial hash-set count.
@@ -1496,6 +1551,7 @@ mod tests {
                         if let Some((t, len)) = piece_line(a, b) {
                             lattice.traverse(a.truncate(), t, 0.0, len, |v, _, _| {
                                 serial.insert(lattice.linear(v));
+                                ControlFlow::Continue(())
                             });
                         }
                     });

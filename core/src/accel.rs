@@ -89,7 +89,13 @@ pub type BuildError = Box<dyn std::error::Error + Send + Sync>;
 /// answers a statistical question, not an intersection one.
 pub trait FiberDensity: Send + Sync {
     /// Expected number of fibers crossed along `ray` over `(0, ray.t_max)`.
-    fn fibers_crossed(&self, ray: &Ray) -> f32;
+    fn fibers_crossed(&self, ray: &Ray) -> f32 {
+        self.fibers_crossed_up_to(ray, f32::INFINITY)
+    }
+    /// [`Self::fibers_crossed`], except that counting may stop once the count reaches `limit`
+    /// (the result is then at least `limit`): a caller for whom every count past `limit` means
+    /// the same need not pay for the rest of the ray.
+    fn fibers_crossed_up_to(&self, ray: &Ray, limit: f32) -> f32;
     /// One line for logs: resolution, memory, what it stores.
     fn describe(&self) -> String;
 }

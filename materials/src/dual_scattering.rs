@@ -365,8 +365,30 @@ pub struct DualScatteringTables {
     half_circle_energy: Vec<Rgb>,
     /// Measured multiple scattering ([`MultipleScattering::FiberMedium`]).
     medium: Option<FiberMedium>,
+    /// See [`DualScatteringTables::settled_counts`].
+    settled: SettledCounts,
     build_time: Duration,
 }
+
+/// Fiber counts past which F no longer changes measurably, so the density grid may stop
+/// counting there ([`tress_core::accel::FiberDensity::fibers_crossed_up_to`]): most rays toward
+/// a blocked light cross far more fibers than any light gets through, and the count is the
+/// larger part of a dual-scattering sample's cost.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SettledCounts {
+    /// Fibers crossed toward the light past which the scattered transmittance is at most
+    /// [`NEGLIGIBLE_TRANSMITTANCE`] in every channel.
+    pub toward_light: f32,
+    /// Fibers behind the point past which the local back-scattering's energy is within
+    /// [`SETTLED_BACK_SCATTERING`] (relative) of a half-space's.
+    pub behind: f32,
+}
+
+/// Scattered transmittance treated as no light at all: a millionth of the light's radiance,
+/// far below what a render resolves.
+pub const NEGLIGIBLE_TRANSMITTANCE: f32 = 1e-6;
+/// Relative change of the local back-scattering's energy treated as none.
+pub const SETTLED_BACK_SCATTERING: f32 = 1e-5;
 
 impl DualScatteringTables {
     /// Integrates `bcsdf` numerically (module docs); runs on all cores, deterministically.
@@ -400,6 +422,29 @@ impl DualScatteringTables {
         let medium = (settings.multiple_scattering == MultipleScattering::FiberMedium).then(|| {
             FiberMedium::build(bcsdf, &globals, |k| node_theta(k, n) as f32, settings.walks)
         });
+        let settled = match &medium {
+            Some(m) => SettledCounts {
+                toward_light: m.transmittance_negligible_past(NEGLIGIBLE_TRANSMITTANCE),
+                behind: m.back_scattering_settled_past(SETTLED_BACK_SCATTERING),
+            },
+            None => {
+                // T_f = d_f·ā_f^n with d_f ≤ 1, and nothing reads the depth behind.
+                let a_f = globals
+                    .iter()
+                    .map(|g| g.a_f_eff.max_element())
+                    .fold(0.0f32, f32::max);
+                let toward_light = if a_f < 1.0 {
+                    // A hair past where ā_f^n meets the bound, for rounding.
+                    (NEGLIGIBLE_TRANSMITTANCE.ln() / a_f.ln()).max(1.0) * 1.001
+                } else {
+                    f32::INFINITY
+                };
+                SettledCounts {
+                    toward_light,
+                    behind: f32::INFINITY,
+                }
+            }
+        };
         let build_time = start.elapsed();
         let albedo_max = globals
             .iter()
@@ -413,14 +458,16 @@ impl DualScatteringTables {
         }
         tracing::info!(
             "dual-scattering tables for {} lobe(s), {} θ nodes, quadrature h {} ({:?}) × θ {} × φ {}: \
-             built in {:.3} s",
+             built in {:.3} s; F settles past {} fibers toward the light and {} behind",
             lobe_names.len(),
             n,
             quad.h.len(),
             domain,
             settings.theta_quad,
             quad.phi.len(),
-            build_time.as_secs_f64()
+            build_time.as_secs_f64(),
+            settled.toward_light,
+            settled.behind
         );
         Ok(DualScatteringTables {
             settings: settings.clone(),
@@ -429,6 +476,7 @@ impl DualScatteringTables {
             lobes,
             half_circle_energy,
             medium,
+            settled,
             build_time,
         })
     }
@@ -518,6 +566,11 @@ impl DualScatteringTables {
                 }
             }
         }
+    }
+
+    /// The fiber counts past which F no longer changes measurably.
+    pub fn settled_counts(&self) -> SettledCounts {
+        self.settled
     }
 
     /// The random-walk tables, for [`MultipleScattering::FiberMedium`].
@@ -1760,6 +1813,59 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Past the settled counts, F's forward light is negligible and its back-scattering a
+    /// half-space's, for every model and light inclination; and for absorbing fibers the counts
+    /// are short enough to spare the grid most of a ray through a groom.
+    #[test]
+    fn f_does_not_change_past_the_settled_counts() {
+        let models = [MultipleScattering::Paper, MultipleScattering::FiberMedium];
+        for ((name, b, _), model) in all_models()
+            .into_iter()
+            .flat_map(|m| models.map(|model| (m.clone(), model)))
+        {
+            let ds = shading_with(model, b, DensityFactors { d_f: 1.0, d_b: 1.0 });
+            let settled = ds.tables().settled_counts();
+            let blocked = -(-settled.toward_light).exp_m1();
+            for k in 0..=16 {
+                let theta = -0.5 * PI + PI * k as f32 / 16.0;
+                let wi = Vec3::new(theta.sin(), 0.0, theta.cos());
+                for scale in [1.0, 1.3, 2.0, 4.0, 64.0] {
+                    let n = settled.toward_light * scale;
+                    let t_f = ds.forward(wi, n).t_f.max_element();
+                    assert!(
+                        t_f <= NEGLIGIBLE_TRANSMITTANCE / blocked,
+                        "{name} {model:?} θ {theta} n {n}: T_f {t_f}"
+                    );
+                }
+                let half_space = ds
+                    .tables()
+                    .back_scattering(theta, 1.0, f32::INFINITY)
+                    .energy;
+                for scale in [1.0, 1.3, 2.0, 4.0, 64.0] {
+                    let behind = settled.behind * scale;
+                    let energy = ds.tables().back_scattering(theta, 1.0, behind).energy;
+                    assert!(
+                        (energy - half_space)
+                            .abs()
+                            .cmple(half_space * SETTLED_BACK_SCATTERING * 1.001)
+                            .all(),
+                        "{name} {model:?} θ {theta} behind {behind}: {energy} vs {half_space}"
+                    );
+                }
+            }
+        }
+        let blond = shading_with(
+            MultipleScattering::FiberMedium,
+            model("Chiang/blond"),
+            DensityFactors::default(),
+        );
+        let settled = blond.tables().settled_counts();
+        assert!(
+            settled.toward_light <= 128.0 && settled.behind <= 64.0,
+            "{settled:?}"
+        );
     }
 
     /// F is finite and non-negative for every model, with and without fibers in the way.

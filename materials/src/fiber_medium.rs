@@ -152,6 +152,53 @@ impl FiberMedium {
         b
     }
 
+    /// The depth past which [`Self::scattered_transmittance`] stays at or below `negligible`
+    /// in every channel at every inclination (infinite if it never does, or if the
+    /// extrapolation past the deepest node could climb back above it).
+    pub(crate) fn transmittance_negligible_past(&self, negligible: f32) -> f32 {
+        let last = DEPTHS.len() - 1;
+        self.transmit
+            .chunks_exact(DEPTHS.len())
+            .map(|row| {
+                let (deepest, before) = (row[last].max_element(), row[last - 1].max_element());
+                if deepest > negligible || (deepest > 0.0 && deepest > before) {
+                    return f32::INFINITY;
+                }
+                // Between two nodes at or below `negligible` the interpolation stays there.
+                let first_small = row
+                    .iter()
+                    .rposition(|t| t.max_element() > negligible)
+                    .map_or(0, |k| k + 1);
+                DEPTHS[first_small]
+            })
+            .fold(0.0, f32::max)
+    }
+
+    /// The depth past which [`Self::back_scattering`]'s energy is within `tolerance` of the
+    /// half-space's (relative, every channel, every inclination); at most the deepest node,
+    /// past which it is the half-space's.
+    pub(crate) fn back_scattering_settled_past(&self, tolerance: f32) -> f32 {
+        self.reflect
+            .chunks_exact(DEPTHS.len())
+            .zip(&self.back)
+            .map(|(row, half_space)| {
+                let settled = |r: &Rgb| {
+                    (*r - half_space.energy)
+                        .abs()
+                        .cmple(half_space.energy * tolerance)
+                        .all()
+                };
+                // Between two settled nodes the interpolation stays between them.
+                let first_settled = row
+                    .iter()
+                    .rposition(|r| !settled(r))
+                    .map_or(0, |k| k + 1)
+                    .min(DEPTHS.len() - 1);
+                DEPTHS[first_settled]
+            })
+            .fold(0.0, f32::max)
+    }
+
     /// T_s after crossing `depth` fibers (expected), at node `i` + fraction `t`.
     pub(crate) fn scattered_transmittance(&self, i: usize, t: f32, depth: f32) -> Rgb {
         let at = |k: usize| {

@@ -145,7 +145,8 @@ impl HairPoint<'_> {
         } else if scene.occluded_by_surfaces(&ray) {
             return Rgb::ZERO;
         } else {
-            (self.density.fibers_crossed(&ray), 0.0)
+            let limit = self.shading.tables().settled_counts().toward_light;
+            (self.density.fibers_crossed_up_to(&ray, limit), 0.0)
         };
         self.shading.eval_layered(
             self.wo_local,
@@ -264,7 +265,8 @@ impl<D: DirectionSampling> DualScattering<D> {
             return Rgb::ZERO;
         };
         let behind = if shading.uses_depth_behind() {
-            density.fibers_crossed(&sp.spawn(-sp.wo))
+            let limit = shading.tables().settled_counts().behind;
+            density.fibers_crossed_up_to(&sp.spawn(-sp.wo), limit)
         } else {
             f32::INFINITY
         };
