@@ -282,9 +282,24 @@ impl Lattice {
     }
 
     /// Calls `visit(voxel, t_in, t_out)` for each voxel the line `o + t·d` (unit `d`) passes
-    /// through over `t ∈ [t0, t1]` clipped to the lattice, in order (Amanatides & Woo), until
-    /// `visit` returns [`ControlFlow::Break`].
+    /// through over `t ∈ [t0, t1]` clipped to the lattice, in order (Amanatides & Woo).
     fn traverse(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        t0: f32,
+        t1: f32,
+        mut visit: impl FnMut([u32; 3], f32, f32),
+    ) {
+        self.traverse_until(o, d, t0, t1, |c, a, b| {
+            visit(c, a, b);
+            ControlFlow::Continue(())
+        });
+    }
+
+    /// [`Lattice::traverse`], stopping after the voxel for which `visit` returns
+    /// [`ControlFlow::Break`].
+    fn traverse_until(
         &self,
         o: Vec3,
         d: Vec3,
@@ -607,7 +622,6 @@ impl DensityGrid {
             for (m, v) in rec[7..10].iter_mut().zip(offset.to_array()) {
                 *m += area * v;
             }
-            ControlFlow::Continue(())
         });
     }
 
@@ -700,7 +714,6 @@ impl DensityGrid {
                         let w = ribbon_area(a, b, len, u0, u1) * factor * inv_volume;
                         own.add(lattice.linear(c), w);
                     }
-                    ControlFlow::Continue(())
                 });
             });
             touched
@@ -736,7 +749,7 @@ impl FiberDensity for DensityGrid {
         let (o_cells, d_cells) = (self.lattice.in_cells(ray.origin), d / self.lattice.h);
         let mut n = 0.0;
         self.lattice
-            .traverse(ray.origin, d, own.start, t_max, |c, t0, t1| {
+            .traverse_until(ray.origin, d, own.start, t_max, |c, t0, t1| {
                 let Some(at) = self.record_at(c) else {
                     return ControlFlow::Continue(());
                 };
@@ -869,10 +882,7 @@ fn occupied_voxels(lattice: &Lattice, curves: &[(u32, &Arc<CurveData>)]) -> usiz
     let visit = |c: &CurveData, prim: usize, mark: &mut dyn FnMut(u32)| {
         for_each_piece(c, prim, |a, b| {
             if let Some((t, len)) = piece_line(a, b) {
-                lattice.traverse(a.truncate(), t, 0.0, len, |v, _, _| {
-                    mark(lattice.linear(v));
-                    ControlFlow::Continue(())
-                });
+                lattice.traverse(a.truncate(), t, 0.0, len, |v, _, _| mark(lattice.linear(v)));
             }
         });
     };
@@ -1551,7 +1561,6 @@ mod tests {
                         if let Some((t, len)) = piece_line(a, b) {
                             lattice.traverse(a.truncate(), t, 0.0, len, |v, _, _| {
                                 serial.insert(lattice.linear(v));
-                                ControlFlow::Continue(())
                             });
                         }
                     });
