@@ -112,9 +112,10 @@ fn dual_mis_error_falls_as_one_over_n_without_a_floor() {
         products.push(m * spp as f64);
     }
     // A floor (bias, or a pdf that does not match its sampler) would make MSE·spp grow with
-    // spp. Stratified pixel positions make it fall at first (faster than 1/N while a pixel's
-    // samples still resolve its coverage), then 1/N leaves it flat: it must never rise above
-    // its running minimum by more than noise, and end flat.
+    // spp. Stratified draws make it fall (faster than 1/N while a pixel's samples still resolve
+    // its coverage and its lights): it must never rise above its running minimum by more than
+    // noise, and at the highest spp neither rise nor fall faster than randomised quasi-Monte
+    // Carlo can on integrands with edges, N^{-3/2} (MSE·spp ×0.5 per 4× spp): measured 0.8.
     let mut lowest = f64::INFINITY;
     for p in &products {
         assert!(
@@ -126,8 +127,8 @@ fn dual_mis_error_falls_as_one_over_n_without_a_floor() {
     let n = products.len();
     let (a, b) = (products[n - 2], products[n - 1]);
     assert!(
-        b < 1.4 * a && b > 0.7 * a,
-        "not flat at the highest spp: {products:?}"
+        b < 1.4 * a && b > 0.5 * a,
+        "MSE·spp at the highest spp: {products:?}"
     );
 }
 
@@ -189,7 +190,7 @@ fn with_no_fibers_to_cross_and_no_back_scattering_dual_scattering_is_single_scat
 /// has no light integral to estimate (one shadow ray toward the sun), so its noise is only
 /// which fibers a pixel's rays hit, while the path tracer samples every bounce of the multiple
 /// scattering: at equal spp its noise must be far below the path tracer's (measured on this
-/// ball: 11–17× less variance over four seeds; under an environment, whose light integral both
+/// ball: 10–17× less variance over four seeds; under an environment, whose light integral both
 /// estimate with the same shadow rays, the two come within 2× of each other: README).
 #[test]
 fn under_a_directional_light_dual_mis_is_far_less_noisy_than_the_path_tracer_on_light_hair() {
