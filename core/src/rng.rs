@@ -48,7 +48,7 @@ impl Pcg32 {
 
 /// SplitMix64 finaliser: a bijective 64-bit mix with full avalanche.
 #[inline]
-pub fn mix64(mut z: u64) -> u64 {
+pub const fn mix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58476d1ce4e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d049bb133111eb);
     z ^ (z >> 31)
@@ -72,8 +72,12 @@ pub fn hash_words(words: &[u64]) -> u64 {
 /// pixel's light, BCSDF and lens samples cover their domains evenly. How much noise that takes
 /// out depends on how alike the integrands of a pixel's samples are: on hair, whose samples
 /// hit different fibers, 7–16 % of dual-mis's variance (README, "Why not under an
-/// environment"). Free-standing samplers ([`Sampler::from_seed`]) are independent PCG32
-/// streams.
+/// environment"). Only a sample's first [`STRATIFIED_DRAWS`] draws are stratified — the lens
+/// and the first two bounces' light, BCSDF and light-choice numbers, where stratification
+/// pays — and the rest come from a PCG32 stream of the sample, because a scrambled Sobol draw
+/// costs tens of nanoseconds, which a long path (light hair: tens of bounces, four draws each)
+/// would pay at every bounce. Free-standing samplers ([`Sampler::from_seed`]) are
+/// independent PCG32 streams.
 #[derive(Clone, Debug)]
 pub struct Sampler {
     source: Source,
@@ -82,8 +86,27 @@ pub struct Sampler {
 #[derive(Clone, Debug)]
 enum Source {
     Independent(Pcg32),
-    Stratified(PixelSequence),
+    Stratified {
+        sequence: PixelSequence,
+        /// The draws after the first [`STRATIFIED_DRAWS`].
+        tail: Pcg32,
+    },
 }
+
+/// Draws of a pixel sample that are stratified over the pixel's samples; later ones are
+/// independent.
+pub const STRATIFIED_DRAWS: u64 = 8;
+
+/// Each stratified draw's key, hashed into its scrambling seeds.
+const DIMENSION_KEYS: [u64; STRATIFIED_DRAWS as usize] = {
+    let mut keys = [0; STRATIFIED_DRAWS as usize];
+    let mut d = 0;
+    while d < keys.len() {
+        keys[d] = mix64(d as u64);
+        d += 1;
+    }
+    keys
+};
 
 /// Where one pixel sample stands in its pixel's padded Sobol sequence.
 #[derive(Clone, Debug)]
@@ -101,7 +124,7 @@ impl PixelSequence {
     /// shuffled and each coordinate Owen-scrambled by seeds of this pixel and dimension.
     #[inline]
     fn next_point<const N: usize>(&mut self) -> [f32; N] {
-        let h = mix64(self.pixel ^ mix64(self.dimension));
+        let h = mix64(self.pixel ^ DIMENSION_KEYS[self.dimension as usize]);
         self.dimension += 1;
         // Owen-scrambling the index permutes every aligned block of 2^k indices within
         // itself, so the first 2^k samples of a pixel are still a Sobol net in every draw.
@@ -123,12 +146,16 @@ impl Sampler {
     /// The numbers of sample `sample_index` of pixel (`x`, `y`) under `seed`: stratified over
     /// the pixel's samples (see [`Sampler`]).
     pub fn for_pixel_sample(x: u32, y: u32, sample_index: u64, seed: u64) -> Self {
+        let pixel = hash_words(&[x as u64, y as u64, seed, sample_index >> 32]);
         Sampler {
-            source: Source::Stratified(PixelSequence {
-                pixel: hash_words(&[x as u64, y as u64, seed, sample_index >> 32]),
-                index: sample_index as u32,
-                dimension: 0,
-            }),
+            source: Source::Stratified {
+                sequence: PixelSequence {
+                    pixel,
+                    index: sample_index as u32,
+                    dimension: 0,
+                },
+                tail: Pcg32::new(mix64(pixel ^ sample_index), pixel),
+            },
         }
     }
 
@@ -143,8 +170,10 @@ impl Sampler {
     #[inline]
     pub fn next_1d(&mut self) -> f32 {
         match &mut self.source {
-            Source::Independent(rng) => rng.next_f32(),
-            Source::Stratified(sequence) => sequence.next_point::<1>()[0],
+            Source::Stratified { sequence, .. } if sequence.dimension < STRATIFIED_DRAWS => {
+                sequence.next_point::<1>()[0]
+            }
+            Source::Independent(rng) | Source::Stratified { tail: rng, .. } => rng.next_f32(),
         }
     }
 
@@ -152,8 +181,12 @@ impl Sampler {
     #[inline]
     pub fn next_2d(&mut self) -> Vec2 {
         match &mut self.source {
-            Source::Independent(rng) => Vec2::new(rng.next_f32(), rng.next_f32()),
-            Source::Stratified(sequence) => Vec2::from_array(sequence.next_point()),
+            Source::Stratified { sequence, .. } if sequence.dimension < STRATIFIED_DRAWS => {
+                Vec2::from_array(sequence.next_point())
+            }
+            Source::Independent(rng) | Source::Stratified { tail: rng, .. } => {
+                Vec2::new(rng.next_f32(), rng.next_f32())
+            }
         }
     }
 
@@ -162,8 +195,12 @@ impl Sampler {
     #[inline]
     pub fn next_4d(&mut self) -> [f32; 4] {
         match &mut self.source {
-            Source::Independent(rng) => std::array::from_fn(|_| rng.next_f32()),
-            Source::Stratified(sequence) => sequence.next_point(),
+            Source::Stratified { sequence, .. } if sequence.dimension < STRATIFIED_DRAWS => {
+                sequence.next_point()
+            }
+            Source::Independent(rng) | Source::Stratified { tail: rng, .. } => {
+                std::array::from_fn(|_| rng.next_f32())
+            }
         }
     }
 }
@@ -320,18 +357,19 @@ mod tests {
         })
     }
 
-    /// Over a pixel's first 2^k samples, every draw is stratified: 1-D draws one per 1/2^k
+    /// Over a pixel's first 2^k samples, each of a sample's first [`STRATIFIED_DRAWS`] draws is
+    /// stratified: 1-D draws one per 1/2^k
     /// interval, 2-D draws one per elementary rectangle (Sobol's first two dimensions are a
     /// (0, 2)-sequence), and every coordinate of a 4-D draw one per interval, the four jointly
     /// one per half-cube for 16 samples (Sobol's property A, which the direction numbers of its
-    /// dimensions 3 and 4 give; a wrong recurrence breaks it). Draws later in the sample are as
+    /// dimensions 3 and 4 give; a wrong recurrence breaks it). The last of them is as
     /// stratified as the first.
     #[test]
-    fn pixel_samples_are_stratified_in_every_draw() {
+    fn the_first_draws_of_pixel_samples_are_stratified() {
         for pixel in [(0, 0, 1), (17, 3, 1), (17, 3, 2)] {
             for k in [4u32, 6] {
                 let n = 1u64 << k;
-                for skip in [0, 1, 7] {
+                for skip in [0, 1, STRATIFIED_DRAWS - 1] {
                     let ones = pixel_draws(pixel, n, |s| {
                         for _ in 0..skip {
                             s.next_2d();
@@ -369,39 +407,49 @@ mod tests {
         }
     }
 
-    /// Across pixels (and seeds) a draw is uniform, and consecutive draws of a sample are
-    /// independent: their correlation over 10^4 pixels is within noise of zero.
+    /// Across pixels a draw is uniform, and consecutive draws of a sample are independent
+    /// (their correlation over 10^4 pixels is within noise of zero): at the start, across the
+    /// switch from stratified draws to the sample's PCG stream, and within that stream.
     #[test]
     fn pixel_sample_draws_are_uniform_and_independent() {
         let n = 10_000u32;
-        let mut cells = [0u32; 16];
-        let (mut sum_xy, mut sum_x, mut sum_y, mut sum_xx, mut sum_yy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for p in 0..n {
-            let mut s = Sampler::for_pixel_sample(p % 100, p / 100, 3, 9);
-            let first = s.next_2d();
-            let second = s.next_1d() as f64;
-            cells[(first.x * 4.0) as usize + 4 * (first.y * 4.0) as usize] += 1;
-            let x = first.x as f64;
-            sum_x += x;
-            sum_y += second;
-            sum_xy += x * second;
-            sum_xx += x * x;
-            sum_yy += second * second;
-        }
-        let expected = n as f32 / 16.0;
-        for c in cells {
+        for skip in [0, STRATIFIED_DRAWS - 1, STRATIFIED_DRAWS] {
+            let mut cells = [0u32; 16];
+            let (mut sum_xy, mut sum_x, mut sum_y, mut sum_xx, mut sum_yy) =
+                (0.0, 0.0, 0.0, 0.0, 0.0);
+            for p in 0..n {
+                let mut s = Sampler::for_pixel_sample(p % 100, p / 100, 3, 9);
+                for _ in 0..skip {
+                    s.next_1d();
+                }
+                let first = s.next_2d();
+                let second = s.next_1d() as f64;
+                cells[(first.x * 4.0) as usize + 4 * (first.y * 4.0) as usize] += 1;
+                let x = first.x as f64;
+                sum_x += x;
+                sum_y += second;
+                sum_xy += x * second;
+                sum_xx += x * x;
+                sum_yy += second * second;
+            }
+            let expected = n as f32 / 16.0;
+            for c in cells {
+                assert!(
+                    (c as f32 - expected).abs() < 4.0 * expected.sqrt(),
+                    "after {skip} draws: {cells:?}"
+                );
+            }
+            let nf = n as f64;
+            let cov = sum_xy / nf - sum_x / nf * sum_y / nf;
+            let var_x = sum_xx / nf - (sum_x / nf).powi(2);
+            let var_y = sum_yy / nf - (sum_y / nf).powi(2);
+            let correlation = cov / (var_x * var_y).sqrt();
+            // One standard error of a correlation over n independent pairs is 1/√n = 0.01.
             assert!(
-                (c as f32 - expected).abs() < 4.0 * expected.sqrt(),
-                "{cells:?}"
+                correlation.abs() < 0.04,
+                "after {skip} draws: correlation {correlation}"
             );
         }
-        let nf = n as f64;
-        let cov = sum_xy / nf - sum_x / nf * sum_y / nf;
-        let var_x = sum_xx / nf - (sum_x / nf).powi(2);
-        let var_y = sum_yy / nf - (sum_y / nf).powi(2);
-        let correlation = cov / (var_x * var_y).sqrt();
-        // One standard error of a correlation over n independent pairs is 1/√n = 0.01.
-        assert!(correlation.abs() < 0.04, "correlation {correlation}");
     }
 
     #[test]
