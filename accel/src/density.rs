@@ -54,10 +54,8 @@
 //! centroid (`g` per axis = 12·offset/h², clamped so that the profile stays non-negative across
 //! the voxel), whose integral along a segment is its value at the segment's middle. Against
 //! Embree's count of every fiber crossed, for rays leaving hair points hit from outside, on
-//! the procedural head of the studies: the squared error falls from 16.8 to 9.6 and the mean
-//! of `e^{−n}` − `e^{−N}` from −0.105 to −0.077 (5 000 rays, a unit test); the rays for which
-//! the grid counts 1 to 2 fibers cross 1.19 on average, against 0.99 with a constant density
-//! (20 000 rays). A record is 20 bytes: σκ (f32), T̄ (six i16, 2⁻¹⁵ apart) and `g·h` (three i8
+//! the procedural head of the studies: the squared error falls from 17.4 to 10.0 and the mean
+//! of `e^{−n}` − `e^{−N}` from −0.115 to −0.097 (5 000 rays, a unit test). A record is 20 bytes: σκ (f32), T̄ (six i16, 2⁻¹⁵ apart) and `g·h` (three i8
 //! in [−2, 2], 1/63.5 apart).
 //!
 //! # Queries
@@ -78,9 +76,6 @@
 //!   without), is subtracted from those voxels (clamped at 0). Where the strand comes back to
 //!   the ray after leaving its voxels (a curl), it is crossed through free space and counts,
 //!   as in Embree.
-//! - Embree's flat curves report no hit closer to the ray origin than one diameter of the hit
-//!   fiber, so fibers touching the one left are never crossed by the renderer's rays: counting
-//!   starts at one diameter of the fiber left.
 //!
 //! # Automatic resolution
 //!
@@ -659,9 +654,8 @@ impl DensityGrid {
             self.records.len() * std::mem::size_of::<VoxelRecord>() + self.top.len() * 4;
     }
 
-    /// For a ray leaving segment `exclude` of a hair object: where counting starts (one
-    /// diameter of that fiber, as in Embree) and, per voxel the ray passes through, the own
-    /// strand's contribution as the grid counts it for direction `d` (see the module docs).
+    /// For a ray leaving segment `exclude` of a hair object: per voxel the ray passes through,
+    /// the own strand's contribution as the grid counts it for direction `d` (see the module docs).
     fn own_strand(&self, ray: &Ray, d: Vec3, t_max: f32) -> OwnStrand {
         let mut own = OwnStrand::default();
         let Some(p) = ray.exclude else {
@@ -674,7 +668,6 @@ impl DensityGrid {
         if s >= curves.segments() {
             return own;
         }
-        own.start = 2.0 * curves.control_points(s).iter().fold(0.0, |r, c| c.w.max(r));
         let lattice = &self.lattice;
         let (h, inv_d) = (lattice.h, d.recip());
         let inv_volume = h.powi(-3);
@@ -696,7 +689,7 @@ impl DensityGrid {
                     std::array::from_fn(|i| ca[i].min(cb[i])),
                     std::array::from_fn(|i| ca[i].max(cb[i])),
                 );
-                if clip_to_box(ray.origin, inv_d, own.start, t_max, lo, hi).is_none() {
+                if clip_to_box(ray.origin, inv_d, 0.0, t_max, lo, hi).is_none() {
                     return;
                 }
                 let factor = if self.direction {
@@ -706,9 +699,7 @@ impl DensityGrid {
                 };
                 lattice.traverse(a.truncate(), t, 0.0, len, |c, u0, u1| {
                     let (lo, hi) = cell_box(c, c);
-                    if let Some((_, exit)) =
-                        clip_to_box(ray.origin, inv_d, own.start, t_max, lo, hi)
-                    {
+                    if let Some((_, exit)) = clip_to_box(ray.origin, inv_d, 0.0, t_max, lo, hi) {
                         touched = true;
                         own.reach = own.reach.max(exit);
                         let w = ribbon_area(a, b, len, u0, u1) * factor * inv_volume;
@@ -749,7 +740,7 @@ impl FiberDensity for DensityGrid {
         let (o_cells, d_cells) = (self.lattice.in_cells(ray.origin), d / self.lattice.h);
         let mut n = 0.0;
         self.lattice
-            .traverse_until(ray.origin, d, own.start, t_max, |c, t0, t1| {
+            .traverse_until(ray.origin, d, 0.0, t_max, |c, t0, t1| {
                 let Some(at) = self.record_at(c) else {
                     return ControlFlow::Continue(());
                 };
@@ -783,8 +774,6 @@ struct OwnStrand {
     len: usize,
     /// Voxels entered farther than this along the ray hold none of the own strand.
     reach: f32,
-    /// Where counting starts along the ray.
-    start: f32,
 }
 
 impl Default for OwnStrand {
@@ -794,7 +783,6 @@ impl Default for OwnStrand {
             weights: [0.0; OWN_CELLS],
             len: 0,
             reach: 0.0,
-            start: 0.0,
         }
     }
 }
@@ -1263,11 +1251,10 @@ mod tests {
         // t_max stops the count: the layers at z = 0.38 … 0.32 only.
         let r = Ray::new(Vec3::new(0.5, 0.2, 0.40), -Vec3::Z).with_t_max(0.09);
         assert_eq!(accel.count_fibers_crossed(&r), 4);
-        // Embree's flat curves report no hit within one fiber diameter (2r) of the origin, so
-        // the layer at z = 0.38 is not seen from z = 0.39; the grid starts rays leaving a fiber
-        // at 2r for the same reason.
+        // A fiber nearer the origin than its diameter counts (Embree would cull it unless the
+        // ray were handed to it from farther back: see `EmbreeAccel`).
         let r = Ray::new(Vec3::new(0.5, 0.2, 0.39), -Vec3::Z).with_t_max(0.08);
-        assert_eq!(accel.count_fibers_crossed(&r), 3);
+        assert_eq!(accel.count_fibers_crossed(&r), 4);
     }
 
     #[test]
@@ -1951,8 +1938,8 @@ mod tests {
     /// The linear profile within voxels, against Embree's count of every fiber crossed, for
     /// rays leaving hair points hit from outside (as a camera sees them) on a procedural head
     /// (the studies' groom): closer than the constant profile it replaced, both in squared
-    /// error and in the mean of `e^{−n}` (measured: squared error 9.4 against 15.6, mean
-    /// `e^{−n}` − `e^{−N}` −0.078 against −0.107 over 20 000 rays).
+    /// error and in the mean of `e^{−n}` (measured: squared error 10.0 against 17.4, mean
+    /// `e^{−n}` − `e^{−N}` −0.097 against −0.115 over 5 000 rays).
     #[test]
     fn the_profile_within_voxels_counts_closer_to_the_fibers() {
         let head = ProceduralHair {

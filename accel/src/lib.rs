@@ -73,6 +73,16 @@
 //! cases count as inside. This runs in an Embree context filter carried only by queries that
 //! exclude a primitive (the excluded primitive travels in the intersection context), so
 //! occlusion queries get the same rule, and camera rays pay no callback at all.
+//!
+//! Embree has its own self-intersection avoidance for flat curves: it drops every hit nearer
+//! the ray's origin than twice the hit curve's radius. In hair that drops real fibers — the
+//! neighbour a fiber touches, and in dense hair any fiber within a diameter — so light passed
+//! through hair it should meet: shadow rays from the fibers a camera saw in a layer of fibers
+//! 1.4 deep passed 62 % of the time where the fibers' positions give 33 %, and the path
+//! tracer's hair on the studies' scenes was 3–18 % too bright, whatever its colour. Every
+//! query therefore reaches Embree from slightly behind its origin (2.05 of the scene's largest
+//! fiber radius) with its interval moved by as much: the culling never applies, and the rule
+//! above alone decides.
 
 #![warn(missing_docs)]
 

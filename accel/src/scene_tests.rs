@@ -74,12 +74,10 @@ fn single_fiber_hit_reports_t_tangent_h_and_v() {
                     let hit = accel.intersect(&ray).expect("hit");
                     let (tangent, h, radius, strand, v) = fiber(&hit);
                     let sign = if reversed { -1.0 } else { 1.0 };
-                    // The ribbon faces the ray through the axis: t is the distance to the axis.
-                    // The tube is hit on its surface, (r² − y0²)^½ before the axis plane z = 0.
-                    let want_t = match curve {
-                        CurveShape::Flat => 5.0,
-                        CurveShape::Round => 5.0 - (r * r - y0 * y0).sqrt() / dir.z.abs(),
-                    };
+                    // The tube is hit on its surface, (r² − y0²)^½ / sin θ before the axis
+                    // plane z = 0; the ribbon, met at the axis, reports the tube's hit.
+                    let want_t = 5.0 - (r * r - y0 * y0).sqrt() / dir.z.abs();
+                    let _ = curve;
                     assert!((hit.t - want_t).abs() < 1e-3, "{options:?} t = {}", hit.t);
                     assert!((hit.p - ray.at(want_t)).length() < 1e-3);
                     assert!((tangent - sign * Vec3::X).length() < 1e-4, "{tangent}");
@@ -90,7 +88,12 @@ fn single_fiber_hit_reports_t_tangent_h_and_v() {
                     );
                     assert!((radius - r).abs() < 1e-6);
                     assert_eq!((strand, hit.material), (0, 5));
-                    let along = (hit.p.x + 1.0) / 2.0;
+                    // Where the ray passes the axis (the ribbon's curve parameter) or the wall.
+                    let at = match curve {
+                        CurveShape::Flat => ray.at(5.0),
+                        CurveShape::Round => hit.p,
+                    };
+                    let along = (at.x + 1.0) / 2.0;
                     let want_v = if reversed { 1.0 - along } else { along };
                     assert!((v - want_v).abs() < 1e-3, "{options:?} v = {v}");
                     assert!(accel.occluded(&ray));
@@ -276,12 +279,9 @@ fn rays_leaving_a_fiber_do_not_hit_it_again_but_hit_a_neighbour() {
             let ray = Ray::leaving(hit.p, (q - hit.p) / dist, hit.prim);
             let h2 = accel.intersect(&ray).expect("the neighbour strand is hit");
             assert_eq!(fiber(&h2).3, 1, "{basis:?}");
-            // A ribbon is hit at the axis; a tube on its wall, r / sin θ before the axis for a
-            // ray at θ to the strand.
-            let before = match options.curve {
-                CurveShape::Flat => 0.0,
-                CurveShape::Round => r / ray.dir.cross(Vec3::X).length(),
-            };
+            // A tube is hit on its wall, r / sin θ before the axis for a ray at θ to the strand,
+            // and a ribbon reports the same.
+            let before = r / ray.dir.cross(Vec3::X).length();
             assert!(
                 h2.t <= dist * (1.0 + 2e-3) && h2.t >= dist * (1.0 - 2e-3) - before,
                 "{basis:?}: t {} vs {dist}",
@@ -350,7 +350,10 @@ fn same_strand_hits_need_free_space_on_a_bent_strand() {
             .intersect(&Ray::leaving(from.p, Vec3::Y, from.prim))
             .expect("upper leg of the hairpin");
         assert_eq!(fiber(&up).3, 1);
-        assert!((up.t - 0.29).abs() < 1e-3, "{}", up.t);
+        // The legs' axes are 0.29 apart along the ray, which passes the upper one at the
+        // height of the lower one's wall: its wall is met that much sooner.
+        let want = 0.29 - (r * r - from.p.z * from.p.z).max(0.0).sqrt();
+        assert!((up.t - want).abs() < 1e-3, "{} vs {want}", up.t);
     }
     println!("{kept} legitimate same-strand hits on the zig-zag strand");
 }
@@ -472,7 +475,8 @@ fn options_transform_taper_and_subsample_hair() {
             assert!(h.abs() < 1e-3);
             assert!((rad - radius).abs() < 0.005, "{rad} vs {radius}");
             assert!((hv - v).abs() < 0.01);
-            assert!((hit.t - 9.0).abs() < 1e-3);
+            // Met on the tube's wall, a radius before the axis.
+            assert!((hit.t - (9.0 - rad)).abs() < 1e-3, "t = {}", hit.t);
         }
     }
     let dropped = (0..40u32).find(|s| !kept.contains(s)).unwrap();
@@ -648,4 +652,136 @@ fn surface_occlusion_ignores_fibers() {
         .build()
         .unwrap();
     assert!(!hair_only.occluded_by_surfaces(&to_sphere));
+}
+
+/// A neighbour whose axis lies 1.44 radii from the point where a ray leaves a fiber's wall
+/// toward it (1.2 radii across, 0.8 up; 2.16 radii from the first fiber's axis: the fibers do
+/// not touch): nearer than Embree's culling of flat-curve hits (two radii from the origin)
+/// would allow. Every shape and basis.
+#[test]
+fn rays_leaving_a_fiber_find_a_near_neighbour() {
+    let r = 0.01;
+    for options in all_curves() {
+        let lower = line(Vec3::new(-1.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0), 4);
+        let (y, z) = (1.2 * r, 1.8 * r);
+        let upper = line(Vec3::new(-1.0, y, z), Vec3::new(1.0, y, z), 4);
+        let accel = SceneBuilder::new()
+            .unwrap()
+            .add_hair(&hair(&[lower, upper], r), &options, 0)
+            .unwrap()
+            .build()
+            .unwrap();
+        // Straight down onto the lower fiber's top, beside the upper one.
+        let camera = Ray::new(Vec3::new(0.3, 0.0, 1.0), -Vec3::Z);
+        let first = accel.intersect(&camera).expect("the lower fiber");
+        assert_eq!(fiber(&first).3, 0, "{options:?}");
+        assert!(
+            (first.p.z - r).abs() < 1e-4,
+            "{options:?}: hit at {}",
+            first.p
+        );
+        let toward = (Vec3::new(0.3, y, z) - first.p).normalize();
+        let leaving = Ray::leaving(first.p, toward, first.prim);
+        let next = accel.intersect(&leaving).unwrap_or_else(|| {
+            panic!("{options:?}: the ray leaving the lower fiber passed the upper one")
+        });
+        assert_eq!(fiber(&next).3, 1, "{options:?}");
+        // Aimed at the axis: the wall, a radius before it.
+        let axis = (Vec3::new(0.3, y, z) - first.p).length();
+        assert!(
+            (next.t - (axis - r)).abs() < 1e-3 * r + 1e-5,
+            "{options:?}: t = {} (wall {})",
+            next.t,
+            axis - r
+        );
+        assert!(accel.occluded(&leaving), "{options:?}");
+        assert!(!accel.occluded(&leaving.with_t_max(0.4 * r)), "{options:?}");
+    }
+}
+
+/// In a dense stack of parallel fibers (eight sublayers a hair's breadth apart, fibers two to
+/// three radii apart within each), the fibers a vertical ray finds by chaining hits — and
+/// whether a shadow ray from the first passes — are exactly the crossings the fibers'
+/// positions give, for ribbons and tubes.
+#[test]
+fn chained_hits_count_every_fiber_of_a_dense_layer() {
+    let (r, half) = (0.01f32, 1.0f32);
+    let mut rng = Pcg32::new(7, 1);
+    // About four fibers crossed by a vertical line.
+    let mut strands: Vec<Vec<Vec3>> = Vec::new();
+    for k in 0..8 {
+        let z = -2.05 * r * k as f32;
+        let mut y = -half + r * rng.next_f32();
+        while y < half {
+            let x0 = (2.0 * rng.next_f32() - 1.0) * half - 0.5;
+            strands.push(line(Vec3::new(x0, y, z), Vec3::new(x0 + 1.0, y, z), 3));
+            y += 2.0 * r + r * rng.next_f32();
+        }
+    }
+    // Flat linear curves are hit within a radius of the segment (rounded ends included).
+    let distance = |s: &[Vec3], x: f32, y: f32| {
+        let dx = (s[0].x - x).max(x - s[2].x).max(0.0);
+        dx.hypot(s[0].y - y)
+    };
+    let crossings = |x: f32, y: f32| strands.iter().filter(|s| distance(s, x, y) < r).count();
+    for curve in [CurveShape::Flat, CurveShape::Round] {
+        let options = HairOptions {
+            curve,
+            basis: CurveBasis::Linear,
+            ..Default::default()
+        };
+        let accel = SceneBuilder::new()
+            .unwrap()
+            .add_hair(&hair(&strands, r), &options, 0)
+            .unwrap()
+            .build()
+            .unwrap();
+        let (mut rays, mut wrong_count, mut wrong_shadow, mut several) = (0, 0, 0, 0);
+        for _ in 0..4000 {
+            let (x, y) = (
+                (2.0 * rng.next_f32() - 1.0) * 0.5 * half,
+                (2.0 * rng.next_f32() - 1.0) * 0.5 * half,
+            );
+            let want = crossings(x, y);
+            // Grazing a fiber's edge: either answer is right to rounding.
+            if strands
+                .iter()
+                .any(|s| (distance(s, x, y) - r).abs() < 1e-4 * r)
+            {
+                continue;
+            }
+            rays += 1;
+            several += usize::from(want > 1);
+            let camera = Ray::new(Vec3::new(x, y, 1.0), -Vec3::Z);
+            let Some(first) = accel.intersect(&camera) else {
+                wrong_count += usize::from(want != 0);
+                continue;
+            };
+            // A tube is entered and left: count the distinct strands.
+            let mut found = vec![fiber(&first).3];
+            let mut ray = Ray::leaving(first.p, -Vec3::Z, first.prim);
+            while let Some(h) = accel.intersect(&ray) {
+                let strand = fiber(&h).3;
+                if !found.contains(&strand) {
+                    found.push(strand);
+                }
+                ray = Ray::leaving(h.p, -Vec3::Z, h.prim);
+            }
+            wrong_count += usize::from(found.len() != want);
+            let passes = !accel.occluded(&Ray::leaving(first.p, -Vec3::Z, first.prim));
+            // From a tube's front surface a shadow ray still has its back to pass.
+            if curve == CurveShape::Flat {
+                wrong_shadow += usize::from(passes != (want == 1));
+            }
+        }
+        assert!(
+            several > rays / 2,
+            "the stack is not dense: {several} of {rays}"
+        );
+        assert!(
+            wrong_count == 0 && wrong_shadow == 0,
+            "{curve:?}: {wrong_count} chained counts and {wrong_shadow} shadow rays of {rays} \
+             disagree with the fibers' positions"
+        );
+    }
 }

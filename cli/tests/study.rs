@@ -180,9 +180,11 @@ fn study_end_to_end_resumable_and_deterministic() {
         .map(|s| mean_mse("path-1", s))
         .collect();
     assert!(m.windows(2).all(|w| w[0] > w[1]), "MSE by spp: {m:?}");
+    // From 4 spp: at 1 spp three repetitions under the sky's sun are too heavy-tailed to
+    // average (1 → 64 spp measured 15× with these seeds, 42× with twelve repetitions).
     assert!(
-        m[0] / m[3] > 16.0,
-        "64× the samples should cut the MSE well below a 16th: {m:?}"
+        m[1] / m[3] > 8.0,
+        "16× the samples should cut the MSE well below an 8th: {m:?}"
     );
 
     // Report, summary, plots, heat map and crop sheets.
