@@ -700,14 +700,14 @@ fn rays_leaving_a_fiber_find_a_near_neighbour() {
 }
 
 /// In a dense stack of parallel fibers (eight sublayers a hair's breadth apart, fibers two to
-/// three radii apart within each), the fibers a vertical ray finds by chaining hits — and
-/// whether a shadow ray from the first passes — are exactly the crossings the fibers'
-/// positions give, for ribbons and tubes.
+/// three radii apart within each), the fibers a ray finds by chaining hits — and whether a
+/// shadow ray from the first passes — are exactly the crossings the fibers' positions give,
+/// for ribbons and tubes, at any angle across the fibers.
 #[test]
 fn chained_hits_count_every_fiber_of_a_dense_layer() {
     let (r, half) = (0.01f32, 1.0f32);
     let mut rng = Pcg32::new(7, 1);
-    // About four fibers crossed by a vertical line.
+    // About four fibers crossed by a vertical line, more by oblique ones.
     let mut strands: Vec<Vec<Vec3>> = Vec::new();
     for k in 0..8 {
         let z = -2.05 * r * k as f32;
@@ -718,12 +718,14 @@ fn chained_hits_count_every_fiber_of_a_dense_layer() {
             y += 2.0 * r + r * rng.next_f32();
         }
     }
-    // Flat linear curves are hit within a radius of the segment (rounded ends included).
-    let distance = |s: &[Vec3], x: f32, y: f32| {
+    // Rays in the y-z plane, up to 63° from the vertical, through (x, y, 0). Flat linear curves
+    // are hit within a radius of the segment (rounded ends included); the line has constant x.
+    let distance = |s: &[Vec3], x: f32, y: f32, a: f32| {
         let dx = (s[0].x - x).max(x - s[2].x).max(0.0);
-        dx.hypot(s[0].y - y)
+        dx.hypot((s[0].y - y) * a.cos() + s[0].z * a.sin())
     };
-    let crossings = |x: f32, y: f32| strands.iter().filter(|s| distance(s, x, y) < r).count();
+    let crossings =
+        |x: f32, y: f32, a: f32| strands.iter().filter(|s| distance(s, x, y, a) < r).count();
     for curve in [CurveShape::Flat, CurveShape::Round] {
         let options = HairOptions {
             curve,
@@ -738,41 +740,40 @@ fn chained_hits_count_every_fiber_of_a_dense_layer() {
             .unwrap();
         let (mut rays, mut wrong_count, mut wrong_shadow, mut several) = (0, 0, 0, 0);
         for _ in 0..4000 {
-            let (x, y) = (
+            let (x, y, a) = (
                 (2.0 * rng.next_f32() - 1.0) * 0.5 * half,
                 (2.0 * rng.next_f32() - 1.0) * 0.5 * half,
+                (2.0 * rng.next_f32() - 1.0) * 1.1,
             );
-            let want = crossings(x, y);
+            let want = crossings(x, y, a);
             // Grazing a fiber's edge: either answer is right to rounding.
             if strands
                 .iter()
-                .any(|s| (distance(s, x, y) - r).abs() < 1e-4 * r)
+                .any(|s| (distance(s, x, y, a) - r).abs() < 1e-4 * r)
             {
                 continue;
             }
             rays += 1;
             several += usize::from(want > 1);
-            let camera = Ray::new(Vec3::new(x, y, 1.0), -Vec3::Z);
+            let dir = Vec3::new(0.0, a.sin(), -a.cos());
+            let camera = Ray::new(Vec3::new(x, y, 0.0) - 3.0 * dir, dir);
             let Some(first) = accel.intersect(&camera) else {
                 wrong_count += usize::from(want != 0);
                 continue;
             };
             // A tube is entered and left: count the distinct strands.
             let mut found = vec![fiber(&first).3];
-            let mut ray = Ray::leaving(first.p, -Vec3::Z, first.prim);
+            let mut ray = Ray::leaving(first.p, dir, first.prim);
             while let Some(h) = accel.intersect(&ray) {
                 let strand = fiber(&h).3;
                 if !found.contains(&strand) {
                     found.push(strand);
                 }
-                ray = Ray::leaving(h.p, -Vec3::Z, h.prim);
+                ray = Ray::leaving(h.p, dir, h.prim);
             }
             wrong_count += usize::from(found.len() != want);
-            let passes = !accel.occluded(&Ray::leaving(first.p, -Vec3::Z, first.prim));
-            // From a tube's front surface a shadow ray still has its back to pass.
-            if curve == CurveShape::Flat {
-                wrong_shadow += usize::from(passes != (want == 1));
-            }
+            let passes = !accel.occluded(&Ray::leaving(first.p, dir, first.prim));
+            wrong_shadow += usize::from(passes != (want == 1));
         }
         assert!(
             several > rays / 2,
