@@ -28,11 +28,12 @@
 //! # Fibers: flat or round curves, the local frame and `h`
 //!
 //! Hair is drawn by default with Embree's *flat* curves: ribbons of the fiber's width that
-//! always face the ray. Embree reports a hit at the depth of the curve axis point nearest the
-//! ray, offset sideways (perpendicular to the ray) by at most the radius. With
-//! [`CurveShape::Round`] the fibers are tubes and the hit lies on the tube's surface, up to a
-//! radius nearer the ray origin; its offset from the axis across the ray, and so `h`, is the
-//! same. The radius is interpolated along each segment with the same basis as the positions
+//! always face the ray. Embree meets a ribbon at the depth of the curve axis point nearest the
+//! ray, offset sideways (perpendicular to the ray) by at most the radius; tress reports the hit
+//! where the ray enters the segment's tube (its capsule, at the local radius), as a tube would
+//! be hit, so rays leave fibers from their surface. With [`CurveShape::Round`] the fibers are
+//! tubes and Embree's hit already lies on the tube's surface. The offset from the axis across
+//! the ray, and so `h`, is the same for both. The radius is interpolated along each segment with the same basis as the positions
 //! ([`CurveBasis`]).
 //!
 //! A fiber hit ([`tress_core::HitKind::Fiber`]) carries:
@@ -78,11 +79,12 @@
 //! the ray's origin than twice the hit curve's radius. In hair that drops real fibers — the
 //! neighbour a fiber touches, and in dense hair any fiber within a diameter — so light passed
 //! through hair it should meet: shadow rays from the fibers a camera saw in a layer of fibers
-//! 1.4 deep passed 62 % of the time where the fibers' positions give 33 %, and the path
-//! tracer's hair on the studies' scenes was 3–18 % too bright, whatever its colour. Every
-//! query therefore reaches Embree from slightly behind its origin (2.05 of the scene's largest
-//! fiber radius) with its interval moved by as much: the culling never applies, and the rule
-//! above alone decides.
+//! 1.4 deep passed 62 % of the time where the fibers' positions give 33 %, and fixing this
+//! alone made the path tracer's hair on the studies' scenes 3–16 % darker, whatever its colour
+//! (the README's "Dual scattering and hair colour" has the net change with the tube walls
+//! above). Every query therefore reaches Embree from slightly behind its origin (2.05 of the
+//! scene's largest fiber radius) with its interval moved by as much: the culling never
+//! applies, and the rule above alone decides.
 
 #![warn(missing_docs)]
 
