@@ -319,7 +319,8 @@ fn shipped_quick_study_runs() {
 }
 
 /// The hair-colour studies' quick variants (24², 1…4 spp; about 15 s each), under the sunset
-/// and under a directional light: every colour and groom renders and reaches the report.
+/// (with the default dual scattering and with a traced hair bounce) and under a directional
+/// light: every colour and groom renders and reaches the report.
 /// Needs ../shared/data for straight.hair.
 #[test]
 fn hair_colour_quick_studies_run() {
@@ -328,7 +329,7 @@ fn hair_colour_quick_studies_run() {
         eprintln!("note: ../shared/data not found; skipping the hair-colour studies");
         return;
     }
-    for name in ["hair_colour", "hair_colour_sun"] {
+    for name in ["hair_colour", "hair_colour_sun", "hair_colour_path_bounces"] {
         let dir = tempfile::tempdir().unwrap();
         let study = root.join(format!("scenes/studies/{name}.ron"));
         let o = tress(

@@ -52,14 +52,16 @@ pub struct DualSettings {
     pub grid_resolution: Option<u32>,
     /// Resolution of the precomputed tables.
     pub tables: DualScatteringSettings,
-    /// Bounces on non-hair surfaces before a path ends.
+    /// Bounces on non-hair surfaces (and hair hits traced by `path_bounces`) before a path
+    /// ends.
     pub max_depth: u32,
     /// Hair hits shaded as the path tracer shades them (next-event estimation and a sampled
     /// continuation) before dual scattering shades the next one: 0 (the paper's estimator)
     /// shades the first hair hit a camera ray finds. 1 traces the light reflected between
-    /// neighbouring fibers, which dual scattering returns only about half of: dark and brown
-    /// hair come within 2.5 % of the path tracer at about the same cost, light hair 1–4 %
-    /// darker than with 0 (README, "Dual scattering and hair colour").
+    /// neighbouring fibers, which dual scattering returns only about half of: on the study's
+    /// grooms dark and brown hair come within 1 % of the path tracer at about the same cost,
+    /// light hair 1.3–4.7 points darker than with 0 (README, "Dual scattering and hair
+    /// colour").
     pub path_bounces: u32,
 }
 
