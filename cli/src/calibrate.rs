@@ -1,13 +1,16 @@
 //! `tress calibrate`: fits the dual-scattering density factors d_f and d_b of a groom and
-//! material to a short path-traced reference.
+//! material to a short path-traced reference, and chooses how many hair bounces to trace before
+//! the estimate (`path_bounces`).
 //!
 //! Dual scattering's expected image is bilinear in its free parameters: with the fiber-medium
 //! tables `F = V·(f_s + d_b·B) + (1 − V)·d_f·T·(S + d_b·B')`, so the mean over any set of
 //! pixels is `A + x·B + y·C + x·y·D` with `x = d_f`, `y = d_b` (the paper's closed forms carry
 //! d_f twice: there `x = d_f²`). Four renders at the corners of [0, 1]² therefore give that
 //! mean for every (d_f, d_b), and the fit minimises the squared relative error of the three
-//! channels' means over the hair pixels against the path tracer's. A fifth render checks the
-//! fitted values.
+//! channels' means over the hair pixels against the path tracer's. A traced bounce only moves
+//! where the estimate is taken, so the means stay bilinear: each candidate `path_bounces` gets
+//! its own four corners and fit, and the one whose fitted means come closest is kept (dark hair
+//! gains from a traced bounce, light hair loses: README). A last render checks the choice.
 
 use crate::diff::REL_EPSILON;
 use crate::render_cmd::progress_bar;
@@ -40,6 +43,10 @@ pub struct CalibrateArgs {
     /// scene's, if it is one, else dual-mis.
     #[arg(long)]
     pub integrator: Option<String>,
+    /// Hair bounces traced before the estimate to try (`path_bounces`), comma-separated; the
+    /// one whose fitted means come closest to the reference is kept.
+    #[arg(long, value_delimiter = ',', default_value = "0,1")]
+    pub path_bounces: Vec<u32>,
     /// Write the calibrated integrator (RON, for a scene's `integrator:` or `--integrator`).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -254,30 +261,19 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         MultipleScattering::Paper => 2.0,
         MultipleScattering::FiberMedium => 1.0,
     };
-    let ds_image = |d_f: f64, d_b: f64, label: &str| -> Result<Image> {
-        let s = DualSettings {
-            d_f: Some(d_f as f32),
-            d_b: Some(d_b as f32),
-            ..settings.clone()
-        };
-        let integrator = with_settings(s).build(scene, &prep)?;
-        render(integrator.as_ref(), args.spp, label)
-    };
-    let mut corner = [[[0.0; 3]; 2]; 2];
-    for (i, row) in corner.iter_mut().enumerate() {
-        for (j, c) in row.iter_mut().enumerate() {
-            let img = ds_image(i as f64, j as f64, &format!("d_f = {i}, d_b = {j}"))?;
-            *c = masked_mean(&img, &mask);
-        }
-    }
-    let bilinear = Bilinear { corner };
-    let (x, y) = fit(&bilinear, reference_mean);
-    let (d_f, d_b) = (x.powf(1.0 / forward_power), y);
     let defaults = DensityFactors::for_model(model);
     let default_x = (settings.d_f.unwrap_or(defaults.d_f) as f64).powf(forward_power);
     let default_y = settings.d_b.unwrap_or(defaults.d_b) as f64;
-    let fitted_image = ds_image(d_f, d_b, "check")?;
-    let fitted_mean = masked_mean(&fitted_image, &mask);
+    let with_factors = |d_f: f64, d_b: f64, path_bounces: u32| DualSettings {
+        d_f: Some(d_f as f32),
+        d_b: Some(d_b as f32),
+        path_bounces,
+        ..settings.clone()
+    };
+    let ds_image = |s: DualSettings, label: &str| -> Result<Image> {
+        let integrator = with_settings(s).build(scene, &prep)?;
+        render(integrator.as_ref(), args.spp, label)
+    };
 
     println!(
         "{}: {hair_pixels} hair pixels; path reference {} spp, dual scattering {} spp ({model:?})",
@@ -289,15 +285,49 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         "path reference, hair mean R/G/B: {:.4} / {:.4} / {:.4}",
         reference_mean[0], reference_mean[1], reference_mean[2]
     );
+    let mut candidates = args.path_bounces.clone();
+    candidates.sort_unstable();
+    candidates.dedup();
+    // (path_bounces, the bilinear model, the fitted x and y).
+    let mut best: Option<(u32, Bilinear, f64, f64)> = None;
+    for &path_bounces in &candidates {
+        let mut corner = [[[0.0; 3]; 2]; 2];
+        for (i, row) in corner.iter_mut().enumerate() {
+            for (j, c) in row.iter_mut().enumerate() {
+                let label = format!("path_bounces = {path_bounces}, d_f = {i}, d_b = {j}");
+                let img = ds_image(with_factors(i as f64, j as f64, path_bounces), &label)?;
+                *c = masked_mean(&img, &mask);
+            }
+        }
+        let bilinear = Bilinear { corner };
+        let (x, y) = fit(&bilinear, reference_mean);
+        println!(
+            "path_bounces = {path_bounces}: default d_f = {:.3}, d_b = {:.3}: ÷ path {}; fitted \
+             d_f = {:.3}, d_b = {:.3}: ÷ path {} (predicted)",
+            default_x.powf(1.0 / forward_power),
+            default_y,
+            ratios(bilinear.at(default_x, default_y), reference_mean),
+            x.powf(1.0 / forward_power),
+            y,
+            ratios(bilinear.at(x, y), reference_mean),
+        );
+        let misfit_of = |b: &Bilinear, x, y| misfit(b.at(x, y), reference_mean);
+        if best
+            .as_ref()
+            .is_none_or(|(_, b, bx, by)| misfit_of(&bilinear, x, y) < misfit_of(b, *bx, *by))
+        {
+            best = Some((path_bounces, bilinear, x, y));
+        }
+    }
+    let Some((path_bounces, bilinear, x, y)) = best else {
+        bail!("--path-bounces: give at least one value");
+    };
+    let (d_f, d_b) = (x.powf(1.0 / forward_power), y);
+    let fitted_image = ds_image(with_factors(d_f, d_b, path_bounces), "check")?;
+    let fitted_mean = masked_mean(&fitted_image, &mask);
     println!(
-        "default d_f = {:.3}, d_b = {:.3}: ÷ path {}",
-        default_x.powf(1.0 / forward_power),
-        default_y,
-        ratios(bilinear.at(default_x, default_y), reference_mean)
-    );
-    println!(
-        "fitted  d_f = {d_f:.3}, d_b = {d_b:.3}: ÷ path {} (predicted), {} (rendered), \
-         hair relMSE {:.3e}",
+        "fitted  path_bounces = {path_bounces}, d_f = {d_f:.3}, d_b = {d_b:.3}: ÷ path {} \
+         (predicted), {} (rendered), hair relMSE {:.3e}",
         ratios(bilinear.at(x, y), reference_mean),
         ratios(fitted_mean, reference_mean),
         masked_relmse(&fitted_image, &reference, &mask)
@@ -322,6 +352,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         let fitted = with_settings(DualSettings {
             d_f: Some((d_f * 1000.0).round() as f32 / 1000.0),
             d_b: Some((d_b * 1000.0).round() as f32 / 1000.0),
+            path_bounces,
             ..settings
         });
         let text = format!(

@@ -314,6 +314,11 @@ fn calibrate_fits_the_density_factors_and_writes_them() {
         stdout.contains("hair pixels") && stdout.contains("fitted"),
         "{stdout}"
     );
+    // Both candidate numbers of traced hair bounces are fitted, and one of them is kept.
+    assert!(
+        stdout.contains("path_bounces = 0:") && stdout.contains("path_bounces = 1:"),
+        "{stdout}"
+    );
     let text = std::fs::read_to_string(dir.path().join("fit.ron")).unwrap();
     let fitted: tress_cli::integrators::IntegratorDesc = tress_cli::ron_options()
         .from_str(&text)
@@ -325,6 +330,38 @@ fn calibrate_fits_the_density_factors_and_writes_them() {
         assert!((0.0..=1.0).contains(&d), "{text}");
     }
     assert_eq!(s.tables.walks, 512, "the other settings are kept");
+    assert!(
+        stdout.contains(&format!("fitted  path_bounces = {}", s.path_bounces)),
+        "{stdout}\n{text}"
+    );
+
+    // A single candidate is the one kept.
+    let o = tress(
+        &[
+            "calibrate",
+            "scene.ron",
+            "--integrator",
+            small_tables,
+            "--reference-spp",
+            "16",
+            "--spp",
+            "8",
+            "--path-bounces",
+            "2",
+            "--out",
+            "fit2.ron",
+            "--quiet",
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(dir.path().join("fit2.ron")).unwrap();
+    let fitted: tress_cli::integrators::IntegratorDesc =
+        tress_cli::ron_options().from_str(&text).unwrap();
+    let tress_cli::integrators::IntegratorDesc::DualMis(s) = fitted else {
+        panic!("{text}");
+    };
+    assert_eq!(s.path_bounces, 2, "{text}");
 
     // The path tracer is not what calibration fits; a window with no hair has nothing to fit.
     let o = tress(

@@ -17,10 +17,10 @@
 //!
 //! Surfaces that are not hair shade as in the path tracer (next-event estimation plus a
 //! continued path, MIS on lights at infinity); a path that reaches hair ends there with the
-//! dual-scattering estimate — or, with `path_bounces: k`, shades its first k hair hits the same
-//! way and ends with the estimate at the next one. Lights are the scene's lights at infinity (environment, constant,
-//! distant with a disc), sampled by the direction strategy, and delta lights (point, distant
-//! without a disc), evaluated directly.
+//! dual-scattering estimate — or, with `path_bounces: k`, shades its first k hair hits the
+//! same way and ends with the estimate at the next one. Lights are the scene's lights at
+//! infinity (environment, constant, distant with a disc), sampled by the direction strategy,
+//! and delta lights (point, distant without a disc), evaluated directly.
 //!
 //! Settings ([`DualSettings`]), in RON: `DualUniform(d_f: None, d_b: None, grid_resolution:
 //! None, tables: (multiple_scattering: FiberMedium), path_bounces: 0)` — `d_f`/`d_b` default
@@ -391,8 +391,9 @@ impl<D: DirectionSampling> Integrator for DualScattering<D> {
                 break;
             }
             // A surface, or a hair hit before `path_bounces` ran out: next-event estimation as
-            // in the path tracer. Light that hair blocks on its way here is not lost: it
-            // arrives through the continuation, which dual scattering ends at the next hair hit.
+            // in the path tracer. Light that hair blocks on its way here arrives instead, as
+            // scattered light, through the continuation, which dual scattering ends at the next
+            // hair hit.
             let (u_select, u_light) = (sampler.next_1d(), sampler.next_2d());
             // Every delta light (chosen with probability 1), and one of the others.
             for light in scene.lights.delta() {
