@@ -55,8 +55,8 @@
 //! the voxel), whose integral along a segment is its value at the segment's middle. Against
 //! Embree's count of every fiber crossed, for rays leaving hair points hit from outside, on
 //! the procedural head of the studies: the squared error falls from 17.4 to 10.0 and the mean
-//! of `e^{−n}` − `e^{−N}` from −0.115 to −0.097 (5 000 rays, a unit test). A record is 20 bytes: σκ (f32), T̄ (six i16, 2⁻¹⁵ apart) and `g·h` (three i8
-//! in [−2, 2], 1/63.5 apart).
+//! of `e^{−n}` − `e^{−N}` from −0.115 to −0.097 (5 000 rays, a unit test). A record is 20
+//! bytes: σκ (f32), T̄ (six i16, 2⁻¹⁵ apart) and `g·h` (three i8 in [−2, 2], 1/63.5 apart).
 //!
 //! # Queries
 //!

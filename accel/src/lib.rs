@@ -33,8 +33,8 @@
 //! where the ray enters the segment's tube (its capsule, at the local radius), as a tube would
 //! be hit, so rays leave fibers from their surface. With [`CurveShape::Round`] the fibers are
 //! tubes and Embree's hit already lies on the tube's surface. The offset from the axis across
-//! the ray, and so `h`, is the same for both. The radius is interpolated along each segment with the same basis as the positions
-//! ([`CurveBasis`]).
+//! the ray, and so `h`, is the same for both. The radius is interpolated along each segment
+//! with the same basis as the positions ([`CurveBasis`]).
 //!
 //! A fiber hit ([`tress_core::HitKind::Fiber`]) carries:
 //! - `tangent`: the unit derivative of the curve at the hit's curve parameter, pointing root →

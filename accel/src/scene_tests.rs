@@ -77,7 +77,6 @@ fn single_fiber_hit_reports_t_tangent_h_and_v() {
                     // The tube is hit on its surface, (r² − y0²)^½ / sin θ before the axis
                     // plane z = 0; the ribbon, met at the axis, reports the tube's hit.
                     let want_t = 5.0 - (r * r - y0 * y0).sqrt() / dir.z.abs();
-                    let _ = curve;
                     assert!((hit.t - want_t).abs() < 1e-3, "{options:?} t = {}", hit.t);
                     assert!((hit.p - ray.at(want_t)).length() < 1e-3);
                     assert!((tangent - sign * Vec3::X).length() < 1e-4, "{tangent}");

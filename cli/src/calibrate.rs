@@ -288,8 +288,8 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     let mut candidates = args.path_bounces.clone();
     candidates.sort_unstable();
     candidates.dedup();
-    // (path_bounces, the bilinear model, the fitted x and y).
-    let mut best: Option<(u32, Bilinear, f64, f64)> = None;
+    // (path_bounces, the bilinear model, the fitted x and y, their misfit).
+    let mut best: Option<(u32, Bilinear, f64, f64, f64)> = None;
     for &path_bounces in &candidates {
         let mut corner = [[[0.0; 3]; 2]; 2];
         for (i, row) in corner.iter_mut().enumerate() {
@@ -311,15 +311,12 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
             y,
             ratios(bilinear.at(x, y), reference_mean),
         );
-        let misfit_of = |b: &Bilinear, x, y| misfit(b.at(x, y), reference_mean);
-        if best
-            .as_ref()
-            .is_none_or(|(_, b, bx, by)| misfit_of(&bilinear, x, y) < misfit_of(b, *bx, *by))
-        {
-            best = Some((path_bounces, bilinear, x, y));
+        let error = misfit(bilinear.at(x, y), reference_mean);
+        if best.as_ref().is_none_or(|b| error < b.4) {
+            best = Some((path_bounces, bilinear, x, y, error));
         }
     }
-    let Some((path_bounces, bilinear, x, y)) = best else {
+    let Some((path_bounces, bilinear, x, y, _)) = best else {
         bail!("--path-bounces: give at least one value");
     };
     let (d_f, d_b) = (x.powf(1.0 / forward_power), y);

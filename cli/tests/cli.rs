@@ -292,8 +292,10 @@ fn calibrate_fits_the_density_factors_and_writes_them() {
     let (dir, _) = scene_dir(SCENE);
     let small_tables = "DualMis(tables: (theta_nodes: 16, h_nodes: 8, theta_quad: 16, \
                         phi_quad: 24, walks: 512))";
-    let o = tress(
-        &[
+    // Calibrates with small tables and few samples, writing `out`: stdout, the file's text and
+    // the dual-mis settings it holds.
+    let calibrate = |extra: &[&str], out: &str| {
+        let mut args = vec![
             "calibrate",
             "scene.ron",
             "--integrator",
@@ -303,13 +305,22 @@ fn calibrate_fits_the_density_factors_and_writes_them() {
             "--spp",
             "8",
             "--out",
-            "fit.ron",
+            out,
             "--quiet",
-        ],
-        dir.path(),
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
-    let stdout = String::from_utf8_lossy(&o.stdout);
+        ];
+        args.extend_from_slice(extra);
+        let o = tress(&args, dir.path());
+        assert!(o.status.success(), "{}", stderr(&o));
+        let text = std::fs::read_to_string(dir.path().join(out)).unwrap();
+        let fitted: tress_cli::integrators::IntegratorDesc = tress_cli::ron_options()
+            .from_str(&text)
+            .unwrap_or_else(|e| panic!("{e}: {text}"));
+        let tress_cli::integrators::IntegratorDesc::DualMis(s) = fitted else {
+            panic!("{text}");
+        };
+        (String::from_utf8_lossy(&o.stdout).into_owned(), text, s)
+    };
+    let (stdout, text, s) = calibrate(&[], "fit.ron");
     assert!(
         stdout.contains("hair pixels") && stdout.contains("fitted"),
         "{stdout}"
@@ -319,13 +330,6 @@ fn calibrate_fits_the_density_factors_and_writes_them() {
         stdout.contains("path_bounces = 0:") && stdout.contains("path_bounces = 1:"),
         "{stdout}"
     );
-    let text = std::fs::read_to_string(dir.path().join("fit.ron")).unwrap();
-    let fitted: tress_cli::integrators::IntegratorDesc = tress_cli::ron_options()
-        .from_str(&text)
-        .unwrap_or_else(|e| panic!("{e}: {text}"));
-    let tress_cli::integrators::IntegratorDesc::DualMis(s) = fitted else {
-        panic!("{text}");
-    };
     for d in [s.d_f.unwrap(), s.d_b.unwrap()] {
         assert!((0.0..=1.0).contains(&d), "{text}");
     }
@@ -336,31 +340,7 @@ fn calibrate_fits_the_density_factors_and_writes_them() {
     );
 
     // A single candidate is the one kept.
-    let o = tress(
-        &[
-            "calibrate",
-            "scene.ron",
-            "--integrator",
-            small_tables,
-            "--reference-spp",
-            "16",
-            "--spp",
-            "8",
-            "--path-bounces",
-            "2",
-            "--out",
-            "fit2.ron",
-            "--quiet",
-        ],
-        dir.path(),
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
-    let text = std::fs::read_to_string(dir.path().join("fit2.ron")).unwrap();
-    let fitted: tress_cli::integrators::IntegratorDesc =
-        tress_cli::ron_options().from_str(&text).unwrap();
-    let tress_cli::integrators::IntegratorDesc::DualMis(s) = fitted else {
-        panic!("{text}");
-    };
+    let (_, text, s) = calibrate(&["--path-bounces", "2"], "fit2.ron");
     assert_eq!(s.path_bounces, 2, "{text}");
 
     // The path tracer is not what calibration fits; a window with no hair has nothing to fit.

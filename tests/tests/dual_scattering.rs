@@ -46,6 +46,28 @@ fn settings() -> DualSettings {
     }
 }
 
+/// A ball of `strands` Chiang fibers with `eumelanin` (no pheomelanin) under a delta sun from
+/// the camera's side (the sun study's direction).
+fn sunlit_ball(eumelanin: f32, strands: u32) -> Scene {
+    let model = HairModel::Chiang(tress_materials::chiang::Params {
+        pigment: tress_materials::pigment::Pigment::Melanin {
+            eumelanin,
+            pheomelanin: 0.0,
+            tint: tress_materials::pigment::NO_TINT,
+        },
+        ..Default::default()
+    })
+    .build()
+    .unwrap();
+    let sun = Light::distant(
+        glam::Vec3::new(-0.45, -0.55, -0.7),
+        glam::Vec3::splat(3.0),
+        0.0,
+    )
+    .unwrap();
+    hair_ball_scene(model, strands, vec![sun])
+}
+
 /// Means of the four quadrants of an image.
 fn quadrant_means(img: &Image) -> [f64; 4] {
     let mut sums = [0.0f64; 4];
@@ -194,23 +216,7 @@ fn with_no_fibers_to_cross_and_no_back_scattering_dual_scattering_is_single_scat
 /// estimate with the same shadow rays, the two come within 2× of each other: README).
 #[test]
 fn under_a_directional_light_dual_mis_is_far_less_noisy_than_the_path_tracer_on_light_hair() {
-    let model = HairModel::Chiang(tress_materials::chiang::Params {
-        pigment: tress_materials::pigment::Pigment::Melanin {
-            eumelanin: 0.3,
-            pheomelanin: 0.0,
-            tint: tress_materials::pigment::NO_TINT,
-        },
-        ..Default::default()
-    })
-    .build()
-    .unwrap();
-    let sun = Light::distant(
-        glam::Vec3::new(-0.45, -0.55, -0.7),
-        glam::Vec3::splat(3.0),
-        0.0,
-    )
-    .unwrap();
-    let scene = hair_ball_scene(model, 1500, vec![sun]);
+    let scene = sunlit_ball(0.3, 1500);
     let mis = DualMis::new(settings(), &scene, MisDirections, &Default::default()).unwrap();
     let path = tress_path::PathTracer::new(tress_path::PathSettings {
         max_depth: 100,
@@ -257,23 +263,7 @@ fn under_a_directional_light_dual_mis_is_far_less_noisy_than_the_path_tracer_on_
 /// ignored unnoticed (measured: the default 2.1 % dark, one traced bounce 0.5 %).
 #[test]
 fn traced_hair_bounces_move_dual_scattering_to_the_path_tracer() {
-    let model = HairModel::Chiang(tress_materials::chiang::Params {
-        pigment: tress_materials::pigment::Pigment::Melanin {
-            eumelanin: 4.0,
-            pheomelanin: 0.0,
-            tint: tress_materials::pigment::NO_TINT,
-        },
-        ..Default::default()
-    })
-    .build()
-    .unwrap();
-    let sun = Light::distant(
-        glam::Vec3::new(-0.45, -0.55, -0.7),
-        glam::Vec3::splat(3.0),
-        0.0,
-    )
-    .unwrap();
-    let scene = hair_ball_scene(model, 3000, vec![sun]);
+    let scene = sunlit_ball(4.0, 3000);
     let prep = Default::default();
     let dual = |path_bounces, max_depth| {
         let settings = DualSettings {
