@@ -89,6 +89,15 @@ impl HairGeometry {
         }
     }
 
+    /// Appends a strand through `points` (root → tip), every point of radius `radius`: hair
+    /// built in code. Per-point colours or transparency, where the hair has them, are the
+    /// caller's to extend.
+    pub fn push_strand(&mut self, points: &[Vec3], radius: f32) {
+        self.points.extend_from_slice(points);
+        self.radii.resize(self.points.len(), radius);
+        self.strand_offsets.push(self.points.len() as u32);
+    }
+
     /// Number of strands.
     pub fn strand_count(&self) -> usize {
         self.strand_offsets.len().saturating_sub(1)
@@ -358,6 +367,17 @@ mod tests {
             colors: Some(HairAttribute::PerStrand(vec![Rgb::X, Rgb::Y, Rgb::Z])),
             transparency: Some(HairAttribute::PerPoint((0..9).map(|i| i as f32).collect())),
         }
+    }
+
+    #[test]
+    fn pushed_strands_are_valid_hair_with_their_radii() {
+        let mut g = HairGeometry::empty("built");
+        g.push_strand(&[Vec3::ZERO, Vec3::X], 0.1);
+        g.push_strand(&[Vec3::Y, Vec3::ONE, 2.0 * Vec3::ONE], 0.2);
+        g.validate().unwrap();
+        assert_eq!((g.strand_count(), g.segment_count()), (2, 3));
+        assert_eq!(g.strand(1), 2..5);
+        assert_eq!(g.radii, [0.1, 0.1, 0.2, 0.2, 0.2]);
     }
 
     #[test]

@@ -10,10 +10,8 @@ use tress_core::sampling::sample_uniform_sphere;
 pub(crate) fn hair(strands: &[Vec<Vec3>], radius: f32) -> HairGeometry {
     let mut g = HairGeometry::empty("test hair");
     for s in strands {
-        g.points.extend_from_slice(s);
-        g.strand_offsets.push(g.points.len() as u32);
+        g.push_strand(s, radius);
     }
-    g.radii = vec![radius; g.points.len()];
     g
 }
 

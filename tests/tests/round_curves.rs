@@ -52,19 +52,10 @@ fn brown_chiang() -> Arc<dyn Bcsdf> {
 
 /// Hair made of `strands` (polylines), every point of radius `r`.
 fn strands_of_radius(name: &str, strands: &[Vec<Vec3>], r: f32) -> HairGeometry {
-    let mut hair = HairGeometry {
-        name: name.into(),
-        radii: Vec::new(),
-        strand_offsets: vec![0],
-        points: Vec::new(),
-        colors: None,
-        transparency: None,
-    };
+    let mut hair = HairGeometry::empty(name);
     for s in strands {
-        hair.points.extend_from_slice(s);
-        hair.strand_offsets.push(hair.points.len() as u32);
+        hair.push_strand(s, r);
     }
-    hair.radii = vec![r; hair.points.len()];
     hair
 }
 
