@@ -169,6 +169,16 @@ fn ratios(m: [f64; 3], reference: [f64; 3]) -> String {
     )
 }
 
+/// One candidate `path_bounces` with its bilinear model of the hair means, the fitted
+/// `x = d_f^power`, `y = d_b` and their misfit against the reference.
+struct Candidate {
+    path_bounces: u32,
+    bilinear: Bilinear,
+    x: f64,
+    y: f64,
+    misfit: f64,
+}
+
 pub fn run(args: CalibrateArgs) -> Result<()> {
     let mut desc = scene_desc::load(&args.scene)?;
     if let Some(crop) = args.crop {
@@ -288,8 +298,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     let mut candidates = args.path_bounces.clone();
     candidates.sort_unstable();
     candidates.dedup();
-    // (path_bounces, the bilinear model, the fitted x and y, their misfit).
-    let mut best: Option<(u32, Bilinear, f64, f64, f64)> = None;
+    let mut best: Option<Candidate> = None;
     for &path_bounces in &candidates {
         let mut corner = [[[0.0; 3]; 2]; 2];
         for (i, row) in corner.iter_mut().enumerate() {
@@ -312,11 +321,24 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
             ratios(bilinear.at(x, y), reference_mean),
         );
         let error = misfit(bilinear.at(x, y), reference_mean);
-        if best.as_ref().is_none_or(|b| error < b.4) {
-            best = Some((path_bounces, bilinear, x, y, error));
+        if best.as_ref().is_none_or(|b| error < b.misfit) {
+            best = Some(Candidate {
+                path_bounces,
+                bilinear,
+                x,
+                y,
+                misfit: error,
+            });
         }
     }
-    let Some((path_bounces, bilinear, x, y, _)) = best else {
+    let Some(Candidate {
+        path_bounces,
+        bilinear,
+        x,
+        y,
+        ..
+    }) = best
+    else {
         bail!("--path-bounces: give at least one value");
     };
     let (d_f, d_b) = (x.powf(1.0 / forward_power), y);

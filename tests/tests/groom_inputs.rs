@@ -312,13 +312,13 @@ fn guides() -> HairGeometry {
     let mut g = HairGeometry::empty("guides");
     for s in 0..16 {
         let root = Vec3::new((s % 4) as f32 * 0.3, 0.0, (s / 4) as f32 * 0.3);
-        for i in 0..12 {
-            let v = i as f32 / 11.0;
-            g.points
-                .push(root + Vec3::new(0.1 * (5.0 * v + s as f32).sin(), -2.0 * v, 0.2 * v * v));
-            g.radii.push(0.01);
-        }
-        g.strand_offsets.push(g.points.len() as u32);
+        let points: Vec<Vec3> = (0..12)
+            .map(|i| {
+                let v = i as f32 / 11.0;
+                root + Vec3::new(0.1 * (5.0 * v + s as f32).sin(), -2.0 * v, 0.2 * v * v)
+            })
+            .collect();
+        g.push_strand(&points, 0.01);
     }
     g
 }
