@@ -319,8 +319,9 @@ fn shipped_quick_study_runs() {
 }
 
 /// The hair-colour studies' quick variants (24², 1…4 spp; about 15 s each), under the sunset
-/// (with the default dual scattering and with a traced hair bounce) and under a directional
-/// light: every colour and groom renders and reaches the report.
+/// (with the default dual scattering, with a traced hair bounce, and the light hair taken to
+/// 256 spp) and under a directional light: every colour and groom renders and reaches the
+/// report.
 /// Needs ../shared/data for straight.hair.
 #[test]
 fn hair_colour_quick_studies_run() {
@@ -329,7 +330,13 @@ fn hair_colour_quick_studies_run() {
         eprintln!("note: ../shared/data not found; skipping the hair-colour studies");
         return;
     }
-    for name in ["hair_colour", "hair_colour_sun", "hair_colour_path_bounces"] {
+    let all_colours: &[&str] = &["platinum", "blond", "brown", "dark"];
+    for (name, colours) in [
+        ("hair_colour", all_colours),
+        ("hair_colour_sun", all_colours),
+        ("hair_colour_path_bounces", all_colours),
+        ("hair_colour_light_256", &["platinum", "blond"][..]),
+    ] {
         let dir = tempfile::tempdir().unwrap();
         let study = root.join(format!("scenes/studies/{name}.ron"));
         let o = tress(
@@ -346,7 +353,7 @@ fn hair_colour_quick_studies_run() {
         assert!(o.status.success(), "{name}: {}", stderr(&o));
         let report = std::fs::read_to_string(dir.path().join("hc/report.md")).unwrap();
         for groom in ["straight", "head"] {
-            for colour in ["platinum", "blond", "brown", "dark"] {
+            for colour in colours {
                 assert!(
                     report.contains(&format!("## Scene `{groom}_{colour}`")),
                     "{name}: {groom}_{colour} missing"
