@@ -1,5 +1,6 @@
 //! The integrator interface: radiance along one camera ray.
 
+use crate::film::FilmSettings;
 use crate::light::Light;
 use crate::math::{Ray, Rgb, Vec2, Vec3};
 use crate::prepare::Preparation;
@@ -7,12 +8,38 @@ use crate::rng::Sampler;
 use crate::sampling::power_heuristic;
 use crate::scene::Scene;
 use crate::shading::ShadingPoint;
+use std::sync::Arc;
 
 /// Estimates the radiance arriving along a camera ray. The render loop in [`crate::render`] owns
 /// tiles, seeding, film and progress, so an integrator only writes `li`.
 pub trait Integrator: Send + Sync + std::fmt::Debug {
     /// One sample of the radiance arriving at the camera along `ray` (travelling away from it).
     fn li(&self, ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb;
+
+    /// Precomputation that depends on the film as well as the scene (a radiance cache trained
+    /// on paths through the film's own pixels), reporting the fraction done to `progress`. The
+    /// render loop calls it before its first sample, so its cost is render time, and renders
+    /// with what it returns; `None` renders with `self`. It may depend on the film's size and
+    /// seed only, never on its crop, spp or sample range: the tiles and later samples of one
+    /// image must all render alike.
+    fn for_film(
+        &self,
+        scene: &Scene,
+        film: &FilmSettings,
+        progress: &(dyn Fn(f64) + Sync),
+    ) -> Option<FilmIntegrator> {
+        let _ = (scene, film, progress);
+        None
+    }
+}
+
+/// An integrator prepared for one film by [`Integrator::for_film`].
+#[derive(Clone, Debug)]
+pub struct FilmIntegrator {
+    /// What renders the film.
+    pub integrator: Arc<dyn Integrator>,
+    /// What was built and what it cost, one line for logs.
+    pub note: String,
 }
 
 /// An integrator as the registry lists it (the `integrators!` table of the `tress` CLI): how

@@ -28,7 +28,7 @@ pub use accel::{Accel, FiberDensity, Hit, HitKind, PrimId};
 pub use bcsdf::{Bcsdf, BcsdfSample, FiberFrame};
 pub use camera::Camera;
 pub use film::Image;
-pub use integrator::{Integrator, IntegratorKind};
+pub use integrator::{FilmIntegrator, Integrator, IntegratorKind};
 pub use light::Light;
 pub use math::{luminance, Aabb, Frame, Ray, Rgb};
 pub use rng::Sampler;

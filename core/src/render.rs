@@ -101,6 +101,11 @@ pub struct RenderStats {
     pub rays: u64,
     /// Samples whose radiance was NaN or infinite; they were dropped (counted as black).
     pub nonfinite_samples: u64,
+    /// Wall-clock time of the integrator's per-film precomputation
+    /// ([`Integrator::for_film`]), included in `wall`.
+    pub precompute: Duration,
+    /// What that precomputation built, for logs.
+    pub precompute_note: Option<String>,
 }
 
 impl RenderStats {
@@ -120,6 +125,10 @@ impl RenderStats {
         self.samples += other.samples;
         self.rays += other.rays;
         self.nonfinite_samples += other.nonfinite_samples;
+        self.precompute += other.precompute;
+        if other.precompute_note.is_some() {
+            self.precompute_note.clone_from(&other.precompute_note);
+        }
     }
 }
 
@@ -766,6 +775,11 @@ pub fn render_outputs(
     progress: &(dyn Fn(u64) + Sync),
 ) -> Option<SampleRender> {
     let start = Instant::now();
+    let prepared = integrator.for_film(scene, film, &|_| {});
+    let integrator = prepared
+        .as_ref()
+        .map_or(integrator, |p| p.integrator.as_ref());
+    let precompute = start.elapsed();
     let window = film.window();
     let [x0, y0, x1, y1] = window;
     let tiles: Vec<[u32; 4]> = (y0..y1)
@@ -821,6 +835,8 @@ pub fn render_outputs(
     }
     stats.samples = pixels as u64 * per_pixel;
     stats.wall = start.elapsed();
+    stats.precompute = precompute;
+    stats.precompute_note = prepared.map(|p| p.note);
     Some(SampleRender {
         sums: SampleSums {
             window,
