@@ -196,16 +196,18 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         Some(arg) => IntegratorDesc::parse_arg(arg).map_err(anyhow::Error::msg)?,
         None => match &desc.integrator {
             d @ (IntegratorDesc::DualUniform(_) | IntegratorDesc::DualMis(_)) => d.clone(),
-            IntegratorDesc::Path(_) => IntegratorDesc::DualMis(Default::default()),
+            _ => IntegratorDesc::DualMis(Default::default()),
         },
     };
     let (settings, with_settings): (DualSettings, fn(DualSettings) -> IntegratorDesc) = match chosen
     {
         IntegratorDesc::DualUniform(s) => (s, IntegratorDesc::DualUniform),
         IntegratorDesc::DualMis(s) => (s, IntegratorDesc::DualMis),
-        IntegratorDesc::Path(_) => bail!(
+        // Only the dual-scattering integrators have density factors to fit.
+        other => bail!(
             "--integrator: calibration fits a dual-scattering integrator (dual-uniform or \
-                 dual-mis), not the path tracer"
+                 dual-mis), not {}",
+            other.name()
         ),
     };
     let reference_integrator = match &desc.integrator {

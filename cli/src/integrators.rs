@@ -96,6 +96,9 @@ integrators! {
     DualUniform => tress_dual_uniform::UniformDirections,
     /// Dual scattering with MIS of light sampling and shading-function sampling.
     DualMis => tress_dual_mis::MisDirections,
+    /// Path tracing that gathers its neighbours' light from a radiance cache trained on the
+    /// film's own paths.
+    RadianceCache => tress_radiance_cache::RadianceCacheIntegrator,
 }
 
 #[cfg(test)]

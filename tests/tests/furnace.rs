@@ -54,9 +54,9 @@ fn absorbing_fibers_are_darker_than_the_furnace() {
 }
 
 /// Every registered integrator in the white furnace (non-absorbing Chiang fibers, β = 0.3):
-/// unbiased ones must return 1 within 1.5 %; approximations must not create energy nor lose more
-/// than 75 % (measured: path 0.996; dual-uniform 0.913 and dual-mis 0.926 with the coarse test
-/// tables).
+/// unbiased ones must return 1 within 1.5 %; approximations must not create energy beyond that
+/// noise nor lose more than 75 % (measured: path 0.996; dual-uniform 0.913 and dual-mis 0.926
+/// with the coarse test tables; the radiance cache from one training path per pixel 1.00).
 #[test]
 fn every_registered_integrator_in_a_white_furnace() {
     use tress_cli::integrators::IntegratorDesc;
@@ -78,7 +78,7 @@ fn every_registered_integrator_in_a_white_furnace() {
         if desc.unbiased() {
             assert!((mean - 1.0).abs() < 0.015, "{}: mean {mean}", desc.name());
         } else {
-            assert!(mean > 0.25 && mean < 1.0, "{}: mean {mean}", desc.name());
+            assert!(mean > 0.25 && mean < 1.015, "{}: mean {mean}", desc.name());
         }
     }
 }

@@ -1,0 +1,353 @@
+//! The radiance cache: mean outgoing radiance per (cell, direction bin), at several cell sizes.
+//!
+//! A record is one unbiased estimate of the radiance leaving a point toward a direction (the
+//! rest of a training path). Records are summed per chunk of training paths and the chunks'
+//! sums merged in chunk order, so the cache does not depend on how threads shared the chunks.
+//! Cells are cubes of a lattice
+//! over the scene's bounds, `2^finest` along the longest side, halved per coarser level; a
+//! lookup takes the finest level whose cell and bin hold enough records, which puts fine cells
+//! where the training paths went often (the hair near its surface) and coarse ones elsewhere.
+
+use rustc_hash::FxHashMap;
+use tress_core::math::{Aabb, Rgb, Vec3};
+
+/// How cells and directions are quantised.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Lattice {
+    origin: Vec3,
+    /// Side of a finest-level cell.
+    cell: f32,
+    /// Cells per side at the finest level, as a power of two.
+    finest: u32,
+    /// Levels, finest first.
+    levels: u32,
+    /// Direction bins per side of the octahedral map.
+    bins: u32,
+}
+
+impl Lattice {
+    /// A lattice over `bounds` with `2^finest` cells along their longest side.
+    pub(crate) fn new(bounds: Aabb, finest: u32, levels: u32, bins: u32) -> Self {
+        let extent = (bounds.max - bounds.min)
+            .max_element()
+            .max(f32::MIN_POSITIVE);
+        Lattice {
+            origin: bounds.min,
+            cell: extent / (1u32 << finest) as f32,
+            finest,
+            levels,
+            bins,
+        }
+    }
+
+    /// `p` moved into the lattice's box.
+    fn clamp(&self, p: Vec3) -> Vec3 {
+        let extent = self.cell * (1u32 << self.finest) as f32;
+        p.clamp(self.origin, self.origin + Vec3::splat(extent))
+    }
+
+    /// The finest level's cell coordinates of `p` (clamped to the lattice) and the direction
+    /// bin of `dir`.
+    fn locate(&self, p: Vec3, dir: Vec3) -> ([u32; 3], u32) {
+        let max = ((1u32 << self.finest) - 1) as f32;
+        let c = ((p - self.origin) / self.cell).clamp(Vec3::ZERO, Vec3::splat(max));
+        (
+            [c.x as u32, c.y as u32, c.z as u32],
+            self.direction_bin(dir),
+        )
+    }
+
+    /// Octahedral map of a unit direction onto [0, 1)², quantised to `bins × bins`.
+    fn direction_bin(&self, d: Vec3) -> u32 {
+        let l1 = d.x.abs() + d.y.abs() + d.z.abs();
+        let (mut u, mut v) = (d.x / l1, d.y / l1);
+        if d.z < 0.0 {
+            (u, v) = ((1.0 - v.abs()) * u.signum(), (1.0 - u.abs()) * v.signum());
+        }
+        let n = self.bins as f32;
+        let q = |x: f32| (((x * 0.5 + 0.5) * n) as u32).min(self.bins - 1);
+        q(u) * self.bins + q(v)
+    }
+
+    /// The key of level `level`'s cell containing finest-level cell `c`, bin `bin`.
+    fn key(&self, level: u32, c: [u32; 3], bin: u32) -> u64 {
+        self.key_at_level(level, c.map(|v| v >> level), bin)
+    }
+
+    /// The key of level `level`'s cell `c` (in that level's cells), bin `bin`.
+    fn key_at_level(&self, level: u32, c: [u32; 3], bin: u32) -> u64 {
+        let [x, y, z] = c.map(u64::from);
+        (level as u64) << 60 | (bin as u64) << 48 | z << 32 | y << 16 | x
+    }
+}
+
+/// Sums of records.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Sums {
+    rgb: [f64; 3],
+    count: u32,
+}
+
+impl Sums {
+    fn add(&mut self, other: &Sums) {
+        for (a, b) in self.rgb.iter_mut().zip(other.rgb) {
+            *a += b;
+        }
+        self.count += other.count;
+    }
+}
+
+/// Records of the finest level, summed: one training chunk's, or all of them.
+#[derive(Clone, Default)]
+pub(crate) struct Records {
+    cells: FxHashMap<u64, Sums>,
+    pub(crate) count: u64,
+}
+
+impl Records {
+    /// Adds one record; non-finite or negative values are dropped (they carry no estimate).
+    pub(crate) fn add(&mut self, lattice: &Lattice, p: Vec3, dir: Vec3, radiance: Rgb) {
+        if !(radiance.is_finite() && radiance.min_element() >= 0.0 && p.is_finite()) {
+            return;
+        }
+        let (c, bin) = lattice.locate(p, dir);
+        let sums = self.cells.entry(lattice.key(0, c, bin)).or_default();
+        sums.add(&Sums {
+            rgb: radiance.to_array().map(f64::from),
+            count: 1,
+        });
+        self.count += 1;
+    }
+
+    /// Adds a later chunk's records. Floating-point sums depend on their order, so chunks
+    /// must be merged in a fixed order for the cache to be the same on every run.
+    pub(crate) fn merge(&mut self, later: &Records) {
+        // Keys in sorted order: a map's iteration order depends on its history.
+        let mut keys: Vec<_> = later.cells.keys().copied().collect();
+        keys.sort_unstable();
+        for key in keys {
+            self.cells.entry(key).or_default().add(&later.cells[&key]);
+        }
+        self.count += later.count;
+    }
+}
+
+/// A cell's mean radiance and how many records it averages.
+#[derive(Clone, Copy, Debug)]
+struct Cell {
+    mean: Rgb,
+    count: u32,
+}
+
+/// The cache a render looks radiance up in.
+pub(crate) struct RadianceCache {
+    lattice: Lattice,
+    cells: FxHashMap<u64, Cell>,
+    min_records: u32,
+    records: u64,
+}
+
+impl RadianceCache {
+    /// Every level's cells from the finest level's `records`; a lookup uses a cell only when
+    /// it averages at least `min_records` records.
+    pub(crate) fn new(lattice: Lattice, records: Records, min_records: u32) -> Self {
+        let mut levels: Vec<FxHashMap<u64, Sums>> = vec![records.cells];
+        for level in 1..lattice.levels {
+            let mut coarser = FxHashMap::default();
+            let finer = &levels[level as usize - 1];
+            let mut keys: Vec<_> = finer.keys().copied().collect();
+            keys.sort_unstable();
+            for key in keys {
+                let sums = &finer[&key];
+                let bin = ((key >> 48) & 0xfff) as u32;
+                let c = [key & 0xffff, (key >> 16) & 0xffff, (key >> 32) & 0xffff]
+                    .map(|v| (v as u32) << (level - 1));
+                coarser
+                    .entry(lattice.key(level, c, bin))
+                    .or_insert_with(Sums::default)
+                    .add(sums);
+            }
+            levels.push(coarser);
+        }
+        let cells = levels
+            .into_iter()
+            .flatten()
+            .filter(|(_, s)| s.count > 0)
+            .map(|(key, s)| {
+                let mean = Vec3::from_array(s.rgb.map(|v| (v / s.count as f64) as f32));
+                (
+                    key,
+                    Cell {
+                        mean,
+                        count: s.count,
+                    },
+                )
+            })
+            .collect();
+        RadianceCache {
+            lattice,
+            cells,
+            min_records,
+            records: records.count,
+        }
+    }
+
+    /// The radiance leaving `p` toward `dir`, from the finest level whose cell around `p` holds
+    /// enough records: the records of that cell and its neighbours, weighted by a tent around
+    /// `p` one cell wide (trilinear interpolation of the cells' means, weighted by their
+    /// counts), so that neighbouring points see a smooth average rather than the steps and the
+    /// independent noise of single cells. `None` where no level has enough.
+    pub(crate) fn lookup(&self, p: Vec3, dir: Vec3) -> Option<Rgb> {
+        let p = self.lattice.clamp(p);
+        let (c, bin) = self.lattice.locate(p, dir);
+        let level = (0..self.lattice.levels).find(|&level| {
+            self.cells
+                .get(&self.lattice.key(level, c, bin))
+                .is_some_and(|cell| cell.count >= self.min_records)
+        })?;
+        // Position in cells of this level, relative to the centres of the cells below it.
+        let side = self.lattice.cell * (1u32 << level) as f32;
+        let u = (p - self.lattice.origin) / side - Vec3::splat(0.5);
+        let base = u.floor();
+        let t = u - base;
+        let mut sum = Rgb::ZERO;
+        let mut weight = 0.0;
+        for corner in 0..8u32 {
+            let offset = Vec3::new(
+                (corner & 1) as f32,
+                ((corner >> 1) & 1) as f32,
+                (corner >> 2) as f32,
+            );
+            let at = base + offset;
+            let cells_per_side = (1u32 << (self.lattice.finest - level)) as f32;
+            if at.min_element() < 0.0 || at.max_element() >= cells_per_side {
+                continue;
+            }
+            let w = Vec3::ONE - (t - offset).abs();
+            let w = w.x * w.y * w.z;
+            let key =
+                self.lattice
+                    .key_at_level(level, [at.x as u32, at.y as u32, at.z as u32], bin);
+            if let Some(cell) = self.cells.get(&key) {
+                sum += cell.mean * (w * cell.count as f32);
+                weight += w * cell.count as f32;
+            }
+        }
+        (weight > 0.0).then(|| sum / weight)
+    }
+
+    /// One line for logs.
+    pub(crate) fn describe(&self) -> String {
+        format!(
+            "radiance cache: {} records in {} cells of {} levels ({} to {} cells along the \
+             longest side, {} direction bins)",
+            self.records,
+            self.cells.len(),
+            self.lattice.levels,
+            1u32 << self.lattice.finest,
+            1u32 << (self.lattice.finest + 1 - self.lattice.levels),
+            self.lattice.bins * self.lattice.bins
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unit_box() -> Aabb {
+        Aabb {
+            min: Vec3::ZERO,
+            max: Vec3::ONE,
+        }
+    }
+
+    /// Directions spread over the sphere (a Fibonacci lattice).
+    fn directions(n: usize) -> impl Iterator<Item = Vec3> {
+        (0..n).map(move |i| {
+            let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+            let phi = i as f32 * 2.399_963;
+            let r = (1.0 - z * z).sqrt();
+            Vec3::new(r * phi.cos(), r * phi.sin(), z)
+        })
+    }
+
+    #[test]
+    fn direction_bins_cover_the_sphere_evenly() {
+        let lattice = Lattice::new(unit_box(), 3, 1, 4);
+        let mut counts = [0u32; 16];
+        let n = 16_000;
+        for d in directions(n) {
+            counts[lattice.direction_bin(d) as usize] += 1;
+        }
+        // The octahedral map's bins are not equal-area, but none is empty or more than three
+        // times another.
+        let (min, max) = (counts.iter().min().unwrap(), counts.iter().max().unwrap());
+        assert!(*min > 0 && *max < 3 * min, "{counts:?}");
+        // Opposite directions never share a bin.
+        for d in directions(500) {
+            assert_ne!(lattice.direction_bin(d), lattice.direction_bin(-d), "{d}");
+        }
+    }
+
+    #[test]
+    fn a_lookup_takes_the_finest_level_with_enough_records() {
+        // Four levels over the unit box: 8, 4, 2, 1 cells per side.
+        let lattice = Lattice::new(unit_box(), 3, 4, 1);
+        let mut records = Records::default();
+        // Three records in the finest cell at the origin, five in the rest of its level-1
+        // cell, and far away one record of another value.
+        for _ in 0..3 {
+            records.add(&lattice, Vec3::splat(0.01), Vec3::Z, Rgb::splat(1.0));
+        }
+        for _ in 0..5 {
+            records.add(&lattice, Vec3::splat(0.2), Vec3::Z, Rgb::splat(3.0));
+        }
+        records.add(&lattice, Vec3::splat(0.9), Vec3::Z, Rgb::splat(100.0));
+        let at = |min_records| RadianceCache::new(lattice, records.clone(), min_records);
+        // The centre of the finest cell at the origin.
+        let origin = Vec3::splat(0.0625);
+        assert_eq!(at(3).lookup(origin, Vec3::Z), Some(Rgb::splat(1.0)));
+        // Not enough in the finest cell: its parent's mean, (3·1 + 5·3) / 8.
+        assert_eq!(at(4).lookup(origin, Vec3::Z), Some(Rgb::splat(2.25)));
+        // Only the whole box has nine.
+        assert_eq!(at(9).lookup(origin, Vec3::Z), Some(Rgb::splat(118.0 / 9.0)));
+        assert_eq!(at(10).lookup(origin, Vec3::Z), None);
+        // Points outside the lattice are clamped into it.
+        assert_eq!(
+            at(3).lookup(Vec3::splat(-5.0), Vec3::Z),
+            Some(Rgb::splat(1.0))
+        );
+    }
+
+    #[test]
+    fn lookups_interpolate_between_cell_centres() {
+        // Two cells side by side along x, equally many records of 1 and of 3.
+        let lattice = Lattice::new(unit_box(), 1, 1, 1);
+        let mut records = Records::default();
+        for _ in 0..4 {
+            records.add(&lattice, Vec3::new(0.1, 0.1, 0.1), Vec3::Z, Rgb::splat(1.0));
+            records.add(&lattice, Vec3::new(0.9, 0.1, 0.1), Vec3::Z, Rgb::splat(3.0));
+        }
+        let cache = RadianceCache::new(lattice, records, 1);
+        let at = |x: f32| cache.lookup(Vec3::new(x, 0.25, 0.25), Vec3::Z).unwrap().x;
+        assert_eq!(at(0.25), 1.0);
+        assert_eq!(at(0.5), 2.0);
+        assert!((at(0.625) - 2.5).abs() < 1e-6);
+        assert_eq!(at(0.75), 3.0);
+        // Beyond the outermost centres there is nothing to interpolate toward.
+        assert_eq!(at(0.95), 3.0);
+    }
+
+    #[test]
+    fn records_that_carry_no_estimate_are_dropped() {
+        let lattice = Lattice::new(unit_box(), 1, 1, 1);
+        let mut records = Records::default();
+        records.add(&lattice, Vec3::ZERO, Vec3::Z, Rgb::new(f32::NAN, 0.0, 0.0));
+        records.add(&lattice, Vec3::ZERO, Vec3::Z, Rgb::new(-1.0, 0.0, 0.0));
+        records.add(&lattice, Vec3::NAN, Vec3::Z, Rgb::ONE);
+        assert_eq!(records.count, 0);
+        let cache = RadianceCache::new(lattice, records, 1);
+        assert_eq!(cache.lookup(Vec3::ZERO, Vec3::Z), None);
+    }
+}
