@@ -18,6 +18,7 @@ use std::time::{Duration, Instant};
 use tress_core::film::{Aov, Outputs};
 use tress_core::image_io::Attribute;
 use tress_core::render::{self, RenderStats, SampleSums};
+use tress_core::Integrator;
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
@@ -206,6 +207,11 @@ impl OutputFiles<'_> {
                 Attribute::Double(stats.wall.as_secs_f64()),
             ),
             ("tress:rays", Attribute::Double(stats.rays as f64)),
+            // Included in the render time.
+            (
+                "tress:precompute_time_s",
+                Attribute::Double(stats.precompute.as_secs_f64()),
+            ),
             // Samples that came out NaN or infinite and were left out of the sums.
             (
                 "tress:dropped_samples",
@@ -321,6 +327,27 @@ pub fn render(args: RenderArgs) -> Result<()> {
     let interrupt = Interrupt::install()?;
     let cancel = interrupt.cancel_flag();
 
+    // The integrator's per-film precomputation (a radiance cache), with its own bar; it counts
+    // as render time.
+    let t_prepare = Instant::now();
+    let prepare_bar = progress_bar(1000, verbose, "precomputing ");
+    let prepared = pool.install(|| {
+        integrator.for_film(&built.scene, &desc.film, &|done| {
+            prepare_bar.set_position((done * 1000.0) as u64)
+        })
+    });
+    prepare_bar.finish_and_clear();
+    let prepare_time = t_prepare.elapsed();
+    let integrator: &dyn Integrator = match &prepared {
+        Some(p) => {
+            if verbose {
+                eprintln!("{}", p.note);
+            }
+            p.integrator.as_ref()
+        }
+        None => integrator.as_ref(),
+    };
+
     let [x0, y0, x1, y1] = desc.film.window();
     let target = desc.film.spp as u64;
     let first = args.spp_offset;
@@ -335,7 +362,12 @@ pub fn render(args: RenderArgs) -> Result<()> {
         first,
         outputs.clone(),
     );
-    let mut stats = RenderStats::default();
+    let mut stats = RenderStats {
+        wall: prepare_time,
+        precompute: prepare_time,
+        precompute_note: prepared.as_ref().map(|p| p.note.clone()),
+        ..Default::default()
+    };
     let mut reached = 0u64;
     let mut status = Status::Complete;
     while reached < target {
@@ -343,7 +375,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
         let wave = pool.install(|| {
             render::render_outputs(
                 &built.scene,
-                integrator.as_ref(),
+                integrator,
                 &desc.film,
                 &outputs,
                 first + reached..first + next,
@@ -420,6 +452,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
     crate::logging::record("spp_requested", target);
     crate::logging::record("render_status", status.label());
     crate::logging::record("time_s", stats.wall.as_secs_f64());
+    crate::logging::record("precompute_s", stats.precompute.as_secs_f64());
     crate::logging::record("rays", stats.rays);
     crate::logging::record("mrays_per_s", stats.rays_per_second() / 1e6);
     crate::logging::record("nonfinite_samples", stats.nonfinite_samples);

@@ -17,6 +17,8 @@ pub(super) struct Rendered {
     /// comparisons.
     pub(super) time_s: f64,
     pub(super) wall_s: f64,
+    /// Wall seconds of the integrator's per-film precomputation, included in both times.
+    pub(super) precompute_s: f64,
     pub(super) rays: u64,
 }
 
@@ -102,11 +104,14 @@ impl SceneRunner<'_> {
         let time_s = number("tress:render_cpu_s");
         let wall_s = number("tress:render_time_s");
         let rays = attribute(&attrs, "tress:rays").and_then(|v| v.parse().ok());
+        // Renders from before integrators could precompute per film had nothing to record.
+        let precompute_s = number("tress:precompute_time_s").unwrap_or(0.0);
         match (time_s, wall_s, rays) {
             (Some(time_s), Some(wall_s), Some(rays)) => Cached::Hit(Rendered {
                 image,
                 time_s,
                 wall_s,
+                precompute_s,
                 rays,
             }),
             _ => Cached::Stale("no render time or ray count".into()),
@@ -184,6 +189,10 @@ impl SceneRunner<'_> {
             ("tress:seed", job.seed.to_string()),
             ("tress:render_time_s", wall_s.to_string()),
             ("tress:render_cpu_s", time_s.to_string()),
+            (
+                "tress:precompute_time_s",
+                stats.precompute.as_secs_f64().to_string(),
+            ),
             ("tress:rays", stats.rays.to_string()),
             ("tress:study_key", key),
             ("tress:pixels_hash", pixels_hash(&output.image)),
@@ -200,6 +209,7 @@ impl SceneRunner<'_> {
             image: output.image,
             time_s,
             wall_s,
+            precompute_s: stats.precompute.as_secs_f64(),
             rays: stats.rays,
         })
     }

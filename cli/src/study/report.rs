@@ -4,7 +4,8 @@ use super::*;
 
 pub(super) fn write_csv(plan: &Plan, res: &Results) -> Result<PathBuf> {
     let mut s = String::from(
-        "scene,integrator,spp,rep,seed,cpu_s,wall_s,rays,reference,mse,relmse,mean,ref_mean",
+        "scene,integrator,spp,rep,seed,cpu_s,wall_s,precompute_s,rays,reference,mse,relmse,mean,\
+         ref_mean",
     );
     for r in &plan.region_names {
         let _ = write!(s, ",{r}_mse,{r}_relmse,{r}_mean");
@@ -14,7 +15,7 @@ pub(super) fn write_csv(plan: &Plan, res: &Results) -> Result<PathBuf> {
         let e = &r.whole;
         let _ = write!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             plan.scenes[r.scene].name,
             plan.integrators[r.integrator].label,
             r.spp,
@@ -22,6 +23,7 @@ pub(super) fn write_csv(plan: &Plan, res: &Results) -> Result<PathBuf> {
             r.seed,
             r.time_s,
             r.wall_s,
+            r.precompute_s,
             r.rays,
             r.reference.name(),
             e.mse,
@@ -310,8 +312,25 @@ pub(super) fn write_report(
             sc.name, sc.source, f.width, f.height
         );
     }
-    for i in &plan.integrators {
-        let _ = writeln!(s, "- integrator `{}`: `{}`", i.label, i.ron);
+    for (ii, i) in plan.integrators.iter().enumerate() {
+        let _ = write!(s, "- integrator `{}`: `{}`", i.label, i.ron);
+        // A per-film precomputation (a radiance cache) is part of every render's time; say
+        // how much.
+        let precompute: Vec<f64> = res
+            .rows
+            .iter()
+            .filter(|r| r.integrator == ii && r.reference == RefKind::Common)
+            .map(|r| r.precompute_s)
+            .collect();
+        let longest = precompute.iter().copied().fold(0.0, f64::max);
+        if longest > 0.0 {
+            let shortest = precompute.iter().copied().fold(f64::INFINITY, f64::min);
+            let _ = write!(
+                s,
+                "; its per-film precomputation took {shortest:.3}–{longest:.3} s of wall time                  per render, included in its render times"
+            );
+        }
+        s.push('\n');
     }
     let _ = writeln!(
         s,
