@@ -918,7 +918,7 @@ fn look_at(eye: DVec3, look: DVec3, up: DVec3) -> Option<DMat4> {
 
 /// The cubic Bézier segments of a pbrt curve's control points, as pbrt-v4's `Curve::Create`
 /// forms them.
-fn bezier_segments(
+pub(crate) fn bezier_segments(
     cp: &[DVec3],
     degree: f64,
     bspline: bool,
@@ -990,7 +990,7 @@ fn bezier_segments(
 }
 
 /// The point at `u` of a cubic Bézier (de Casteljau, stable).
-fn bezier(cp: &[DVec3; 4], u: f64) -> DVec3 {
+pub(crate) fn bezier(cp: &[DVec3; 4], u: f64) -> DVec3 {
     let a = [
         cp[0].lerp(cp[1], u),
         cp[1].lerp(cp[2], u),
@@ -1006,7 +1006,7 @@ fn bezier(cp: &[DVec3; 4], u: f64) -> DVec3 {
 /// piece's own parameter), and for a cubic Bézier |B''| ≤ 6·L₀ with L₀ the largest second
 /// difference of the control points; halving d times divides it by 4^d. Capped at 2^10
 /// pieces, pbrt's cap.
-fn refinement_depth(cp: &[DVec3; 4], width: f64) -> u32 {
+pub(crate) fn refinement_depth(cp: &[DVec3; 4], width: f64) -> u32 {
     let l0 = (0..2)
         .map(|i| (cp[i] - 2.0 * cp[i + 1] + cp[i + 2]).length())
         .fold(0.0, f64::max);
