@@ -3,8 +3,9 @@
 //! references, variants) before tress reads it.
 //!
 //! **What is read.** Every `BasisCurves` prim the stage's default traversal reaches (active,
-//! loaded, defined, not abstract) becomes strands, one per entry of `curveVertexCounts`, in
-//! traversal order: `type` `linear` or `cubic` (the schema's default) with `basis` `bezier`
+//! loaded, defined, not abstract), instance proxies included (so each instance of an
+//! `instanceable` prim gives its own copy), becomes strands, one per entry of
+//! `curveVertexCounts`, in traversal order: `type` `linear` or `cubic` (the schema's default) with `basis` `bezier`
 //! (default), `bspline` or `catmullRom`; `wrap` `nonperiodic` only. `points` and `widths` (a
 //! width is a diameter: radius = width / 2) with any interpolation — `constant`, `uniform` (one
 //! per curve), `varying` (one per segment end; `faceVarying` counts as `varying`, as in USD) or
@@ -86,11 +87,17 @@ impl UsdFile {
     /// Reads the stage's `BasisCurves` and validates them.
     pub fn read(&self) -> Result<HairGeometry> {
         let path = &self.path;
-        // The usual message for a missing file or a folder, before openusd's own.
-        tress_core::files::read_regular(path).map_err(|source| crate::Error::Io {
+        // The usual messages for a missing file or a folder, before openusd's own.
+        let io = |source| crate::Error::Io {
             path: path.to_owned(),
             source,
-        })?;
+        };
+        if !std::fs::metadata(path).map_err(io)?.is_file() {
+            return Err(io(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "not a regular file (a directory, device or pipe)",
+            )));
+        }
         let fail = |reason: String| format_error(path, reason);
         let name = path
             .to_str()
@@ -123,7 +130,10 @@ impl UsdFile {
         };
         let mut paths = Vec::new();
         stage
-            .traverse(usd::PrimPredicate::DEFAULT, |p| paths.push(p.clone()))
+            .traverse(
+                usd::PrimPredicate::DEFAULT.with_instance_proxies(true),
+                |p| paths.push(p.clone()),
+            )
             .map_err(|e| fail(format!("traversing the stage: {e:#}")))?;
         let mut reader = Reader {
             hair: HairGeometry::empty(path.display().to_string()),
@@ -622,6 +632,25 @@ mod tests {
         assert!(close(colors[catmull.start], v(0.5, 0.5, 0.5)));
         assert!(close(colors[catmull.end - 1], v(0.3, 0.2, 0.1)));
         assert_eq!(colors.len(), g.points.len());
+    }
+
+    #[test]
+    fn every_instance_of_an_instanceable_prim_gives_its_strands() {
+        for file in ["usd_instanced.usda", "usd_instanced.usdc"] {
+            let g = groom(file);
+            // The class prim itself is abstract: only its two instances, moved by theirs.
+            assert_eq!(g.strand_offsets, vec![0, 2, 4], "{file}");
+            let v = Vec3::new;
+            assert_points(
+                &g,
+                &[
+                    v(5.0, 0.0, 0.0),
+                    v(5.0, 1.0, 0.0),
+                    v(10.0, 0.0, 0.0),
+                    v(10.0, 1.0, 0.0),
+                ],
+            );
+        }
     }
 
     /// The error reading `text` as `name` in a temporary folder.

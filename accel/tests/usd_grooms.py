@@ -8,13 +8,15 @@
 - tests/data/usd_cubic: Z up, 0.01 metres per unit; a bezier curve (a hook: refined), a bspline
   and a catmullRom curve along straight lines, widths constant, per vertex and varying,
   displayColor per vertex on all three.
+- tests/data/usd_instanced: a class prim holding a linear curve, referenced by two
+  instanceable Xforms translated by (5, 0, 0) and (10, 0, 0).
 
 Usage (in a virtualenv): pip install usd-core && python3 accel/tests/usd_grooms.py
 """
 
 import os
 
-from pxr import Gf, Usd, UsdGeom
+from pxr import Gf, Sdf, Usd, UsdGeom
 
 HERE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data")
 
@@ -70,7 +72,24 @@ def cubic(stage):
     )
 
 
-for name, build in [("usd_linear", linear), ("usd_cubic", cubic)]:
+def instanced(stage):
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdGeom.Xform.Define(stage, "/Proto")
+    c = UsdGeom.BasisCurves.Define(stage, "/Proto/Hair")
+    c.CreateTypeAttr(UsdGeom.Tokens.linear)
+    c.CreateCurveVertexCountsAttr([2])
+    c.CreatePointsAttr([(0, 0, 0), (0, 1, 0)])
+    c.CreateWidthsAttr([0.1])
+    c.SetWidthsInterpolation(UsdGeom.Tokens.constant)
+    stage.GetPrimAtPath("/Proto").SetSpecifier(Sdf.SpecifierClass)
+    for i, x in enumerate([5, 10]):
+        instance = UsdGeom.Xform.Define(stage, f"/Instance{i}")
+        instance.AddTranslateOp().Set(Gf.Vec3d(x, 0, 0))
+        instance.GetPrim().GetReferences().AddInternalReference("/Proto")
+        instance.GetPrim().SetInstanceable(True)
+
+
+for name, build in [("usd_linear", linear), ("usd_cubic", cubic), ("usd_instanced", instanced)]:
     for ext in ["usda", "usdc"]:
         stage = Usd.Stage.CreateNew(os.path.join(HERE, f"{name}.{ext}"))
         build(stage)
