@@ -11,7 +11,7 @@
 //! per curve), `varying` (one per segment end; `faceVarying` counts as `varying`, as in USD) or
 //! `vertex` (one per control point, the default, interpolated by the curve's basis) — and
 //! `primvars:displayColor` the same way, as the hair's colours (what a hair object's
-//! `variation: Some(file_colors: true)` takes). Values are the earliest time sample where an
+//! `variation: Some(file_colors: true)` takes) when every prim read has them. Values are the earliest time sample where an
 //! attribute has samples, else its default.
 //!
 //! **Cubic curves to points.** Each segment is turned into an exact cubic Bézier (B-spline
@@ -156,6 +156,14 @@ impl UsdFile {
         let mut hair = reader.hair;
         hair.colors = match reader.colors {
             Colors::None => None,
+            Colors::Incomplete => {
+                tracing::warn!(
+                    "{}: some BasisCurves have primvars:displayColor and some not: the colours \
+                     are not used",
+                    path.display()
+                );
+                None
+            }
             Colors::PerStrand(c) => Some(HairAttribute::PerStrand(c)),
             Colors::PerPoint(c) => Some(HairAttribute::PerPoint(c)),
         };
@@ -167,13 +175,14 @@ impl UsdFile {
     }
 }
 
-/// The colours read so far: none, or one per strand or per point for every strand so far.
-/// Prims with and without `displayColor`, or with it per curve and per vertex, cannot share
-/// one array: per-point colours win, and strands without one are refused.
+/// The colours read so far: none, one per strand or per point for every strand so far, or
+/// some strands with and some without (then none are used: a hair's colours are all or
+/// nothing). Prims with `displayColor` per curve and per vertex share one array per point.
 enum Colors {
     None,
     PerStrand(Vec<Rgb>),
     PerPoint(Vec<Rgb>),
+    Incomplete,
 }
 
 struct Reader {
@@ -399,29 +408,23 @@ impl Reader {
             }
             self.hair.strand_offsets.push(self.hair.points.len() as u32);
             varying_start += segments[i] + 1;
-            self.add_colors(colors.as_ref(), point_colors)?;
+            self.add_colors(colors.as_ref(), point_colors);
         }
         Ok(())
     }
 
     /// Records the colours of the strand just added: one per point, or none when its prim has
     /// no `displayColor`.
-    fn add_colors(&mut self, primvar: Option<&Primvar>, colors: Vec<Rgb>) -> anyhow::Result<()> {
+    fn add_colors(&mut self, primvar: Option<&Primvar>, colors: Vec<Rgb>) {
         let strands_before = self.hair.strand_count() - 1;
         let per_strand = matches!(
             primvar.map(|p| p.interpolation),
             Some(Interpolation::Constant | Interpolation::Uniform)
         );
         match (&mut self.colors, primvar) {
-            (Colors::None, None) => {}
-            (Colors::None, Some(_)) if strands_before > 0 => anyhow::bail!(
-                "primvars:displayColor: earlier BasisCurves have no colours, so not every \
-                 strand would have one"
-            ),
-            (_, None) => anyhow::bail!(
-                "no primvars:displayColor, but earlier BasisCurves have them, so not every \
-                 strand would have one"
-            ),
+            (Colors::None, None) | (Colors::Incomplete, _) => {}
+            (Colors::None, Some(_)) if strands_before > 0 => self.colors = Colors::Incomplete,
+            (_, None) => self.colors = Colors::Incomplete,
             (Colors::None, Some(_)) if per_strand => {
                 self.colors = Colors::PerStrand(vec![colors[0]])
             }
@@ -443,7 +446,6 @@ impl Reader {
                 self.colors = Colors::PerPoint(all);
             }
         }
-        Ok(())
     }
 }
 
@@ -723,6 +725,29 @@ def BasisCurves "Hair"
         ) + "}\n";
         let e = error("groom.usda", &nested);
         assert!(e.contains("</S>") && e.contains("not an Xform"), "{e}");
+        // Colours on some prims only: none are used, the strands are read.
+        let two = CURVES.to_string()
+            + &CURVES
+                .replace("#usda 1.0", "")
+                .replace("\"Hair\"", "\"Coloured\"")
+                .replace(
+                    "float[] widths",
+                    "color3f[] primvars:displayColor = [(1, 0, 0)] (interpolation = \"constant\")\n    float[] widths",
+                );
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("two.usda"), &two).unwrap();
+        let g = UsdFile::new(dir.path().join("two.usda")).read().unwrap();
+        assert_eq!((g.strand_count(), g.colors), (2, None));
+        std::fs::write(
+            dir.path().join("one.usda"),
+            two.replace("def BasisCurves \"Hair\"", "over \"Hair\""),
+        )
+        .unwrap();
+        let g = UsdFile::new(dir.path().join("one.usda")).read().unwrap();
+        assert_eq!(
+            g.colors,
+            Some(HairAttribute::PerStrand(vec![Vec3::new(1.0, 0.0, 0.0)]))
+        );
         let e = error("groom.usdc", "not a USD file");
         assert!(e.contains("groom.usdc") && e.contains("USD"), "{e}");
         let e = HairSource::File(PathBuf::from("/nowhere/groom.usd"))
