@@ -106,6 +106,7 @@ pub mod source;
 mod test_util;
 pub mod tfx;
 pub mod usc;
+pub mod usd;
 
 pub use children::ChildStrands;
 pub use curves::{CurveBasis, CurveShape};
@@ -122,3 +123,4 @@ pub use scene::{AccelInfo, EmbreeAccel, HairSegment, ObjectInfo, ObjectKind, Sce
 pub use source::{HairOptions, HairSource};
 pub use tfx::TfxFile;
 pub use usc::UscFile;
+pub use usd::UsdFile;

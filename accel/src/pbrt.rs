@@ -30,11 +30,20 @@
 //! used. Widths are scaled by the cube root of the transform's determinant (exact for rotations
 //! and uniform scales). Coordinates are kept as they are: set `z_up` for Z-up scenes.
 //!
+//! **Instancing.** The curves between `ObjectBegin "name"` and `ObjectEnd` (an attribute scope,
+//! as in pbrt) define an object and are not drawn themselves; every `ObjectInstance "name"`
+//! adds a copy of the object's strands, mapped by the transform at the `ObjectInstance` (after
+//! the one at their definition, as in pbrt), widths scaled by its determinant's cube root. As in
+//! pbrt-v4, an object may be instanced before it is defined; the copies follow the other
+//! strands, in the order of the `ObjectInstance` statements. Nested definitions, instances
+//! inside a definition, redefinitions and instances of undefined objects are errors. The
+//! instances together may make at most 2^26 points (about 1 GiB with their radii), counted
+//! before anything is copied, so a file instancing an object millions of times is refused.
+//!
 //! **Ignored.** Curve `type` (`flat`, `cylinder`, `ribbon`: the object's `curve` option decides
 //! between ray-facing ribbons and tubes) and ribbon normals `N`; `splitdepth`; materials (the
-//! hair object has the material the tress scene gives it); curves inside
-//! `ObjectBegin`/`ObjectEnd` (instancing is not supported: they are skipped with a warning);
-//! gzip-compressed files (an error: decompress them first).
+//! hair object has the material the tress scene gives it); gzip-compressed files (an error:
+//! decompress them first).
 
 use crate::error::{format_error, Result};
 use crate::geometry::HairGeometry;
@@ -48,6 +57,10 @@ use tress_core::math::Vec3;
 const MAX_INCLUDE_DEPTH: usize = 32;
 /// pbrt's cap on the refinement depth of one curve segment (2^10 pieces).
 const MAX_REFINE_DEPTH: u32 = 10;
+/// The most points the strands and their instances may make: 2^26, about 1 GiB with the
+/// radii. Without instancing every point costs the file some text; with it a short file can
+/// ask for any number of copies.
+const MAX_INSTANCED_POINTS: u64 = 1 << 26;
 
 /// A pbrt scene file whose curves to load.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -76,22 +89,23 @@ impl PbrtFile {
             state: GraphicsState::default(),
             saved: Vec::new(),
             named: HashMap::new(),
-            object_depth: 0,
-            skipped_in_objects: 0,
+            defining: None,
+            objects: HashMap::new(),
+            instances: Vec::new(),
             other_shapes: 0,
             hair: HairGeometry::empty(self.path.display().to_string()),
             strand_open: false,
         };
         reader.read_file(&self.path, 0)?;
-        reader.close_strand();
-        if reader.skipped_in_objects > 0 {
-            tracing::warn!(
-                "{}: {} curves inside ObjectBegin/ObjectEnd skipped: object instancing is not \
-                 supported",
-                self.path.display(),
-                reader.skipped_in_objects
-            );
+        if let Some(d) = &reader.defining {
+            return Err(at(
+                &d.path,
+                d.pos,
+                format!("ObjectBegin \"{}\" without ObjectEnd", d.name),
+            ));
         }
+        reader.close_strand();
+        reader.instantiate()?;
         let mut hair = reader.hair;
         if hair.strand_count() == 0 {
             return Err(format_error(
@@ -292,6 +306,26 @@ impl Default for GraphicsState {
     }
 }
 
+/// An object being defined (between `ObjectBegin` and `ObjectEnd`).
+struct Definition {
+    name: String,
+    /// Where its `ObjectBegin` is.
+    path: PathBuf,
+    pos: Pos,
+    /// The strands outside objects, set aside while the object's curves fill `hair`.
+    outside: HairGeometry,
+}
+
+/// An `ObjectInstance` statement, resolved once the whole file is read (pbrt-v4 lets a file
+/// instance an object it defines further on).
+struct InstanceUse {
+    name: String,
+    /// The transform at the statement.
+    ctm: DMat4,
+    path: PathBuf,
+    pos: Pos,
+}
+
 struct CurveReader {
     /// Folder that relative `Include`/`Import` paths are resolved against.
     base: PathBuf,
@@ -299,10 +333,12 @@ struct CurveReader {
     saved: Vec<GraphicsState>,
     /// `CoordinateSystem` names (and "camera").
     named: HashMap<String, DMat4>,
-    /// Nesting of `ObjectBegin`.
-    object_depth: usize,
-    skipped_in_objects: usize,
+    defining: Option<Definition>,
+    /// The defined objects' strands, each in the frame of its definition.
+    objects: HashMap<String, HairGeometry>,
+    instances: Vec<InstanceUse>,
     other_shapes: usize,
+    /// The strands read so far (of the object being defined, while there is one).
     hair: HairGeometry,
     /// Whether the strand being built may be continued by the next curve (nothing but curves
     /// came since its last one).
@@ -473,12 +509,61 @@ impl CurveReader {
                 self.state.ctm = DMat4::IDENTITY;
                 self.named.insert("world".into(), DMat4::IDENTITY);
             }
-            "ObjectBegin" => self.object_depth += 1,
+            "ObjectBegin" => {
+                let name = name()?.to_owned();
+                if let Some(d) = &self.defining {
+                    return Err(err(format!(
+                        "ObjectBegin \"{name}\" inside the definition of \"{}\": objects do \
+                         not nest",
+                        d.name
+                    )));
+                }
+                if self.objects.contains_key(&name) {
+                    return Err(err(format!(
+                        "ObjectBegin \"{name}\": an object of that name is already defined"
+                    )));
+                }
+                // As in pbrt, a definition is an attribute scope.
+                self.saved.push(self.state.clone());
+                self.close_strand();
+                let outside = std::mem::replace(&mut self.hair, HairGeometry::empty(&name));
+                self.defining = Some(Definition {
+                    name,
+                    path: path.to_owned(),
+                    pos: keyword.pos,
+                    outside,
+                });
+                self.strand_open = false;
+            }
             "ObjectEnd" => {
-                self.object_depth = self
-                    .object_depth
-                    .checked_sub(1)
+                let d = self
+                    .defining
+                    .take()
                     .ok_or_else(|| err("ObjectEnd without ObjectBegin".into()))?;
+                self.close_strand();
+                let object = std::mem::replace(&mut self.hair, d.outside);
+                self.objects.insert(d.name, object);
+                self.state = self
+                    .saved
+                    .pop()
+                    .ok_or_else(|| err("ObjectEnd without a matching begin".into()))?;
+                self.strand_open = false;
+            }
+            "ObjectInstance" => {
+                let name = name()?.to_owned();
+                if let Some(d) = &self.defining {
+                    return Err(err(format!(
+                        "ObjectInstance \"{name}\" inside the definition of \"{}\": objects \
+                         do not nest",
+                        d.name
+                    )));
+                }
+                self.instances.push(InstanceUse {
+                    name,
+                    ctm: self.state.ctm,
+                    path: path.to_owned(),
+                    pos: keyword.pos,
+                });
             }
             "Include" | "Import" => {
                 let file = name()?;
@@ -514,8 +599,6 @@ impl CurveReader {
                 if name()? != "curve" {
                     self.other_shapes += 1;
                     self.strand_open = false;
-                } else if self.object_depth > 0 {
-                    self.skipped_in_objects += 1;
                 } else {
                     let params = params(path, &args[1..])?;
                     self.curve(path, keyword.pos, &params)?;
@@ -524,6 +607,61 @@ impl CurveReader {
             // Everything else (camera, film, lights, materials, media, …) says nothing about
             // curve geometry; its arguments were read above.
             _ => {}
+        }
+        Ok(())
+    }
+
+    /// Appends every `ObjectInstance`'s copy of its object, once all are known to exist and
+    /// to fit within [`MAX_INSTANCED_POINTS`] together.
+    fn instantiate(&mut self) -> Result<()> {
+        let mut total = self.hair.points.len() as u64;
+        for u in &self.instances {
+            let object = self.objects.get(&u.name).ok_or_else(|| {
+                at(
+                    &u.path,
+                    u.pos,
+                    format!(
+                        "ObjectInstance \"{}\": no object of that name is defined (ObjectBegin)",
+                        u.name
+                    ),
+                )
+            })?;
+            total += object.points.len() as u64;
+            if total > MAX_INSTANCED_POINTS {
+                return Err(at(
+                    &u.path,
+                    u.pos,
+                    format!(
+                        "ObjectInstance \"{}\": the strands and instances up to here make \
+                         {total} points, more than {MAX_INSTANCED_POINTS} (2^26): is the object \
+                         instanced more often than meant?",
+                        u.name
+                    ),
+                ));
+            }
+        }
+        self.hair
+            .points
+            .reserve(total as usize - self.hair.points.len());
+        for u in &self.instances {
+            let object = &self.objects[&u.name];
+            let width_scale = DMat3::from_mat4(u.ctm).determinant().abs().cbrt();
+            let base = self.hair.points.len() as u32;
+            self.hair.points.extend(
+                object
+                    .points
+                    .iter()
+                    .map(|p| to_f32(u.ctm.transform_point3(p.as_dvec3()))),
+            );
+            self.hair.radii.extend(
+                object
+                    .radii
+                    .iter()
+                    .map(|&r| (r as f64 * width_scale) as f32),
+            );
+            self.hair
+                .strand_offsets
+                .extend(object.strand_offsets[1..].iter().map(|&o| base + o));
         }
         Ok(())
     }
@@ -780,7 +918,7 @@ fn look_at(eye: DVec3, look: DVec3, up: DVec3) -> Option<DMat4> {
 
 /// The cubic Bézier segments of a pbrt curve's control points, as pbrt-v4's `Curve::Create`
 /// forms them.
-fn bezier_segments(
+pub(crate) fn bezier_segments(
     cp: &[DVec3],
     degree: f64,
     bspline: bool,
@@ -852,7 +990,7 @@ fn bezier_segments(
 }
 
 /// The point at `u` of a cubic Bézier (de Casteljau, stable).
-fn bezier(cp: &[DVec3; 4], u: f64) -> DVec3 {
+pub(crate) fn bezier(cp: &[DVec3; 4], u: f64) -> DVec3 {
     let a = [
         cp[0].lerp(cp[1], u),
         cp[1].lerp(cp[2], u),
@@ -868,7 +1006,7 @@ fn bezier(cp: &[DVec3; 4], u: f64) -> DVec3 {
 /// piece's own parameter), and for a cubic Bézier |B''| ≤ 6·L₀ with L₀ the largest second
 /// difference of the control points; halving d times divides it by 4^d. Capped at 2^10
 /// pieces, pbrt's cap.
-fn refinement_depth(cp: &[DVec3; 4], width: f64) -> u32 {
+pub(crate) fn refinement_depth(cp: &[DVec3; 4], width: f64) -> u32 {
     let l0 = (0..2)
         .map(|i| (cp[i] - 2.0 * cp[i + 1] + cp[i + 2]).length())
         .fold(0.0, f64::max);
@@ -1082,6 +1220,123 @@ mod tests {
         assert_eq!(g.points[4], Vec3::new(0.0, 0.0, 3.0));
         assert_eq!(g.points[6], Vec3::ZERO);
         assert_eq!(g.radii[6], 0.5);
+    }
+
+    #[test]
+    fn objects_are_instanced_with_their_transforms() {
+        let g = read(
+            r#"AttributeBegin
+                 Translate 0 0 -1
+                 ObjectInstance "tuft"
+               AttributeEnd
+               Shape "curve" "point3 P" [9 0 0  9 1 0  9 2 0  9 3 0] "float width" 0.2
+               ObjectBegin "tuft"
+                 Translate 1 0 0
+                 Shape "curve" "point3 P" [0 0 0  0 1 0  0 2 0  0 3 0] "float width" 0.2
+                 Shape "curve" "point3 P" [0 3 0  0 4 0  0 5 0  0 6 0] "float width" 0.2
+                 Shape "curve" "point3 P" [2 0 0  2 1 0  2 2 0  2 3 0] "float width" 0.2
+               ObjectEnd
+               Shape "curve" "point3 P" [0 0 0  0 1 0  0 2 0  0 3 0] "float width" 0.2
+               AttributeBegin
+                 Translate 0 10 0
+                 Scale 2 2 2
+                 ObjectInstance "tuft"
+               AttributeEnd"#,
+        )
+        .unwrap();
+        // The two strands outside the object (the object's Translate stayed inside it), then
+        // each instance's two strands (the first two curves of the object join), in the order
+        // of the ObjectInstance statements, the first coming before the definition.
+        assert_eq!(g.strand_offsets, vec![0, 2, 4, 7, 9, 12, 14]);
+        let v = |x, y, z| Vec3::new(x, y, z);
+        let expect = [
+            v(9.0, 0.0, 0.0),
+            v(9.0, 3.0, 0.0),
+            v(0.0, 0.0, 0.0),
+            v(0.0, 3.0, 0.0),
+            // Translate 0 0 −1, after the definition's Translate 1 0 0.
+            v(1.0, 0.0, -1.0),
+            v(1.0, 3.0, -1.0),
+            v(1.0, 6.0, -1.0),
+            v(3.0, 0.0, -1.0),
+            v(3.0, 3.0, -1.0),
+            // Translate 0 10 0 and Scale 2, after Translate 1 0 0: 2·(p + (1, 0, 0)) + (0, 10, 0).
+            v(2.0, 10.0, 0.0),
+            v(2.0, 16.0, 0.0),
+            v(2.0, 22.0, 0.0),
+            v(6.0, 10.0, 0.0),
+            v(6.0, 16.0, 0.0),
+        ];
+        assert_eq!(g.points.len(), expect.len());
+        for (i, (p, e)) in g.points.iter().zip(expect).enumerate() {
+            assert!(close(*p, e), "point {i}: {p}, expected {e}");
+        }
+        // Widths scale with the instance: 0.2 wide, 0.1 in radius; doubled in the second.
+        assert!(g.radii[..9].iter().all(|&r| r == 0.1), "{:?}", g.radii);
+        assert!(
+            g.radii[9..].iter().all(|&r| (r - 0.2).abs() < 1e-6),
+            "{:?}",
+            g.radii
+        );
+    }
+
+    #[test]
+    fn bad_instancing_is_refused_naming_the_object() {
+        let curve = r#"Shape "curve" "point3 P" [0 0 0  0 1 0  0 2 0  0 3 0]"#;
+        let cases = [
+            (
+                format!("{curve}\nObjectInstance \"nowhere\""),
+                "line 2, column 1: ObjectInstance \"nowhere\": no object of that name",
+            ),
+            (
+                format!("ObjectBegin \"a\"\n  ObjectBegin \"b\"\n{curve}"),
+                "line 2, column 3: ObjectBegin \"b\" inside the definition of \"a\"",
+            ),
+            (
+                format!("ObjectBegin \"a\"\n{curve}\nObjectInstance \"a\"\nObjectEnd"),
+                "line 3, column 1: ObjectInstance \"a\" inside the definition of \"a\"",
+            ),
+            (
+                format!("ObjectBegin \"a\" ObjectEnd\nObjectBegin \"a\" ObjectEnd\n{curve}"),
+                "line 2, column 1: ObjectBegin \"a\": an object of that name is already defined",
+            ),
+            (
+                format!("{curve}\nObjectBegin \"open\"\n{curve}"),
+                "line 2, column 1: ObjectBegin \"open\" without ObjectEnd",
+            ),
+            (
+                format!("{curve}\nObjectEnd"),
+                "ObjectEnd without ObjectBegin",
+            ),
+            (
+                "ObjectBegin \"a\" ObjectEnd".into(),
+                "no `Shape \"curve\"` statements",
+            ),
+        ];
+        for (text, expect) in cases {
+            let e = read(&text).unwrap_err().to_string();
+            assert!(
+                e.contains("scene.pbrt") && e.contains(expect),
+                "{expect}: {e}"
+            );
+        }
+        // An object of 101 points (100 straight Bézier segments) instanced a million times
+        // would make 101 million points: refused, before any is copied, at the instance that
+        // passes 2^26.
+        let control: Vec<String> = (0..301).map(|i| format!("0 {i} 0")).collect();
+        let mut text = format!(
+            "ObjectBegin \"tuft\"\nShape \"curve\" \"point3 P\" [{}]\nObjectEnd\n",
+            control.join(" ")
+        );
+        text.push_str(&"ObjectInstance \"tuft\"\n".repeat(1_000_000));
+        let e = read(&text).unwrap_err().to_string();
+        let line = 3 + (MAX_INSTANCED_POINTS / 101 + 1);
+        assert!(
+            e.contains("scene.pbrt")
+                && e.contains(&format!("line {line}, column 1: ObjectInstance \"tuft\""))
+                && e.contains("more than 67108864"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -11,6 +11,7 @@ use crate::ply::PlyFile;
 use crate::procedural::ProceduralHair;
 use crate::tfx::TfxFile;
 use crate::usc::UscFile;
+use crate::usd::UsdFile;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -33,8 +34,9 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub enum HairSource {
-    /// A `.hair`, `.tfx`, USC-HairSalon `.data`, `.ply` or `.pbrt` file (by extension,
-    /// case-insensitive) with default reader options.
+    /// A `.hair`, `.tfx`, USC-HairSalon `.data`, `.ply`, `.pbrt` or USD (`.usda`, `.usdc`,
+    /// `.usd`: its `BasisCurves`, see [`crate::usd`]) file (by extension, case-insensitive)
+    /// with default reader options.
     File(PathBuf),
     /// A Cem Yuksel `.hair` file with reader options (`z_up`).
     Hair(HairFile),
@@ -93,10 +95,11 @@ impl HairSource {
                     Some("data") => UscFile::new(path).read(),
                     Some("ply") => PlyFile::new(path).read(),
                     Some("pbrt") => PbrtFile::new(path).read(),
+                    Some("usda" | "usdc" | "usd") => UsdFile::new(path).read(),
                     _ => Err(format_error(
                         path,
-                        "unknown hair file type: expected a .hair, .tfx, .data, .ply or .pbrt \
-                         extension",
+                        "unknown hair file type: expected a .hair, .tfx, .data, .ply, .pbrt, \
+                         .usda, .usdc or .usd extension",
                     )),
                 }
             }

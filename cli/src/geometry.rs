@@ -10,7 +10,7 @@ use tress_accel::{
     EmbreeAccel, HairAttribute, HairOptions, HairSource, SceneBuilder, Transform, TriangleMesh,
 };
 use tress_core::Material;
-use tress_materials::pigment::{quantise_absorption, Pigment, StrandVariation};
+use tress_materials::pigment::{quantise_variants, Pigment, StrandVariation};
 
 /// An object of the scene, referring to a material by name.
 #[derive(Clone, Debug, Serialize, Deserialize, schemars::JsonSchema)]
@@ -173,9 +173,10 @@ pub fn build_accel(
     Ok((accel, summary))
 }
 
-/// Adds a hair object whose pigment varies (`variation`): every segment's absorption from the
-/// variation, quantised to at most `variation.variants` values, each a copy of `model` with
-/// that absorption appended to `materials`. Returns the builder and a line for the summary.
+/// Adds a hair object whose material varies (`variation`): every segment's absorption and
+/// roughness scale from the variation, quantised to at most `variation.variants` values, each a
+/// copy of `model` with that absorption and roughness appended to `materials`. Returns the
+/// builder and a line for the summary.
 fn add_varied_hair(
     builder: SceneBuilder,
     hair: &tress_accel::HairGeometry,
@@ -199,11 +200,11 @@ fn add_varied_hair(
     let first = materials.len() as u32;
     let mut palette = Vec::new();
     let builder = builder.add_hair_varied(hair, options, |segments| {
-        let sigma = segments
+        let values = segments
             .iter()
             .map(|s| {
                 varied
-                    .sigma_a(s.strand, s.v, s.color)
+                    .variant(s.strand, s.v, s.color)
                     .map_err(|e| match s.color {
                         Some(c) if varied.uses_file_colors() => {
                             format!("variation: strand {}, file colour {c}: {e}", s.strand)
@@ -212,17 +213,22 @@ fn add_varied_hair(
                     })
             })
             .collect::<std::result::Result<Vec<_>, _>>()?;
-        let (representatives, index) = quantise_absorption(&sigma, varied.variants() as usize);
+        let (representatives, index) = quantise_variants(&values, varied.variants() as usize);
         palette = representatives;
         Ok(index.into_iter().map(|k| first + k).collect())
     })?;
-    for sigma in &palette {
+    for v in &palette {
+        let sigma = v.sigma_a;
         let variant = model
             .with_pigment(Pigment::SigmaA((sigma.x, sigma.y, sigma.z)))
-            .ok_or_else(|| anyhow!("variation: the model has no pigment"))?;
-        let bcsdf = variant
-            .build()
-            .map_err(|e| anyhow!("variation: pigment variant σ_a = {sigma}: {e}"))?;
+            .ok_or_else(|| anyhow!("variation: the model has no pigment"))?
+            .with_roughness_scale(v.roughness);
+        let bcsdf = variant.build().map_err(|e| {
+            anyhow!(
+                "variation: variant σ_a = {sigma}, roughness × {}: {e}",
+                v.roughness
+            )
+        })?;
         materials.push(Material::Hair(bcsdf));
     }
     let note = match palette.len() {
@@ -272,7 +278,7 @@ mod tests {
             .take_while(|l| !l.contains("```"))
             .map(|l| l.trim_start_matches("///").trim())
             .collect();
-        assert_eq!(block.len(), 3);
+        assert_eq!(block.len(), 4);
         for line in block {
             crate::ron_options()
                 .from_str::<tress_materials::pigment::StrandVariation>(line)
@@ -361,6 +367,21 @@ mod tests {
                 "variation.file_colors: procedural",
             ),
             (
+                "Chiang()",
+                "variation: Some(random_roughness: 1)",
+                "variation.random_roughness = 1: must lie in [0, 1)",
+            ),
+            (
+                "Chiang()",
+                "variation: Some(darken_roots: Some(amount: -1))",
+                "variation.darken_roots.amount = -1",
+            ),
+            (
+                "Chiang()",
+                "variation: Some(darken_roots: Some(amount: 1, length: 0))",
+                "variation.darken_roots.length = 0: must lie in (0, 1]",
+            ),
+            (
                 "LambertianFiber()",
                 "variation: Some(random: 0.2)",
                 "has no pigment to vary",
@@ -386,6 +407,10 @@ mod tests {
             (
                 "variation: Some(gradient: Some(tip: Bleach(0.5)))",
                 "Bleach",
+            ),
+            (
+                "variation: Some(darken_roots: Some(amount: 1, lenght: 0.2))",
+                "lenght",
             ),
         ] {
             let e = parse(&scene("Chiang()", typo)).expect_err("a parse error");

@@ -95,6 +95,238 @@ fn tiles_times_passes_merge_into_the_full_render() {
         && l.contains("scene-farm/")));
 }
 
+/// The README's recipe with a real engine: `tress farm … | parallel -j 2`, then the printed
+/// merge piped to `sh`, gives the single full render bit for bit. GNU parallel is required, not
+/// optional: `.ci/install-deps` installs it (Debian's `parallel`).
+#[test]
+fn a_farm_run_by_gnu_parallel_merges_into_the_full_render() {
+    let version = Command::new("parallel").arg("--version").output();
+    // moreutils ships another `parallel`, without `--version`: only GNU's will do.
+    let is_gnu = version
+        .as_ref()
+        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).starts_with("GNU parallel"));
+    assert!(
+        is_gnu,
+        "GNU parallel is not installed (found: {version:?}): run .ci/install-deps, or \
+         apt-get install parallel"
+    );
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    render_ok(&["--out", "full.exr", "--quiet"], d);
+    let farm = "\"$0\" farm scene.ron --tiles 3 --passes 2 --out pfarm";
+    let o = Command::new("bash")
+        .args([
+            "-c",
+            &format!("set -euo pipefail; {farm} | parallel -j 2; {farm} --merge | sh"),
+            env!("CARGO_BIN_EXE_tress"),
+        ])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let merged = d.join("pfarm/scene.exr");
+    assert_eq!(pixels(&merged), pixels(&d.join("full.exr")));
+    assert_eq!(
+        attribute(&merged, "tress:merged_from"),
+        Some("6".to_string())
+    );
+}
+
+/// Daemons a test started: killed and reaped when it ends, passing or failing.
+struct Daemons(Vec<std::process::Child>);
+
+impl Drop for Daemons {
+    fn drop(&mut self) {
+        for child in &mut self.0 {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+/// Fails, saying how to install it, unless `program` can be started.
+fn require(program: &str, package: &str) {
+    let o = Command::new(program).arg("--help").output();
+    assert!(
+        o.is_ok(),
+        "{program} is not installed ({}): run .ci/install-deps, or apt-get install {package}",
+        o.unwrap_err()
+    );
+}
+
+/// A port nobody listens on now.
+fn free_port() -> u16 {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    listener.local_addr().unwrap().port()
+}
+
+/// The README's Slurm recipe on a one-node cluster of the test's own (munge with its own key
+/// and socket, slurmctld and slurmd on free ports, all in a temporary folder): an array job of
+/// the farm's lines, then the merge as a job depending on it, gives the single full render bit
+/// for bit. Slurm is required, not optional: `.ci/install-deps` installs it (`slurm-wlm`).
+#[test]
+fn a_farm_run_as_a_slurm_array_job_merges_into_the_full_render() {
+    for program in ["munged", "slurmctld", "slurmd", "sbatch", "sinfo", "squeue"] {
+        require(program, "slurm-wlm");
+    }
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    render_ok(&["--out", "full.exr", "--quiet"], d);
+    let args = ["--tiles", "3", "--passes", "2", "--out", "sfarm"];
+    std::fs::write(d.join("jobs.txt"), farm(&args, d)).unwrap();
+    std::fs::write(
+        d.join("merge.sh"),
+        farm(&[&args[..], &["--merge"]].concat(), d),
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("render.sbatch"),
+        "#!/bin/sh\n#SBATCH --array=1-6\n#SBATCH --cpus-per-task=1\n\
+         sed -n \"${SLURM_ARRAY_TASK_ID}p\" jobs.txt | sh\n",
+    )
+    .unwrap();
+
+    let s = d.join("slurm");
+    std::fs::create_dir(&s).unwrap();
+    let at = |name: &str| s.join(name).to_str().unwrap().to_string();
+    let mut key = Vec::new();
+    use std::io::Read;
+    std::fs::File::open("/dev/urandom")
+        .unwrap()
+        .take(1024)
+        .read_to_end(&mut key)
+        .unwrap();
+    std::fs::write(s.join("munge.key"), key).unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(s.join("munge.key"), std::fs::Permissions::from_mode(0o600)).unwrap();
+    let user = String::from_utf8(Command::new("id").arg("-un").output().unwrap().stdout).unwrap();
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap();
+    let host = host.trim().split('.').next().unwrap();
+    let cpus = std::thread::available_parallelism().unwrap();
+    // sched_interval=1: the scheduler looks at the queue every second rather than every
+    // minute, so waiting array tasks and the merge start sooner (7 s for all, not 20).
+    let conf = format!(
+        "ClusterName=tress\nSlurmctldHost={host}(127.0.0.1)\nSlurmUser={user}\n\
+         AuthType=auth/munge\nAuthInfo=socket={socket}\nStateSaveLocation={state}\n\
+         SlurmdSpoolDir={state}/spool\nSlurmctldPidFile={state}/slurmctld.pid\n\
+         SlurmdPidFile={state}/slurmd.pid\nSlurmctldPort={}\nSlurmdPort={}\n\
+         SlurmctldLogFile={state}/slurmctld.log\nSlurmdLogFile={state}/slurmd.log\n\
+         ProctrackType=proctrack/linuxproc\nTaskPlugin=task/none\n\
+         JobAcctGatherType=jobacct_gather/none\nMpiDefault=none\nReturnToService=2\n\
+         SchedulerType=sched/builtin\nSchedulerParameters=sched_interval=1\n\
+         SelectType=select/cons_tres\n\
+         DependencyParameters=kill_invalid_depend\n\
+         NodeName=tress-node NodeAddr=127.0.0.1 CPUs={cpus} State=UNKNOWN\n\
+         PartitionName=farm Nodes=tress-node Default=YES MaxTime=INFINITE State=UP\n",
+        free_port(),
+        free_port(),
+        user = user.trim(),
+        socket = at("munge.socket"),
+        state = s.display(),
+    );
+    std::fs::write(s.join("slurm.conf"), conf).unwrap();
+    let log = |name: &str| std::fs::File::create(s.join(name)).unwrap();
+    let daemon = |program: &str, args: &[String], out: &str| {
+        Command::new(program)
+            .args(args)
+            .env("SLURM_CONF", s.join("slurm.conf"))
+            .stdout(log(out))
+            .stderr(log(out))
+            .spawn()
+            .unwrap()
+    };
+    let started = std::time::Instant::now();
+    let mut daemons = Daemons(vec![daemon(
+        "munged",
+        &[
+            "--foreground".into(),
+            "--force".into(),
+            format!("--key-file={}", at("munge.key")),
+            format!("--socket={}", at("munge.socket")),
+            format!("--pid-file={}", at("munged.pid")),
+            format!("--log-file={}", at("munged.log")),
+            format!("--seed-file={}", at("munged.seed")),
+        ],
+        "munged.out",
+    )]);
+    let conf = at("slurm.conf");
+    let slurm = |program: &str, args: &[&str]| {
+        Command::new(program)
+            .args(args)
+            .env("SLURM_CONF", &conf)
+            .current_dir(d)
+            .output()
+            .unwrap()
+    };
+    // Waits up to `seconds` for `done`; on timeout fails with the daemons' logs.
+    let wait = |what: &str, seconds: u64, done: &dyn Fn() -> bool| {
+        let start = std::time::Instant::now();
+        while !done() {
+            if start.elapsed().as_secs() >= seconds {
+                let logs: Vec<String> = files_in(&s)
+                    .iter()
+                    .filter(|f| f.ends_with(".log") || f.ends_with(".out"))
+                    .map(|f| format!("--- {f}\n{}", std::fs::read_to_string(s.join(f)).unwrap()))
+                    .collect();
+                panic!("{what}: not after {seconds} s\n{}", logs.join("\n"));
+            }
+            std::thread::sleep(std::time::Duration::from_millis(250));
+        }
+    };
+    wait("munged's socket", 30, &|| s.join("munge.socket").exists());
+    daemons.0.push(daemon(
+        "slurmctld",
+        &["-D".into(), "-f".into(), conf.clone()],
+        "slurmctld.out",
+    ));
+    daemons.0.push(daemon(
+        "slurmd",
+        &[
+            "-D".into(),
+            "-f".into(),
+            conf.clone(),
+            "-N".into(),
+            "tress-node".into(),
+        ],
+        "slurmd.out",
+    ));
+    wait("the node idle", 60, &|| {
+        String::from_utf8_lossy(&slurm("sinfo", &["-h", "-o", "%T"]).stdout).trim() == "idle"
+    });
+    let up = started.elapsed();
+    let o = slurm("sbatch", &["--parsable", "render.sbatch"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let job = String::from_utf8(o.stdout).unwrap().trim().to_string();
+    let after = format!("--dependency=afterok:{job}");
+    let o = slurm("sbatch", &["--parsable", &after, "--wrap", "sh merge.sh"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // A failed task cancels the merge (kill_invalid_depend), so the queue empties either way.
+    wait("the queue empty", 300, &|| {
+        slurm("squeue", &["-h"]).stdout.is_empty()
+    });
+    eprintln!(
+        "slurm: up after {:.1} s, array and merge done after {:.1} s more",
+        up.as_secs_f64(),
+        (started.elapsed() - up).as_secs_f64()
+    );
+    let merged = d.join("sfarm/scene.exr");
+    let outputs: Vec<String> = files_in(d)
+        .iter()
+        .filter(|f| f.starts_with("slurm-"))
+        .map(|f| format!("--- {f}\n{}", std::fs::read_to_string(d.join(f)).unwrap()))
+        .collect();
+    assert!(
+        merged.exists(),
+        "no merged image; the jobs said:\n{}",
+        outputs.join("\n")
+    );
+    assert_eq!(pixels(&merged), pixels(&d.join("full.exr")));
+    assert_eq!(
+        attribute(&merged, "tress:merged_from"),
+        Some("6".to_string())
+    );
+}
+
 /// `-D` reaches every job: a scene whose seed is a placeholder merges into the render with the
 /// same define.
 #[test]

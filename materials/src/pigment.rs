@@ -7,8 +7,10 @@
 //! `Color(0.8, 0.6, 0.4)`.
 //!
 //! [`StrandVariation`] varies a hair object's pigment from strand to strand and from root to
-//! tip: random melanin (Cycles' *Random Color*), a root-to-tip gradient and the colours a hair
-//! file stores, quantised to a few variants of the object's material.
+//! tip — random melanin (Cycles' *Random Color*), a root-to-tip gradient, darker roots
+//! (PxrHairColor's *Darken Roots*), the colours a hair file stores — and its roughness from
+//! strand to strand (Cycles' *Random Roughness*), quantised to a few variants of the object's
+//! material.
 
 use crate::{marschner, HairModel, ParamError};
 use serde::{Deserialize, Serialize};
@@ -154,26 +156,31 @@ impl HairModel {
     }
 }
 
-/// Per-strand variation of a hair object's pigment (the `variation` of a `Hair` object):
-/// random melanin, a root-to-tip gradient, the colours stored in the hair file.
+/// Per-strand variation of a hair object's material (the `variation` of a `Hair` object):
+/// random melanin, a root-to-tip gradient, darker roots, the colours stored in the hair file,
+/// random roughness.
 ///
 /// ```ron
 /// (random: 0.3, seed: 7, gradient: Some(tip: Scale(0.4), start: 0.5))
 /// (file_colors: true, variants: 32)
 /// (gradient: Some(tip: Pigment(Melanin(eumelanin: 0.2, pheomelanin: 0.4)), start: 0.7))
+/// (random_roughness: 0.3, darken_roots: Some(amount: 1.0, length: 0.2))
 /// ```
 ///
-/// Each curve segment gets the absorption σ_a = f·((1 − w)·σ_root + w·σ_tip), where σ_root is
+/// Each curve segment gets the absorption σ_a = f·d·((1 − w)·σ_root + w·σ_tip), where σ_root is
 /// the material's pigment (or the file's colour there, through Chiang's colour fit), σ_tip the
 /// gradient's tip pigment, w = clamp((v − start) / (1 − start), 0, 1) at the middle of the
-/// segment (v = 0 at the root, 1 at the tip; w = 0 without a gradient) and f = 1 + random·(2ξ −
-/// 1), ξ uniform in [0, 1) per strand from `seed` and the strand's index. σ_a is linear in the
-/// melanin concentrations, so f multiplies them (as Cycles' *Random Color* does) and the
-/// gradient interpolates them. The segments' absorptions are then quantised to at most
-/// `variants` values, each a copy of the material with that absorption: the distinct values
-/// themselves when there are no more, else the means of groups found by variance-minimising
-/// splits in √σ_a (equal steps there are about equal ratios of colour), so the mean absorption
-/// is kept.
+/// segment (v = 0 at the root, 1 at the tip; w = 0 without a gradient), f = 1 + random·(2ξ −
+/// 1), ξ uniform in [0, 1) per strand from `seed` and the strand's index, and d = 1 +
+/// amount·max(1 − v/length, 0) the darkening of the roots (1 without). σ_a is linear in the
+/// melanin concentrations, so f and d multiply them (as Cycles' *Random Color* does) and the
+/// gradient interpolates them. Each strand's roughness is scaled by g = 1 +
+/// random_roughness·(2ζ − 1), ζ uniform in [0, 1) per strand, drawn independently of ξ. The
+/// segments' (σ_a, g) pairs are then quantised to at most `variants` values, each a copy of the
+/// material with that absorption and roughness: the distinct values themselves when there are
+/// no more, else the means of groups found by variance-minimising splits in (√σ_a, ln g / 6)
+/// (equal steps there are about equal ratios of colour, and of roughness), so the mean
+/// absorption and roughness scale are kept.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct StrandVariation {
@@ -185,6 +192,14 @@ pub struct StrandVariation {
     pub seed: u64,
     /// Root-to-tip change of pigment (default none).
     pub gradient: Option<Gradient>,
+    /// Darker roots (PxrHairColor's *Darken Roots*; default none).
+    pub darken_roots: Option<DarkenRoots>,
+    /// Random roughness (Cycles' *Random Roughness*): each strand's roughness — Chiang's β_m
+    /// and β_n, d'Eon's longitudinal and azimuthal roughness, Marschner's β_R — is multiplied by
+    /// 1 + random_roughness·(2ζ − 1), ζ uniform in [0, 1) per strand, then clamped to the
+    /// model's range; in [0, 1) (default 0: none). The absorption does not change with it: a
+    /// `Color` pigment is converted at the material's own β_n.
+    pub random_roughness: f32,
     /// Take the root pigment from the colours the hair file stores per strand or per point
     /// (HAIR colour arrays, PLY vertex colours, TressFX vertex colours), each a `Color` target
     /// (channels in (0, 1]), instead of the material's pigment (default false).
@@ -201,10 +216,30 @@ impl Default for StrandVariation {
             random: 0.0,
             seed: 0,
             gradient: None,
+            darken_roots: None,
+            random_roughness: 0.0,
             file_colors: false,
             variants: 16,
         }
     }
+}
+
+/// Darker roots: the absorption (the melanin concentrations) is multiplied by 1 + `amount` at
+/// the root, falling linearly to 1 at `length` along the strand and staying 1 beyond.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DarkenRoots {
+    /// How much darker the root is: its absorption is 1 + amount times the rest's; finite and
+    /// in [0, 100].
+    pub amount: f32,
+    /// Where the darkening ends, as a fraction of the strand from the root, in (0, 1] (default
+    /// 0.2).
+    #[serde(default = "a_fifth")]
+    pub length: f32,
+}
+
+fn a_fifth() -> f32 {
+    0.2
 }
 
 /// A root-to-tip change of pigment: the root pigment up to `start`, then a linear change of
@@ -254,6 +289,23 @@ impl StrandVariation {
             ));
         };
         crate::check_range("variation.random", self.random, 0.0, 1.0)?;
+        if !(self.random_roughness.is_finite() && (0.0..1.0).contains(&self.random_roughness)) {
+            return Err(ParamError::new(
+                "variation.random_roughness",
+                self.random_roughness,
+                "must lie in [0, 1)",
+            ));
+        }
+        if let Some(d) = &self.darken_roots {
+            crate::check_range("variation.darken_roots.amount", d.amount, 0.0, 100.0)?;
+            if !(d.length.is_finite() && d.length > 0.0 && d.length <= 1.0) {
+                return Err(ParamError::new(
+                    "variation.darken_roots.length",
+                    d.length,
+                    "must lie in (0, 1]",
+                ));
+            }
+        }
         if !(1..=Self::MAX_VARIANTS).contains(&self.variants) {
             return Err(ParamError::new(
                 "variation.variants",
@@ -301,6 +353,8 @@ impl StrandVariation {
             root: pigment.sigma_a(beta_n)?,
             beta_n,
             tip,
+            darken_roots: self.darken_roots.as_ref().map(|d| (d.amount, d.length)),
+            random_roughness: self.random_roughness,
             file_colors: self.file_colors,
             variants: self.variants,
         })
@@ -326,6 +380,9 @@ pub struct PigmentVariation {
     beta_n: f32,
     /// The tip's absorption and where the gradient starts.
     tip: Option<(TipAbsorption, f32)>,
+    /// The roots' darkening: amount and length.
+    darken_roots: Option<(f32, f32)>,
+    random_roughness: f32,
     file_colors: bool,
     variants: u32,
 }
@@ -347,6 +404,22 @@ impl PigmentVariation {
         let xi =
             (hash_words(&[self.seed, strand as u64]) >> 40) as f32 * (1.0 / (1u32 << 24) as f32);
         1.0 + self.random * (2.0 * xi - 1.0)
+    }
+
+    /// Strand `strand`'s roughness factor 1 + random_roughness·(2ζ − 1), in [1 −
+    /// random_roughness, 1 + random_roughness]: ζ comes from a hash of the seed, the strand's
+    /// index and a third word, so it is independent of the melanin factor's ξ.
+    pub fn roughness_scale(&self, strand: u32) -> f32 {
+        let zeta =
+            (hash_words(&[self.seed, strand as u64, 1]) >> 40) as f32 * (1.0 / (1u32 << 24) as f32);
+        1.0 + self.random_roughness * (2.0 * zeta - 1.0)
+    }
+
+    /// The roots' darkening factor at `v`: 1 + amount at the root, 1 from `length` on.
+    fn root_darkening(&self, v: f32) -> f32 {
+        self.darken_roots.map_or(1.0, |(amount, length)| {
+            1.0 + amount * (1.0 - v / length).max(0.0)
+        })
     }
 
     /// The gradient's weight of the tip pigment at `v` (0 at the root … 1 at the tip).
@@ -380,116 +453,183 @@ impl PigmentVariation {
             Some((TipAbsorption::Scale(s), _)) => root * (1.0 + (s - 1.0) * w),
             Some((TipAbsorption::Fixed(tip), _)) => root + (tip - root) * w,
         };
-        Ok(self.strand_factor(strand) * mixed)
+        Ok(self.strand_factor(strand) * self.root_darkening(v) * mixed)
+    }
+
+    /// What segment `strand`, at `v` along it, is made of: its absorption ([`Self::sigma_a`])
+    /// and its strand's roughness scale.
+    pub fn variant(
+        &self,
+        strand: u32,
+        v: f32,
+        file_color: Option<Rgb>,
+    ) -> Result<Variant, ParamError> {
+        Ok(Variant {
+            sigma_a: self.sigma_a(strand, v, file_color)?,
+            roughness: self.roughness_scale(strand),
+        })
     }
 }
 
-/// At most `k` (≥ 1) representative absorptions for `sigma` (per unit radius, non-negative)
-/// and the index of each value's representative, deterministically (the same input gives the
-/// same result on any machine and thread count).
+/// A material variant of a hair object: an absorption σ_a (per unit radius, non-negative) and
+/// a roughness scale (positive) for the model's roughness.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Variant {
+    /// σ_a per unit radius.
+    pub sigma_a: Rgb,
+    /// The factor on the model's roughness ([`HairModel::with_roughness_scale`]).
+    pub roughness: f32,
+}
+
+impl HairModel {
+    /// The same model with its roughness multiplied by `scale`, clamped to the model's range:
+    /// Chiang's β_m and β_n, d'Eon's longitudinal and azimuthal roughness, Marschner's β_R
+    /// (its only lobe width a strand's roughness sets). The Lambertian fiber has none.
+    pub fn with_roughness_scale(&self, scale: f32) -> HairModel {
+        let mut model = self.clone();
+        match &mut model {
+            HairModel::Chiang(p) => {
+                p.beta_m = (p.beta_m * scale).clamp(crate::chiang::BETA_MIN, 1.0);
+                p.beta_n = (p.beta_n * scale).clamp(crate::chiang::BETA_MIN, 1.0);
+            }
+            HairModel::DEon(p) => {
+                p.longitudinal_roughness = (p.longitudinal_roughness * scale).clamp(0.0, 1.0);
+                p.azimuthal_roughness = (p.azimuthal_roughness * scale).clamp(0.0, 1.0);
+            }
+            HairModel::Marschner(p) => p.beta_r = (p.beta_r * scale).clamp(1.0, 30.0),
+            HairModel::LambertianFiber(_) => {}
+        }
+        model
+    }
+}
+
+/// Weight of ln(roughness scale) beside √σ_a when grouping variants: by Chiang's fit √σ_a ≈
+/// −ln(colour)/6 (for β_n about 0.3), so a ratio of roughness weighs as the same ratio of colour.
+const ROUGHNESS_WEIGHT: f64 = 1.0 / 6.0;
+
+/// At most `k` (≥ 1) representative variants for `values` (absorptions per unit radius,
+/// non-negative, and roughness scales, positive) and the index of each value's
+/// representative, deterministically (the same input gives the same result on any machine and
+/// thread count).
 ///
 /// Values equal to 16 significant bits (about 5 digits: far below what a render shows) count
 /// as one, so values that differ by rounding do not make variants of their own (bar a pair
-/// on either side of a rounding boundary). When there are at most `k` distinct
-/// values, they are the representatives (each the mean of the values it stands for: exact
-/// when they are equal). Otherwise the distinct values are grouped by variance-minimising splits in √σ_a — by Chiang
-/// et al.'s colour fit, √σ_a is proportional to −ln of the colour, so equal steps are equal
-/// ratios of colour, about equally visible: the group of largest squared error (weighted by how
-/// many values share each point) is cut, across its axis of largest variance, where the two
-/// halves' summed squared error is least, until there are `k` groups. A group's representative
-/// is the mean σ_a of its values, so the mean absorption over all values is kept. The
-/// representatives are ordered by total absorption, lightest first.
-pub fn quantise_absorption(sigma: &[Rgb], k: usize) -> (Vec<Rgb>, Vec<u32>) {
+/// on either side of a rounding boundary). When there are at most `k` distinct values, they
+/// are the representatives (each the mean of the values it stands for: exact when they are
+/// equal). Otherwise the distinct values are grouped by variance-minimising splits in (√σ_a,
+/// ln(roughness)/6) — by Chiang et al.'s colour fit, √σ_a is proportional to −ln of the
+/// colour, so equal steps are equal ratios of colour, about equally visible, and the roughness
+/// coordinate makes a ratio of roughness weigh as the same ratio of colour: the group of
+/// largest squared error (weighted by how many values share each point) is cut, across its
+/// axis of largest variance, where the two halves' summed squared error is least, until there
+/// are `k` groups. A group's representative is the mean σ_a and mean roughness scale of its
+/// values, so the means over all values are kept. The representatives are ordered by total
+/// absorption, lightest first, then by roughness.
+pub fn quantise_variants(values: &[Variant], k: usize) -> (Vec<Variant>, Vec<u32>) {
     let k = k.max(1);
+    let array = |v: &Variant| {
+        let [r, g, b] = v.sigma_a.to_array();
+        [r, g, b, v.roughness]
+    };
     // Distinct values, by their bits rounded to 16 significant bits (for non-negative floats
     // the bit patterns order like the values; with the index, a total order, so the sort is
     // deterministic).
-    let key = |c: Rgb| c.to_array().map(|v| (v.to_bits() + 0x40) & !0x7f);
-    let mut order: Vec<u32> = (0..sigma.len() as u32).collect();
-    order.sort_unstable_by_key(|&i| (key(sigma[i as usize]), i));
+    let key = |v: &Variant| array(v).map(|x| (x.to_bits() + 0x40) & !0x7f);
+    let mut order: Vec<u32> = (0..values.len() as u32).collect();
+    order.sort_unstable_by_key(|&i| (key(&values[i as usize]), i));
     // Per distinct value: the sum of the values it stands for and their number.
-    let mut sums: Vec<[f64; 3]> = Vec::new();
+    let mut sums: Vec<[f64; 4]> = Vec::new();
     let mut weight: Vec<f64> = Vec::new();
-    let mut of = vec![0u32; sigma.len()];
+    let mut of = vec![0u32; values.len()];
     let mut last_key = None;
     for &i in &order {
-        let c = sigma[i as usize];
-        if last_key != Some(key(c)) {
-            last_key = Some(key(c));
-            sums.push([0.0; 3]);
+        let v = &values[i as usize];
+        if last_key != Some(key(v)) {
+            last_key = Some(key(v));
+            sums.push([0.0; 4]);
             weight.push(0.0);
         }
         let d = sums.len() - 1;
-        for (s, v) in sums[d].iter_mut().zip(c.to_array()) {
-            *s += v as f64;
+        for (s, x) in sums[d].iter_mut().zip(array(v)) {
+            *s += x as f64;
         }
         weight[d] += 1.0;
         of[i as usize] = d as u32;
     }
     drop(order);
-    let distinct: Vec<[f64; 3]> = sums
-        .iter()
-        .zip(&weight)
-        .map(|(s, &w)| s.map(|v| v / w))
-        .collect();
 
-    let groups: Vec<Vec<u32>> = if distinct.len() <= k {
-        (0..distinct.len() as u32).map(|d| vec![d]).collect()
+    let groups: Vec<Vec<u32>> = if sums.len() <= k {
+        (0..sums.len() as u32).map(|d| vec![d]).collect()
     } else {
-        let x: Vec<[f64; 3]> = distinct
+        let x: Vec<[f64; 4]> = sums
             .iter()
-            .map(|c| c.map(|v| v.max(0.0).sqrt()))
+            .zip(&weight)
+            .map(|(s, &w)| {
+                let [r, g, b, rough] = s.map(|v| v / w);
+                [
+                    r.max(0.0).sqrt(),
+                    g.max(0.0).sqrt(),
+                    b.max(0.0).sqrt(),
+                    rough.ln() * ROUGHNESS_WEIGHT,
+                ]
+            })
             .collect();
         split_by_variance(&x, &weight, k)
     };
-    // Representatives: the mean σ_a of each group's values.
-    let mut reps: Vec<(Rgb, Vec<u32>)> = groups
+    // Representatives: the mean of each group's values.
+    let mut reps: Vec<(Variant, Vec<u32>)> = groups
         .into_iter()
         .map(|g| {
-            let (mut sum, mut n) = ([0.0f64; 3], 0.0);
+            let (mut sum, mut n) = ([0.0f64; 4], 0.0);
             for &d in &g {
                 for (s, v) in sum.iter_mut().zip(sums[d as usize]) {
                     *s += v;
                 }
                 n += weight[d as usize];
             }
-            (Rgb::from_array(sum.map(|s| (s / n) as f32)), g)
+            let [r, g_, b, rough] = sum.map(|s| (s / n) as f32);
+            let variant = Variant {
+                sigma_a: Rgb::new(r, g_, b),
+                roughness: rough,
+            };
+            (variant, g)
         })
         .collect();
     reps.sort_by(|a, b| {
-        let total = |c: Rgb| c.x as f64 + c.y as f64 + c.z as f64;
-        let bits = |c: Rgb| c.to_array().map(f32::to_bits);
-        total(a.0)
-            .total_cmp(&total(b.0))
-            .then(bits(a.0).cmp(&bits(b.0)))
+        let total = |v: &Variant| v.sigma_a.x as f64 + v.sigma_a.y as f64 + v.sigma_a.z as f64;
+        total(&a.0).total_cmp(&total(&b.0)).then(
+            array(&a.0)
+                .map(f32::to_bits)
+                .cmp(&array(&b.0).map(f32::to_bits)),
+        )
     });
-    let mut group_of = vec![0u32; distinct.len()];
+    let mut group_of = vec![0u32; sums.len()];
     for (r, (_, g)) in reps.iter().enumerate() {
         for &d in g {
             group_of[d as usize] = r as u32;
         }
     }
     let index = of.iter().map(|&d| group_of[d as usize]).collect();
-    (reps.into_iter().map(|(c, _)| c).collect(), index)
+    (reps.into_iter().map(|(v, _)| v).collect(), index)
 }
 
 /// Groups the points `x` (with weights `w`) into at most `k` groups by variance-minimising
-/// splits (see [`quantise_absorption`]).
-fn split_by_variance(x: &[[f64; 3]], w: &[f64], k: usize) -> Vec<Vec<u32>> {
+/// splits (see [`quantise_variants`]).
+fn split_by_variance(x: &[[f64; 4]], w: &[f64], k: usize) -> Vec<Vec<u32>> {
     /// Weighted sums of a set of points: Σw, Σw·x, Σw·|x|².
     #[derive(Clone, Copy, Default)]
     struct Moments {
         w: f64,
-        wx: [f64; 3],
+        wx: [f64; 4],
         wxx: f64,
     }
     impl Moments {
-        fn add(&mut self, x: &[f64; 3], w: f64) {
+        fn add(&mut self, x: &[f64; 4], w: f64) {
             self.w += w;
             for (s, v) in self.wx.iter_mut().zip(x) {
                 *s += w * v;
             }
-            self.wxx += w * (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+            self.wxx += w * x.iter().map(|v| v * v).sum::<f64>();
         }
         /// Σw·|x − mean|².
         fn squared_error(&self) -> f64 {
@@ -519,7 +659,7 @@ fn split_by_variance(x: &[[f64; 3]], w: &[f64], k: usize) -> Vec<Vec<u32>> {
         let (_, mut g) = groups.swap_remove(worst);
         // The axis of largest variance.
         let m = moments(&g);
-        let axis = (0..3)
+        let axis = (0..4)
             .map(|a| {
                 let mean = m.wx[a] / m.w;
                 let var: f64 = g
@@ -561,6 +701,20 @@ fn split_by_variance(x: &[[f64; 3]], w: &[f64], k: usize) -> Vec<Vec<u32>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// [`quantise_variants`] of absorptions alone (roughness scale 1).
+    fn quantise_absorption(sigma: &[Rgb], k: usize) -> (Vec<Rgb>, Vec<u32>) {
+        let values: Vec<Variant> = sigma
+            .iter()
+            .map(|&sigma_a| Variant {
+                sigma_a,
+                roughness: 1.0,
+            })
+            .collect();
+        let (palette, index) = quantise_variants(&values, k);
+        assert!(palette.iter().all(|v| v.roughness == 1.0));
+        (palette.into_iter().map(|v| v.sigma_a).collect(), index)
+    }
 
     #[test]
     fn melanin_is_linear_in_concentrations() {
@@ -677,6 +831,26 @@ mod tests {
             "variation.random",
         );
         check(StrandVariation { random: 1.5, ..v() }, "variation.random");
+        for random_roughness in [1.0, -0.1, f32::NAN, f32::INFINITY] {
+            check(
+                StrandVariation {
+                    random_roughness,
+                    ..v()
+                },
+                "variation.random_roughness",
+            );
+        }
+        let darken = |amount, length| StrandVariation {
+            darken_roots: Some(DarkenRoots { amount, length }),
+            ..v()
+        };
+        for amount in [-0.5, 101.0, f32::NAN] {
+            check(darken(amount, 0.2), "variation.darken_roots.amount");
+        }
+        for length in [0.0, -0.1, 1.5, f32::NAN] {
+            check(darken(1.0, length), "variation.darken_roots.length");
+        }
+        darken(0.0, 1.0).for_model(&m).unwrap();
         for variants in [0, 257, u32::MAX] {
             check(StrandVariation { variants, ..v() }, "variation.variants");
         }
@@ -713,6 +887,187 @@ mod tests {
         let bad = chiang(Pigment::SigmaA((-1.0, 0.0, 0.0)));
         assert_eq!(v().for_model(&bad).unwrap_err().field, "sigma_a");
         v().for_model(&m).unwrap();
+    }
+
+    #[test]
+    fn random_roughness_varies_per_strand_within_its_bounds() {
+        let m = chiang(brown());
+        let r = 0.4;
+        let varied = |seed| {
+            StrandVariation {
+                random_roughness: r,
+                seed,
+                ..Default::default()
+            }
+            .for_model(&m)
+            .unwrap()
+        };
+        let v = varied(5);
+        let scales: Vec<f32> = (0..20_000).map(|s| v.roughness_scale(s)).collect();
+        assert!(scales.iter().all(|&g| (1.0 - r..=1.0 + r).contains(&g)));
+        assert!(scales.iter().any(|&g| g < 1.0 - 0.9 * r));
+        assert!(scales.iter().any(|&g| g > 1.0 + 0.9 * r));
+        // Independent of the melanin factor drawn from the same seed and strand: uncorrelated.
+        let melanin = StrandVariation {
+            random: 1.0,
+            seed: 5,
+            ..Default::default()
+        }
+        .for_model(&m)
+        .unwrap();
+        let n = scales.len() as f64;
+        let covariance = scales
+            .iter()
+            .enumerate()
+            .map(|(s, &g)| (g as f64 - 1.0) * (melanin.strand_factor(s as u32) as f64 - 1.0))
+            .sum::<f64>()
+            / n;
+        // Each factor has standard deviation r/√3 and 1/√3; 4 standard errors of their mean
+        // product.
+        assert!(
+            covariance.abs() < 4.0 * (r as f64 / 3.0) / n.sqrt(),
+            "{covariance}"
+        );
+        // Deterministic per seed; another seed draws others.
+        assert_eq!(varied(5).roughness_scale(9), v.roughness_scale(9));
+        assert_ne!(varied(6).roughness_scale(9), v.roughness_scale(9));
+        // The absorption does not change with it, and without it the scale is exactly 1.
+        let base = brown().sigma_a(0.4).unwrap();
+        let variant = v.variant(3, 0.5, None).unwrap();
+        assert_eq!(variant.sigma_a, base);
+        assert_eq!(variant.roughness, v.roughness_scale(3));
+        let plain = StrandVariation::default().for_model(&m).unwrap();
+        assert_eq!(plain.roughness_scale(3), 1.0);
+    }
+
+    #[test]
+    fn a_roughness_scale_scales_each_models_roughness_within_its_range() {
+        let HairModel::Chiang(p) = chiang(brown()).with_roughness_scale(1.5) else {
+            panic!()
+        };
+        assert_eq!((p.beta_m, p.beta_n), (0.3 * 1.5, 0.4 * 1.5));
+        let rough = HairModel::Chiang(crate::chiang::Params {
+            beta_m: 0.9,
+            ..Default::default()
+        });
+        let HairModel::Chiang(p) = rough.with_roughness_scale(1.5) else {
+            panic!()
+        };
+        assert_eq!(p.beta_m, 1.0, "clamped to the model's range");
+        let deon = HairModel::DEon(Default::default()).with_roughness_scale(0.5);
+        let HairModel::DEon(p) = deon else { panic!() };
+        assert_eq!(
+            (p.longitudinal_roughness, p.azimuthal_roughness),
+            (0.05, 0.15)
+        );
+        let marschner = HairModel::Marschner(Default::default()).with_roughness_scale(2.0);
+        let HairModel::Marschner(p) = marschner else {
+            panic!()
+        };
+        assert_eq!(p.beta_r, 15.0);
+        // A scale of 1 changes nothing.
+        let m = chiang(brown());
+        assert_eq!(m.with_roughness_scale(1.0), m);
+    }
+
+    #[test]
+    fn darker_roots_fade_to_the_pigment_over_their_length() {
+        let m = chiang(brown());
+        let base = brown().sigma_a(0.4).unwrap();
+        let v = StrandVariation {
+            darken_roots: Some(DarkenRoots {
+                amount: 2.0,
+                length: 0.25,
+            }),
+            ..Default::default()
+        }
+        .for_model(&m)
+        .unwrap();
+        let at = |x: f32| v.sigma_a(7, x, None).unwrap();
+        assert_eq!(at(0.0), 3.0 * base);
+        assert_eq!(at(0.125), 2.0 * base);
+        // From `length` on, the pigment itself, to the bit.
+        for x in [0.25, 0.5, 1.0] {
+            assert_eq!(at(x), base, "{x}");
+        }
+        // Darker all the way from the root to `length`.
+        let steps: Vec<f32> = (0..=25).map(|i| at(i as f32 / 100.0).x).collect();
+        assert!(steps.windows(2).all(|w| w[0] > w[1]), "{steps:?}");
+        // With random melanin and a gradient, the darkening multiplies the rest.
+        let all = StrandVariation {
+            random: 0.5,
+            gradient: Some(Gradient {
+                tip: TipPigment::Scale(0.5),
+                start: 0.0,
+            }),
+            darken_roots: Some(DarkenRoots {
+                amount: 1.0,
+                length: 0.5,
+            }),
+            ..Default::default()
+        }
+        .for_model(&m)
+        .unwrap();
+        let without = StrandVariation {
+            darken_roots: None,
+            ..StrandVariation {
+                random: 0.5,
+                gradient: Some(Gradient {
+                    tip: TipPigment::Scale(0.5),
+                    start: 0.0,
+                }),
+                ..Default::default()
+            }
+        }
+        .for_model(&m)
+        .unwrap();
+        let ratio = all.sigma_a(4, 0.1, None).unwrap() / without.sigma_a(4, 0.1, None).unwrap();
+        assert!(
+            (ratio - Rgb::splat(1.8)).abs().max_element() < 1e-6,
+            "{ratio}"
+        );
+    }
+
+    #[test]
+    fn quantisation_groups_roughness_too_and_keeps_its_mean() {
+        let m = chiang(brown());
+        let r = 0.5;
+        let v = StrandVariation {
+            random_roughness: r,
+            seed: 2,
+            ..Default::default()
+        }
+        .for_model(&m)
+        .unwrap();
+        let values: Vec<Variant> = (0..3000)
+            .map(|s| v.variant(s, 0.5, None).unwrap())
+            .collect();
+        let (palette, index) = quantise_variants(&values, 8);
+        // Only the roughness varies: 8 variants of one absorption, 8 distinct roughness scales
+        // within the bounds.
+        assert_eq!(palette.len(), 8);
+        assert!(palette.iter().all(|p| p.sigma_a == values[0].sigma_a));
+        let mut scales: Vec<f32> = palette.iter().map(|p| p.roughness).collect();
+        assert!(
+            scales.iter().all(|&g| (1.0 - r..=1.0 + r).contains(&g)),
+            "{scales:?}"
+        );
+        scales.sort_by(f32::total_cmp);
+        scales.dedup();
+        assert_eq!(scales.len(), 8);
+        assert!(
+            scales[0] < 1.0 - 0.7 * r && scales[7] > 1.0 + 0.7 * r,
+            "{scales:?}"
+        );
+        let mean = |g: &mut dyn Iterator<Item = f32>| g.map(f64::from).sum::<f64>() / 3000.0;
+        let exact = mean(&mut values.iter().map(|v| v.roughness));
+        let quantised = mean(&mut index.iter().map(|&i| palette[i as usize].roughness));
+        assert!((exact - quantised).abs() < 1e-5, "{exact} vs {quantised}");
+        // Each value's representative is near it.
+        assert!(values
+            .iter()
+            .zip(&index)
+            .all(|(v, &i)| (v.roughness - palette[i as usize].roughness).abs() < 0.1));
     }
 
     #[test]

@@ -1,0 +1,758 @@
+//! Reader for the `BasisCurves` prims of a USD stage (`.usda` text, `.usdc` binary, or `.usd`
+//! either), through the pure-Rust `openusd` crate, which composes the stage (sublayers,
+//! references, variants) before tress reads it.
+//!
+//! **What is read.** Every `BasisCurves` prim the stage's default traversal reaches (active,
+//! loaded, defined, not abstract), instance proxies included (so each instance of an
+//! `instanceable` prim gives its own copy), becomes strands, one per entry of
+//! `curveVertexCounts`, in traversal order: `type` `linear` or `cubic` (the schema's default) with `basis` `bezier`
+//! (default), `bspline` or `catmullRom`; `wrap` `nonperiodic` only. `points` and `widths` (a
+//! width is a diameter: radius = width / 2) with any interpolation — `constant`, `uniform` (one
+//! per curve), `varying` (one per segment end; `faceVarying` counts as `varying`, as in USD) or
+//! `vertex` (one per control point, the default, interpolated by the curve's basis) — and
+//! `primvars:displayColor` the same way, as the hair's colours (what a hair object's
+//! `variation: Some(file_colors: true)` takes) when every prim read has them. Values are the earliest time sample where an
+//! attribute has samples, else its default.
+//!
+//! **Cubic curves to points.** Each segment is turned into an exact cubic Bézier (B-spline
+//! and Catmull-Rom segments converted, one per four consecutive control points, as USD's
+//! nonperiodic curves define them) and sampled on the curve as the pbrt reader does
+//! ([`crate::pbrt`]): at 2^d + 1 parameters, d the fewest halvings that bring every chord
+//! within a twentieth of the fiber width. Linear curves keep their points.
+//!
+//! **Transforms and units.** Each prim's points are mapped by its local-to-world transform
+//! (the `xformOpOrder` of the prim and of its `Xform` ancestors, up to a
+//! `!resetXformStack!`), then scaled by the stage's `metersPerUnit` (USD's fallback: 0.01,
+//! centimetres) so that the groom is in metres, and turned Y-up when the stage's `upAxis` is
+//! `Z`. Widths scale by the cube root of the transform's determinant, and by `metersPerUnit`.
+//!
+//! **Refused**, naming the file and the prim: `periodic` or `pinned` wrap, the `hermite` basis,
+//! `curveVertexCounts` that do not add up to the points or are too short for the basis, widths
+//! or colours whose count does not match their interpolation, missing `points` or `widths`, a
+//! transform on an ancestor that is not an `Xform`, and a stage without `BasisCurves`.
+
+use crate::error::{format_error, Result};
+use crate::geometry::{HairAttribute, HairGeometry};
+use crate::pbrt::{bezier, bezier_segments, refinement_depth};
+use glam::{DMat3, DMat4, DVec3};
+use openusd::schemas::geom::{BasisCurves, Curves, Gprim, PointBased, Xform, Xformable};
+use openusd::{sdf, usd};
+use std::path::PathBuf;
+use tress_core::math::Rgb;
+
+/// A USD file whose `BasisCurves` to load.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UsdFile {
+    /// Path of the `.usda`, `.usdc` or `.usd` file, used as given.
+    pub path: PathBuf,
+}
+
+/// How a primvar's values map onto a batch of curves.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Interpolation {
+    Constant,
+    Uniform,
+    Varying,
+    Vertex,
+}
+
+/// The cubic bases tress reads.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Basis {
+    Bezier,
+    BSpline,
+    CatmullRom,
+}
+
+/// The value of `attr` (its earliest time sample, else its default) cast to `T`.
+fn value<T: sdf::FromValueCast>(attr: &usd::Attribute) -> anyhow::Result<Option<T>> {
+    match attr.get_at::<sdf::Value>(usd::TimeCode::EARLIEST)? {
+        Some(v) => Ok(Some(v.cast::<T>()?)),
+        None => Ok(None),
+    }
+}
+
+/// An openusd matrix (row vectors, rows stored in order) as a glam matrix acting on column
+/// vectors: the same array read column by column is its transpose, which is what that takes.
+fn to_dmat4(m: &openusd::gf::Matrix4d) -> DMat4 {
+    DMat4::from_cols_array(&m.0)
+}
+
+impl UsdFile {
+    /// The file at `path`.
+    pub fn new(path: impl Into<PathBuf>) -> Self {
+        UsdFile { path: path.into() }
+    }
+
+    /// Reads the stage's `BasisCurves` and validates them.
+    pub fn read(&self) -> Result<HairGeometry> {
+        let path = &self.path;
+        // The usual messages for a missing file or a folder, before openusd's own.
+        let io = |source| crate::Error::Io {
+            path: path.to_owned(),
+            source,
+        };
+        if !std::fs::metadata(path).map_err(io)?.is_file() {
+            return Err(io(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "not a regular file (a directory, device or pipe)",
+            )));
+        }
+        let fail = |reason: String| format_error(path, reason);
+        let name = path
+            .to_str()
+            .ok_or_else(|| fail("the path is not valid UTF-8".into()))?;
+        let stage = usd::Stage::open(name)
+            .map_err(|e| fail(format!("cannot read it as a USD stage: {e:#}")))?;
+        if let Some(e) = stage.composition_errors().first() {
+            return Err(fail(format!("composing the stage: {e}")));
+        }
+        let metadata = |field: &str| {
+            stage
+                .stage_metadata(field)
+                .map_err(|e| fail(format!("{field}: {e:#}")))
+        };
+        let meters_per_unit = match metadata("metersPerUnit")? {
+            None => 0.01,
+            Some(v) => v
+                .cast::<f64>()
+                .ok()
+                .filter(|m| m.is_finite() && *m > 0.0)
+                .ok_or_else(|| fail("metersPerUnit must be a positive number".into()))?,
+        };
+        let z_up = match metadata("upAxis")? {
+            None => false,
+            Some(v) => match v.cast::<String>().as_deref() {
+                Ok("Y") => false,
+                Ok("Z") => true,
+                _ => return Err(fail("upAxis must be \"Y\" or \"Z\"".into())),
+            },
+        };
+        let mut paths = Vec::new();
+        stage
+            .traverse(
+                usd::PrimPredicate::DEFAULT.with_instance_proxies(true),
+                |p| paths.push(p.clone()),
+            )
+            .map_err(|e| fail(format!("traversing the stage: {e:#}")))?;
+        let mut reader = Reader {
+            hair: HairGeometry::empty(path.display().to_string()),
+            colors: Colors::None,
+            scale: DMat4::from_scale(DVec3::splat(meters_per_unit)),
+        };
+        let mut others = 0;
+        for p in &paths {
+            let at = |e: anyhow::Error| fail(format!("<{}>: {e:#}", p.as_str()));
+            match BasisCurves::get(&stage, p.clone()).map_err(at)? {
+                Some(curves) => reader.add(&stage, &curves).map_err(at)?,
+                None => others += 1,
+            }
+        }
+        if reader.hair.strand_count() == 0 {
+            return Err(fail(format!(
+                "no BasisCurves with curves on the stage ({others} other prims)"
+            )));
+        }
+        let mut hair = reader.hair;
+        hair.colors = match reader.colors {
+            Colors::None => None,
+            Colors::Incomplete => {
+                tracing::warn!(
+                    "{}: some BasisCurves have primvars:displayColor and some not: the colours \
+                     are not used",
+                    path.display()
+                );
+                None
+            }
+            Colors::PerStrand(c) => Some(HairAttribute::PerStrand(c)),
+            Colors::PerPoint(c) => Some(HairAttribute::PerPoint(c)),
+        };
+        if z_up {
+            hair.z_up_to_y_up();
+        }
+        hair.validate()?;
+        Ok(hair)
+    }
+}
+
+/// The colours read so far: none, one per strand or per point for every strand so far, or
+/// some strands with and some without (then none are used: a hair's colours are all or
+/// nothing). Prims with `displayColor` per curve and per vertex share one array per point.
+enum Colors {
+    None,
+    PerStrand(Vec<Rgb>),
+    PerPoint(Vec<Rgb>),
+    Incomplete,
+}
+
+struct Reader {
+    hair: HairGeometry,
+    colors: Colors,
+    /// `metersPerUnit` as a transform, applied after every prim's own.
+    scale: DMat4,
+}
+
+/// A primvar's values (widths, or colours as vectors) with their interpolation.
+struct Primvar {
+    values: Vec<DVec3>,
+    interpolation: Interpolation,
+}
+
+impl Primvar {
+    /// `attr`'s values and its `interpolation` metadata (default `vertex`); `None` when the
+    /// attribute has no value.
+    fn read(
+        attr: &usd::Attribute,
+        values: impl FnOnce(&usd::Attribute) -> anyhow::Result<Option<Vec<DVec3>>>,
+    ) -> anyhow::Result<Option<Primvar>> {
+        let Some(values) = values(attr)? else {
+            return Ok(None);
+        };
+        let interpolation = match attr
+            .get_metadata::<sdf::Value>("interpolation")?
+            .map(|v| v.cast::<String>())
+            .transpose()?
+            .as_deref()
+        {
+            None | Some("vertex") => Interpolation::Vertex,
+            Some("constant") => Interpolation::Constant,
+            Some("uniform") => Interpolation::Uniform,
+            Some("varying") | Some("faceVarying") => Interpolation::Varying,
+            Some(other) => anyhow::bail!("{}: unknown interpolation \"{other}\"", attr_name(attr)),
+        };
+        Ok(Some(Primvar {
+            values,
+            interpolation,
+        }))
+    }
+
+    /// The values this primvar needs, for curves of `counts` control points and `segments`
+    /// segments each.
+    fn expected(&self, counts: &[usize], segments: &[usize]) -> usize {
+        match self.interpolation {
+            Interpolation::Constant => 1,
+            Interpolation::Uniform => counts.len(),
+            Interpolation::Varying => segments.iter().map(|s| s + 1).sum(),
+            Interpolation::Vertex => counts.iter().sum(),
+        }
+    }
+}
+
+fn attr_name(attr: &usd::Attribute) -> String {
+    attr.path()
+        .as_str()
+        .rsplit('.')
+        .next()
+        .unwrap_or_default()
+        .to_string()
+}
+
+impl Reader {
+    /// Adds the strands of one `BasisCurves` prim.
+    fn add(&mut self, stage: &usd::Stage, curves: &BasisCurves) -> anyhow::Result<()> {
+        let token = |attr: usd::Attribute, default: &str| -> anyhow::Result<String> {
+            Ok(value::<String>(&attr)?.unwrap_or_else(|| default.into()))
+        };
+        let cubic = match token(curves.type_attr(), "cubic")?.as_str() {
+            "linear" => false,
+            "cubic" => true,
+            other => anyhow::bail!("type \"{other}\": expected \"linear\" or \"cubic\""),
+        };
+        let basis = match token(curves.basis_attr(), "bezier")?.as_str() {
+            "bezier" => Basis::Bezier,
+            "bspline" => Basis::BSpline,
+            "catmullRom" => Basis::CatmullRom,
+            other => anyhow::bail!(
+                "basis \"{other}\": only \"bezier\", \"bspline\" and \"catmullRom\" are supported"
+            ),
+        };
+        match token(curves.wrap_attr(), "nonperiodic")?.as_str() {
+            "nonperiodic" => {}
+            other => anyhow::bail!("wrap \"{other}\": only \"nonperiodic\" curves are supported"),
+        }
+        let counts = match curves
+            .curve_vertex_counts_attr()
+            .get_at::<sdf::Value>(usd::TimeCode::EARLIEST)?
+        {
+            None => Vec::new(),
+            Some(sdf::Value::IntVec(c)) => c,
+            Some(_) => anyhow::bail!("curveVertexCounts: not an int[]"),
+        };
+        let points: Vec<DVec3> = value::<Vec<openusd::gf::Vec3f>>(&curves.points_attr())?
+            .ok_or_else(|| anyhow::anyhow!("no points"))?
+            .iter()
+            .map(|p| DVec3::new(p.x as f64, p.y as f64, p.z as f64))
+            .collect();
+        let counts: Vec<usize> = counts
+            .iter()
+            .map(|&c| usize::try_from(c))
+            .collect::<Result<_, _>>()
+            .map_err(|_| anyhow::anyhow!("curveVertexCounts: a count is negative"))?;
+        let total: usize = counts.iter().sum();
+        if total != points.len() {
+            anyhow::bail!(
+                "curveVertexCounts add up to {total} points, but there are {}",
+                points.len()
+            );
+        }
+        // Each curve's segments: Béziers for cubic curves, chords for linear ones.
+        let as_segments = |cp: &[DVec3]| -> Result<Vec<[DVec3; 4]>, String> {
+            match basis {
+                Basis::Bezier => bezier_segments(cp, 3.0, false),
+                Basis::BSpline => bezier_segments(cp, 3.0, true),
+                Basis::CatmullRom => catmull_rom_segments(cp),
+            }
+        };
+        let mut starts = Vec::with_capacity(counts.len());
+        let mut segments = Vec::with_capacity(counts.len());
+        let mut start = 0;
+        for (i, &n) in counts.iter().enumerate() {
+            let s = if cubic {
+                as_segments(&points[start..start + n])
+                    .map_err(|e| anyhow::anyhow!("curve {i}: {e}"))?
+                    .len()
+            } else if n >= 2 {
+                n - 1
+            } else {
+                anyhow::bail!("curve {i}: {n} points: a linear curve needs at least 2");
+            };
+            starts.push(start);
+            segments.push(s);
+            start += n;
+        }
+        let widths = Primvar::read(&curves.widths_attr(), |a| {
+            Ok(value::<Vec<f32>>(a)?
+                .map(|w| w.iter().map(|&w| DVec3::new(w as f64, 0.0, 0.0)).collect()))
+        })?
+        .ok_or_else(|| anyhow::anyhow!("no widths"))?;
+        let colors = Primvar::read(&curves.display_color_attr(), |a| {
+            Ok(value::<Vec<openusd::gf::Vec3f>>(a)?.map(|c| {
+                c.iter()
+                    .map(|c| DVec3::new(c.x as f64, c.y as f64, c.z as f64))
+                    .collect()
+            }))
+        })?;
+        for (what, primvar) in [
+            ("widths", Some(&widths)),
+            ("primvars:displayColor", colors.as_ref()),
+        ] {
+            let Some(p) = primvar else { continue };
+            let expected = p.expected(&counts, &segments);
+            if p.values.len() != expected {
+                anyhow::bail!(
+                    "{what}: {} values, but {:?} interpolation over these curves needs {expected}",
+                    p.values.len(),
+                    p.interpolation
+                );
+            }
+        }
+
+        let transform = self.scale * world_transform(stage, curves)?;
+        let width_scale = DMat3::from_mat4(transform).determinant().abs().cbrt();
+        let mut varying_start = 0;
+        for (i, (&start, &n)) in starts.iter().zip(&counts).enumerate() {
+            let cp = &points[start..start + n];
+            // A primvar's value at parameter u of segment s of this curve.
+            let at = |p: &Primvar, seg: &[[DVec3; 4]], s: usize, u: f64| -> DVec3 {
+                match p.interpolation {
+                    Interpolation::Constant => p.values[0],
+                    Interpolation::Uniform => p.values[i],
+                    Interpolation::Varying => {
+                        let v = &p.values[varying_start..];
+                        v[s].lerp(v[s + 1], u)
+                    }
+                    Interpolation::Vertex if cubic => bezier(&seg[s], u),
+                    Interpolation::Vertex => p.values[start + s].lerp(p.values[start + s + 1], u),
+                }
+            };
+            // The Béziers of the vertex primvars, through the same basis as the points.
+            let vertex_segments = |p: &Primvar| -> Vec<[DVec3; 4]> {
+                if cubic && p.interpolation == Interpolation::Vertex {
+                    as_segments(&p.values[start..start + n]).expect("checked with the points")
+                } else {
+                    Vec::new()
+                }
+            };
+            let width_segments = vertex_segments(&widths);
+            let color_segments = colors.as_ref().map(vertex_segments).unwrap_or_default();
+            let push = |hair: &mut HairGeometry, point: DVec3, s: usize, u: f64| -> Option<Rgb> {
+                hair.points.push(point.as_vec3());
+                let width = at(&widths, &width_segments, s, u).x;
+                hair.radii.push((0.5 * width * width_scale) as f32);
+                colors
+                    .as_ref()
+                    .map(|c| -> Rgb { at(c, &color_segments, s, u).as_vec3() })
+            };
+            let mut point_colors = Vec::new();
+            if cubic {
+                let beziers = as_segments(cp).expect("checked above");
+                for (s, b) in beziers.iter().enumerate() {
+                    let b = b.map(|p| transform.transform_point3(p));
+                    let w0 = at(&widths, &width_segments, s, 0.0).x;
+                    let w1 = at(&widths, &width_segments, s, 1.0).x;
+                    let pieces = 1u32 << refinement_depth(&b, w0.max(w1) * width_scale);
+                    if s == 0 {
+                        point_colors.extend(push(&mut self.hair, b[0], 0, 0.0));
+                    }
+                    for k in 1..=pieces {
+                        let u = k as f64 / pieces as f64;
+                        point_colors.extend(push(&mut self.hair, bezier(&b, u), s, u));
+                    }
+                }
+            } else {
+                for (k, p) in cp.iter().enumerate() {
+                    let (s, u) = if k + 1 < n { (k, 0.0) } else { (k - 1, 1.0) };
+                    let color = push(&mut self.hair, transform.transform_point3(*p), s, u);
+                    point_colors.extend(color);
+                }
+            }
+            self.hair.strand_offsets.push(self.hair.points.len() as u32);
+            varying_start += segments[i] + 1;
+            self.add_colors(colors.as_ref(), point_colors);
+        }
+        Ok(())
+    }
+
+    /// Records the colours of the strand just added: one per point, or none when its prim has
+    /// no `displayColor`.
+    fn add_colors(&mut self, primvar: Option<&Primvar>, colors: Vec<Rgb>) {
+        let strands_before = self.hair.strand_count() - 1;
+        let per_strand = matches!(
+            primvar.map(|p| p.interpolation),
+            Some(Interpolation::Constant | Interpolation::Uniform)
+        );
+        match (&mut self.colors, primvar) {
+            (Colors::None, None) | (Colors::Incomplete, _) => {}
+            (Colors::None, Some(_)) if strands_before > 0 => self.colors = Colors::Incomplete,
+            (_, None) => self.colors = Colors::Incomplete,
+            (Colors::None, Some(_)) if per_strand => {
+                self.colors = Colors::PerStrand(vec![colors[0]])
+            }
+            (Colors::None, Some(_)) => self.colors = Colors::PerPoint(colors),
+            (Colors::PerStrand(c), Some(_)) if per_strand => c.push(colors[0]),
+            (Colors::PerPoint(c), Some(_)) => c.extend(colors),
+            (Colors::PerStrand(c), Some(_)) => {
+                // Per-strand colours so far, now per-point ones: spread the former over their
+                // strands' points.
+                let offsets = &self.hair.strand_offsets;
+                let mut all = Vec::with_capacity(offsets[offsets.len() - 1] as usize);
+                for (s, color) in c.iter().enumerate() {
+                    all.extend(std::iter::repeat_n(
+                        *color,
+                        (offsets[s + 1] - offsets[s]) as usize,
+                    ));
+                }
+                all.extend(colors);
+                self.colors = Colors::PerPoint(all);
+            }
+        }
+    }
+}
+
+/// The Bézier segments of a nonperiodic Catmull-Rom curve: one per four consecutive control
+/// points, running from the second to the third.
+fn catmull_rom_segments(cp: &[DVec3]) -> Result<Vec<[DVec3; 4]>, String> {
+    if cp.len() < 4 {
+        return Err(format!(
+            "{} control points: a Catmull-Rom curve needs at least 4",
+            cp.len()
+        ));
+    }
+    Ok(cp
+        .windows(4)
+        .map(|w| {
+            [
+                w[1],
+                w[1] + (w[2] - w[0]) / 6.0,
+                w[2] - (w[3] - w[1]) / 6.0,
+                w[2],
+            ]
+        })
+        .collect())
+}
+
+/// `curves`' local-to-world transform: its own `xformOpOrder` and its ancestors', up to a
+/// `!resetXformStack!`. Only `Xform` ancestors may carry transforms.
+fn world_transform(stage: &usd::Stage, curves: &BasisCurves) -> anyhow::Result<DMat4> {
+    let mut m = to_dmat4(&curves.local_to_parent_transform(usd::TimeCode::EARLIEST)?);
+    if curves.resets_xform_stack()? {
+        return Ok(m);
+    }
+    let mut path = curves.path().parent();
+    while let Some(p) = path {
+        if p.as_str() == "/" || p.as_str().is_empty() {
+            break;
+        }
+        match Xform::get(stage, p.clone())? {
+            Some(x) => {
+                m = to_dmat4(&x.local_to_parent_transform(usd::TimeCode::EARLIEST)?) * m;
+                if x.resets_xform_stack()? {
+                    break;
+                }
+            }
+            None => {
+                let order = stage.prim(p.clone()).attribute("xformOpOrder");
+                if order.get::<sdf::Value>()?.is_some() {
+                    anyhow::bail!(
+                        "the ancestor <{}> has a transform but is not an Xform: only Xform \
+                         ancestors' transforms are read",
+                        p.as_str()
+                    );
+                }
+            }
+        }
+        path = p.parent();
+    }
+    Ok(m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::HairSource;
+    use std::path::Path;
+    use tress_core::math::Vec3;
+
+    /// A groom that `tests/usd_grooms.py` wrote with Pixar's USD library.
+    fn groom(name: &str) -> HairGeometry {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data")
+            .join(name);
+        HairSource::File(path)
+            .load()
+            .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    fn close(a: Vec3, b: Vec3) -> bool {
+        (a - b).length() <= 1e-6 * (1.0 + b.length())
+    }
+
+    fn assert_points(hair: &HairGeometry, expect: &[Vec3]) {
+        assert_eq!(hair.points.len(), expect.len(), "{:?}", hair.points);
+        for (i, (p, e)) in hair.points.iter().zip(expect).enumerate() {
+            assert!(close(*p, *e), "point {i}: {p}, expected {e}");
+        }
+    }
+
+    fn assert_near(values: &[f32], expect: &[f32]) {
+        assert_eq!(values.len(), expect.len(), "{values:?}");
+        for (v, e) in values.iter().zip(expect) {
+            assert!(
+                (v - e).abs() <= 1e-6 * e.abs().max(1e-3),
+                "{values:?} vs {expect:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn linear_curves_take_the_transforms_widths_and_colours_per_curve() {
+        for file in ["usd_linear.usda", "usd_linear.usdc"] {
+            let g = groom(file);
+            assert_eq!(g.strand_offsets, vec![0, 3, 5], "{file}");
+            // Scaled by 2 on the curves, then translated by (1, 2, 3) on their Xform.
+            let v = Vec3::new;
+            assert_points(
+                &g,
+                &[
+                    v(1.0, 2.0, 3.0),
+                    v(1.0, 4.0, 3.0),
+                    v(1.0, 6.0, 4.0),
+                    v(3.0, 2.0, 3.0),
+                    v(3.0, 4.0, 3.0),
+                ],
+            );
+            // Widths are diameters, doubled by the scale: the radii are the widths.
+            assert_near(&g.radii, &[0.1, 0.08, 0.06, 0.2, 0.1]);
+            let Some(HairAttribute::PerStrand(colors)) = &g.colors else {
+                panic!("{file}: {:?}", g.colors)
+            };
+            assert_eq!(colors, &vec![v(0.5, 0.3, 0.1), v(0.2, 0.4, 0.6)]);
+        }
+    }
+
+    #[test]
+    fn cubic_bases_are_sampled_on_the_curve_in_metres_y_up() {
+        let (text, binary) = (groom("usd_cubic.usda"), groom("usd_cubic.usdc"));
+        assert_eq!(
+            text,
+            HairGeometry {
+                name: text.name.clone(),
+                ..binary
+            }
+        );
+        let g = text;
+        // Z up and 0.01 m per unit: (x, y, z) → 0.01·(x, z, −y).
+        let world = |p: DVec3| Vec3::new(0.01 * p.x as f32, 0.01 * p.z as f32, -0.01 * p.y as f32);
+        assert_eq!(g.strand_count(), 3);
+        // The hook: refined, every point on the Bézier of its control points.
+        let hook = &g.points[g.strand(0)];
+        let pieces = hook.len() - 1;
+        assert!(pieces.is_power_of_two() && pieces >= 4, "{pieces}");
+        let cp = [
+            DVec3::ZERO,
+            DVec3::new(0.0, 0.0, 3.0),
+            DVec3::new(2.0, 0.0, 3.0),
+            DVec3::new(2.0, 0.0, 0.5),
+        ];
+        for (k, p) in hook.iter().enumerate() {
+            let u = k as f64 / pieces as f64;
+            let s = 1.0 - u;
+            let b = s * s * s * cp[0]
+                + 3.0 * s * s * u * cp[1]
+                + 3.0 * s * u * u * cp[2]
+                + u * u * u * cp[3];
+            assert!(close(*p, world(b)), "hook point {k}: {p} vs {}", world(b));
+        }
+        assert!(g.radii[g.strand(0)]
+            .iter()
+            .all(|&r| (r - 0.00025).abs() < 1e-9));
+        // The B-spline spans (p0 + 4p1 + p2)/6 … (p2 + 4p3 + p4)/6: z 1, 2, 3, with its vertex
+        // widths and colours weighted the same way.
+        let bspline = g.strand(1);
+        let v = Vec3::new;
+        assert_points(
+            &HairGeometry {
+                points: g.points[bspline.clone()].to_vec(),
+                ..HairGeometry::empty("b")
+            },
+            &[v(0.05, 0.01, 0.0), v(0.05, 0.02, 0.0), v(0.05, 0.03, 0.0)],
+        );
+        assert_near(&g.radii[bspline.clone()], &[0.002, 0.0025, 0.002]);
+        let Some(HairAttribute::PerPoint(colors)) = &g.colors else {
+            panic!("{:?}", g.colors)
+        };
+        for (c, e) in colors[bspline].iter().zip([0.4, 0.6, 0.8]) {
+            assert!(close(*c, Vec3::splat(e)), "{c} vs {e}");
+        }
+        // The Catmull-Rom curve runs from its second point to its third, varying widths and
+        // vertex colours from the second colour to the third.
+        let catmull = g.strand(2);
+        assert!(close(g.points[catmull.start], v(0.11, 0.0, 0.0)));
+        assert!(close(g.points[catmull.end - 1], v(0.12, 0.0, 0.0)));
+        assert_eq!(catmull.len(), 2);
+        assert_near(&g.radii[catmull.clone()], &[0.001, 0.002]);
+        assert!(close(colors[catmull.start], v(0.5, 0.5, 0.5)));
+        assert!(close(colors[catmull.end - 1], v(0.3, 0.2, 0.1)));
+        assert_eq!(colors.len(), g.points.len());
+    }
+
+    #[test]
+    fn every_instance_of_an_instanceable_prim_gives_its_strands() {
+        for file in ["usd_instanced.usda", "usd_instanced.usdc"] {
+            let g = groom(file);
+            // The class prim itself is abstract: only its two instances, moved by theirs.
+            assert_eq!(g.strand_offsets, vec![0, 2, 4], "{file}");
+            let v = Vec3::new;
+            assert_points(
+                &g,
+                &[
+                    v(5.0, 0.0, 0.0),
+                    v(5.0, 1.0, 0.0),
+                    v(10.0, 0.0, 0.0),
+                    v(10.0, 1.0, 0.0),
+                ],
+            );
+        }
+    }
+
+    /// The error reading `text` as `name` in a temporary folder.
+    fn error(name: &str, text: &str) -> String {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        match UsdFile::new(&path).read() {
+            Ok(g) => panic!("{text}: read {} strands", g.strand_count()),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    const CURVES: &str = r#"#usda 1.0
+def BasisCurves "Hair"
+{
+    uniform token type = "cubic"
+    uniform token basis = "bezier"
+    uniform token wrap = "nonperiodic"
+    int[] curveVertexCounts = [4]
+    point3f[] points = [(0, 0, 0), (0, 1, 0), (0, 2, 0), (0, 3, 0)]
+    float[] widths = [0.1, 0.1, 0.1, 0.1]
+}
+"#;
+
+    #[test]
+    fn unsupported_or_inconsistent_curves_are_refused_naming_the_file_and_prim() {
+        for (from, to, expect) in [
+            (
+                "\"nonperiodic\"",
+                "\"periodic\"",
+                "</Hair>: wrap \"periodic\"",
+            ),
+            ("\"bezier\"", "\"hermite\"", "</Hair>: basis \"hermite\""),
+            ("\"cubic\"", "\"quintic\"", "</Hair>: type \"quintic\""),
+            (
+                "[4]",
+                "[5]",
+                "</Hair>: curveVertexCounts add up to 5 points, but there are 4",
+            ),
+            ("[4]", "[2, 2]", "</Hair>: curve 0: 2 control points"),
+            (
+                "[0.1, 0.1, 0.1, 0.1]",
+                "[0.1, 0.1, 0.1]",
+                "</Hair>: widths: 3 values",
+            ),
+            (
+                "float[] widths = [0.1, 0.1, 0.1, 0.1]",
+                "",
+                "</Hair>: no widths",
+            ),
+            ("point3f[] points", "point3f[] pts", "</Hair>: no points"),
+            (
+                "def BasisCurves",
+                "def Mesh",
+                "no BasisCurves with curves on the stage (1 other",
+            ),
+        ] {
+            assert!(CURVES.contains(from), "{from}");
+            let e = error("groom.usda", &CURVES.replace(from, to));
+            assert!(
+                e.contains("groom.usda") && e.contains(expect),
+                "{expect}: {e}"
+            );
+        }
+        let nested = CURVES.replace(
+            "def BasisCurves \"Hair\"\n{",
+            "def Scope \"S\"\n{\n    double3 xformOp:translate = (1, 0, 0)\n    uniform token[] \
+             xformOpOrder = [\"xformOp:translate\"]\n    def BasisCurves \"Hair\"\n    {",
+        ) + "}\n";
+        let e = error("groom.usda", &nested);
+        assert!(e.contains("</S>") && e.contains("not an Xform"), "{e}");
+        // Colours on some prims only: none are used, the strands are read.
+        let two = CURVES.to_string()
+            + &CURVES
+                .replace("#usda 1.0", "")
+                .replace("\"Hair\"", "\"Coloured\"")
+                .replace(
+                    "float[] widths",
+                    "color3f[] primvars:displayColor = [(1, 0, 0)] (interpolation = \"constant\")\n    float[] widths",
+                );
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("two.usda"), &two).unwrap();
+        let g = UsdFile::new(dir.path().join("two.usda")).read().unwrap();
+        assert_eq!((g.strand_count(), g.colors), (2, None));
+        std::fs::write(
+            dir.path().join("one.usda"),
+            two.replace("def BasisCurves \"Hair\"", "over \"Hair\""),
+        )
+        .unwrap();
+        let g = UsdFile::new(dir.path().join("one.usda")).read().unwrap();
+        assert_eq!(
+            g.colors,
+            Some(HairAttribute::PerStrand(vec![Vec3::new(1.0, 0.0, 0.0)]))
+        );
+        let e = error("groom.usdc", "not a USD file");
+        assert!(e.contains("groom.usdc") && e.contains("USD"), "{e}");
+        let e = HairSource::File(PathBuf::from("/nowhere/groom.usd"))
+            .load()
+            .unwrap_err();
+        assert!(e.to_string().contains("/nowhere/groom.usd"), "{e}");
+    }
+}
