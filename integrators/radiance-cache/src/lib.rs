@@ -234,6 +234,8 @@ impl Integrator for Trained {
 /// Paths traced per training task: fixed, so the records each task sums — and so the cache —
 /// are the same for any number of threads.
 const TRAINING_CHUNK: u64 = 256;
+/// Chunks traced in parallel before their records are merged.
+const TRAINING_BATCH: u64 = 64;
 /// Stream tag of the training paths' random numbers (apart from every pixel sample's).
 const TRAINING_STREAM: u64 = 0x7261_6469_616e_6365;
 
@@ -281,38 +283,44 @@ fn train(
 ) -> Records {
     let pixels = film.width as u64 * film.height as u64;
     let done = AtomicU64::new(0);
-    let chunk_records: Vec<Records> = (0..paths.div_ceil(TRAINING_CHUNK))
-        .into_par_iter()
-        .map(|chunk| {
-            let mut records = Records::default();
-            let mut vertices = Vec::new();
-            let range = chunk * TRAINING_CHUNK..((chunk + 1) * TRAINING_CHUNK).min(paths);
-            let n = range.end - range.start;
-            for i in range {
-                let pixel = i % pixels;
-                let (x, y) = (pixel % film.width as u64, pixel / film.width as u64);
-                let mut sampler = Sampler::from_seed(hash_words(&[film.seed, TRAINING_STREAM, i]));
-                let jitter = sampler.next_2d();
-                let lens = sampler.next_2d();
-                let ray = scene.camera.generate_ray(
-                    x as f32 + jitter.x,
-                    y as f32 + jitter.y,
-                    film.width,
-                    film.height,
-                    lens,
-                );
-                training_path(settings, &ray, scene, &mut sampler, &mut vertices);
-                for v in &vertices {
-                    records.add(&lattice, v.p, v.wo, v.radiance);
-                }
-            }
-            progress(done.fetch_add(n, Ordering::Relaxed) + n);
-            records
-        })
-        .collect();
+    let chunks = paths.div_ceil(TRAINING_CHUNK);
     let mut records = Records::default();
-    for chunk in &chunk_records {
-        records.merge(chunk);
+    // A batch of chunks at a time, merged before the next, so that only one batch's unmerged
+    // records are held at once.
+    for batch in (0..chunks).step_by(TRAINING_BATCH as usize) {
+        let chunk_records: Vec<Records> = (batch..(batch + TRAINING_BATCH).min(chunks))
+            .into_par_iter()
+            .map(|chunk| {
+                let mut records = Records::default();
+                let mut vertices = Vec::new();
+                let range = chunk * TRAINING_CHUNK..((chunk + 1) * TRAINING_CHUNK).min(paths);
+                let n = range.end - range.start;
+                for i in range {
+                    let pixel = i % pixels;
+                    let (x, y) = (pixel % film.width as u64, pixel / film.width as u64);
+                    let mut sampler =
+                        Sampler::from_seed(hash_words(&[film.seed, TRAINING_STREAM, i]));
+                    let jitter = sampler.next_2d();
+                    let lens = sampler.next_2d();
+                    let ray = scene.camera.generate_ray(
+                        x as f32 + jitter.x,
+                        y as f32 + jitter.y,
+                        film.width,
+                        film.height,
+                        lens,
+                    );
+                    training_path(settings, &ray, scene, &mut sampler, &mut vertices);
+                    for v in &vertices {
+                        records.add(&lattice, v.p, v.wo, v.radiance);
+                    }
+                }
+                progress(done.fetch_add(n, Ordering::Relaxed) + n);
+                records
+            })
+            .collect();
+        for chunk in &chunk_records {
+            records.merge(chunk);
+        }
     }
     records
 }
