@@ -57,6 +57,18 @@ def test_integrator_override_by_name_and_by_ron(scene):
     assert single.mean() < 0.9 * multiple.mean()
 
 
+def test_every_registered_integrator_renders_threads_and_crops_alike(scene):
+    # The radiance cache trains on the whole film whatever the crop, so a window is still the
+    # same window of the full image.
+    for name in tress.INTEGRATORS:
+        full = scene.render(integrator=name, threads=2)
+        assert np.isfinite(full).all() and full.mean() > 0, name
+        np.testing.assert_array_equal(full, scene.render(integrator=name, threads=1), name)
+        np.testing.assert_array_equal(
+            scene.render(integrator=name, crop=(3, 5, 11, 14)), full[5:14, 3:11], name
+        )
+
+
 def test_from_ron_and_to_ron_round_trip(scene):
     again = tress.Scene.from_ron(scene.to_ron())
     np.testing.assert_array_equal(again.render(), scene.render())
