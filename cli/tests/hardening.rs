@@ -1145,3 +1145,48 @@ fn usc_hairsalon_files_load_and_broken_ones_are_named() {
     std::fs::write(d.join("style.data"), &bytes[..bytes.len() - 5]).unwrap();
     assert_bad_hair(d, "File(\"style.data\")", &["style.data", "past the end"]);
 }
+
+/// Printing into a pipe whose reader is gone ends the command quietly, as it does other Unix
+/// tools (`tress info scene.ron | true` panicked "failed printing to stdout: Broken pipe").
+#[cfg(unix)]
+#[test]
+fn closed_stdout_pipes_end_commands_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    std::fs::write(d.join("dirs.csv"), "0.2,0,0,1,0.5,0,1\n").unwrap();
+    render_ok(&["--out", "a.exr", "--quiet"], d);
+    let model = "Chiang(beta_m: 0.3, beta_n: 0.3)";
+    for args in [
+        &["info", "scene.ron"][..],
+        &["farm", "scene.ron", "--tiles", "2"],
+        &[
+            "bcsdf",
+            "furnace",
+            "--model",
+            model,
+            "--csv",
+            "--samples",
+            "1000",
+        ],
+        &["bcsdf", "eval", "--model", model, "--input", "dirs.csv"],
+        &["diff", "a.exr", "a.exr"],
+    ] {
+        // The reading end is closed before tress starts, so its first write meets EPIPE.
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_tress"))
+            .args(args)
+            .current_dir(d)
+            .stdout(writer)
+            .output()
+            .unwrap();
+        let err = stderr(&o);
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert!(
+            o.status.success() || o.status.signal() == Some(libc::SIGPIPE),
+            "{args:?}: {:?} {err}",
+            o.status
+        );
+    }
+}
