@@ -46,6 +46,9 @@ use tress_core::math::Vec3;
 
 /// How deeply `Include`/`Import` may nest: deeper is taken for a cycle.
 const MAX_INCLUDE_DEPTH: usize = 32;
+/// How many `Include`/`Import` statements one file may run in all: the depth limit catches
+/// cycles, not fan-out (8 levels of 10 includes of one small file is 10^8 reads).
+const MAX_INCLUDES: usize = 10_000;
 /// pbrt's cap on the refinement depth of one curve segment (2^10 pieces).
 const MAX_REFINE_DEPTH: u32 = 10;
 
@@ -77,6 +80,7 @@ impl PbrtFile {
             saved: Vec::new(),
             named: HashMap::new(),
             object_depth: 0,
+            includes: 0,
             skipped_in_objects: 0,
             other_shapes: 0,
             hair: HairGeometry::empty(self.path.display().to_string()),
@@ -301,6 +305,8 @@ struct CurveReader {
     named: HashMap<String, DMat4>,
     /// Nesting of `ObjectBegin`.
     object_depth: usize,
+    /// `Include`/`Import` statements run so far, in every file.
+    includes: usize,
     skipped_in_objects: usize,
     other_shapes: usize,
     hair: HairGeometry,
@@ -487,6 +493,13 @@ impl CurveReader {
                         "{} nested more than {MAX_INCLUDE_DEPTH} deep (does a file include \
                          itself?)",
                         keyword.text
+                    )));
+                }
+                self.includes += 1;
+                if self.includes > MAX_INCLUDES {
+                    return Err(err(format!(
+                        "more than {MAX_INCLUDES} `Include`/`Import` statements run in all \
+                         (files including others many times over)"
                     )));
                 }
                 let file = self.base.join(file);

@@ -503,6 +503,12 @@ fn parse(bytes: &[u8], path: &Path, options: &PlyFile) -> Result<HairGeometry> {
                 encoding,
             ))
         };
+        // Records without properties take no bytes in a binary file, so there is nothing to
+        // read: read one by one, `element junk 18446744073709551615` never ended. (An ascii
+        // record is a line, so there the end of the file stops a false count.)
+        if element.properties.is_empty() && encoding != Encoding::Ascii {
+            continue;
+        }
         let name = element.name.as_str();
         if name == "vertex" {
             vertices = Parser::<VertexRecord>::new()

@@ -44,7 +44,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub seed: Option<u64>,
     /// Worker threads (default: all cores). The image does not depend on it.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::parse_threads)]
     pub threads: Option<usize>,
     /// Render only the pixel window x0,y0,x1,y1 (x1, y1 exclusive). The image equals the same
     /// window of the full render bit for bit.

@@ -145,10 +145,11 @@ impl Piece {
 /// Reads and checks a render EXR's header.
 pub fn read_piece(path: &Path) -> Result<Piece> {
     let here = |reason: String| anyhow!("{}: {reason}", path.display());
-    if !path.exists() {
-        return Err(here("file not found".into()));
-    }
-    let meta = ex::MetaData::read_from_file(path, false)
+    let file = tress_core::files::open_regular(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => here("file not found".into()),
+        _ => here(e.to_string()),
+    })?;
+    let meta = ex::MetaData::read_from_unbuffered(file, false)
         .map_err(|e| here(format!("not a readable OpenEXR file: {e}")))?;
     let [header] = meta.headers.as_slice() else {
         bail!(
@@ -341,7 +342,7 @@ pub fn read_sums(piece: &Piece) -> Result<SampleSums> {
         .all_channels()
         .first_valid_layer()
         .all_attributes()
-        .from_file(path)
+        .from_unbuffered(tress_core::files::open_regular(path).map_err(|e| here(e.to_string()))?)
         .map_err(|e| here(format!("cannot read the pixels: {e}")))?;
     let channels: BTreeMap<String, &ex::FlatSamples> = image
         .layer_data

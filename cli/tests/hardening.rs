@@ -1146,6 +1146,52 @@ fn usc_hairsalon_files_load_and_broken_ones_are_named() {
     assert_bad_hair(d, "File(\"style.data\")", &["style.data", "past the end"]);
 }
 
+/// `tress args` in `dir`, killed and reported if it runs longer than `secs` (a hang).
+fn tress_within(
+    args: &[&str],
+    dir: &Path,
+    env: &[(&str, &str)],
+    secs: u64,
+) -> std::process::Output {
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tress"))
+        .args(args)
+        .envs(env.iter().copied())
+        .current_dir(dir)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(secs) {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            panic!("{args:?}: still running after {secs} s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+/// As [`assert_fails_in`], but a hang fails the test instead of blocking it.
+fn assert_fails_within(dir: &Path, args: &[&str], env: &[(&str, &str)], expect: &[&str]) {
+    let before = files_in(dir);
+    let o = tress_within(args, dir, env, 60);
+    let err = stderr(&o);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{args:?}: expected failure: {err}"
+    );
+    for e in expect {
+        assert!(err.contains(e), "{args:?}: message lacks '{e}': {err}");
+    }
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(files_in(dir), before, "{args:?}: output left behind");
+}
+
 /// Printing into a pipe whose reader is gone ends the command quietly, as it does other Unix
 /// tools (`tress info scene.ron | true` panicked "failed printing to stdout: Broken pipe").
 #[cfg(unix)]
@@ -1187,6 +1233,211 @@ fn closed_stdout_pipes_end_commands_quietly() {
             o.status.success() || o.status.signal() == Some(libc::SIGPIPE),
             "{args:?}: {:?} {err}",
             o.status
+        );
+    }
+}
+
+/// FIFOs given as any input are refused at once (opening one waited for a writer forever):
+/// hair files of every format, OBJ meshes, scenes, pbrt includes, study files, `bcsdf eval`
+/// inputs and `merge` pieces.
+#[cfg(unix)]
+#[test]
+fn fifos_as_inputs_are_refused_without_blocking() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    for name in [
+        "f.hair",
+        "f.tfx",
+        "f.ply",
+        "f.obj",
+        "f.ron",
+        "f.pbrt",
+        "study.ron",
+        "dirs.csv",
+        "f.exr",
+    ] {
+        let made = std::process::Command::new("mkfifo")
+            .arg(d.join(name))
+            .status()
+            .unwrap();
+        assert!(made.success());
+    }
+    for name in ["f.hair", "f.tfx", "f.ply"] {
+        std::fs::write(
+            d.join("scene.ron"),
+            SCENE.replace(
+                "Procedural(style: Ball, strands: 300, radius: 0.01)",
+                &format!("File(\"{name}\")"),
+            ),
+        )
+        .unwrap();
+        assert_fails_within(
+            d,
+            &["info", "scene.ron"],
+            &[],
+            &[name, "not a regular file"],
+        );
+    }
+    std::fs::write(d.join("main.pbrt"), "Include \"f.pbrt\"\n").unwrap();
+    std::fs::write(
+        d.join("scene.ron"),
+        SCENE.replace(
+            "Procedural(style: Ball, strands: 300, radius: 0.01)",
+            "File(\"main.pbrt\")",
+        ),
+    )
+    .unwrap();
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &[],
+        &["f.pbrt", "not a regular file"],
+    );
+    std::fs::write(
+        d.join("scene.ron"),
+        SCENE.replace(
+            "Sphere(center: (0, -2, 0), radius: 1, material: \"grey\")",
+            "Mesh(file: \"f.obj\", material: \"grey\")",
+        ),
+    )
+    .unwrap();
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &[],
+        &["f.obj", "not a regular file"],
+    );
+    std::fs::write(d.join("scene.ron"), SCENE).unwrap();
+    let model = "Chiang(beta_m: 0.3, beta_n: 0.3)";
+    render_ok(&["--out", "piece.exr", "--quiet", "--sums"], d);
+    for (args, name) in [
+        (&["info", "f.ron"][..], "f.ron"),
+        (&["render", "f.ron", "--quiet"], "f.ron"),
+        (&["study", "study.ron", "--quiet"], "study.ron"),
+        (
+            &["bcsdf", "eval", "--model", model, "--input", "dirs.csv"],
+            "dirs.csv",
+        ),
+        (&["merge", "m.exr", "piece.exr", "f.exr"], "f.exr"),
+        (&["diff", "piece.exr", "f.exr"], "f.exr"),
+    ] {
+        assert_fails_within(d, args, &[], &[name, "not a regular file"]);
+    }
+}
+
+/// Inputs that multiply or never end are bounded: a binary PLY element with no properties and
+/// 2^64 − 1 records, pbrt `Include` fan-out, and thread counts far beyond the machine.
+#[test]
+fn endless_and_multiplying_inputs_are_bounded() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    let hair_scene = |source: &str| {
+        std::fs::write(
+            d.join("scene.ron"),
+            SCENE.replace(
+                "Procedural(style: Ball, strands: 300, radius: 0.01)",
+                source,
+            ),
+        )
+        .unwrap();
+    };
+    // Two strands of two points each, then an element with no properties: its records take no
+    // bytes, so they are read (as nothing) at once, in both byte orders.
+    for (format, name) in [
+        ("binary_little_endian", "le.ply"),
+        ("binary_big_endian", "be.ply"),
+    ] {
+        let mut ply = format!(
+            "ply\nformat {format} 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
+             property float z\nelement junk 18446744073709551615\nelement strand 2\n\
+             property int vertex_count\nend_header\n"
+        )
+        .into_bytes();
+        let big = format == "binary_big_endian";
+        let put = |ply: &mut Vec<u8>, v: [u8; 4]| ply.extend(v);
+        for p in [
+            [0.0f32, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+        ] {
+            for c in p {
+                put(
+                    &mut ply,
+                    if big {
+                        c.to_be_bytes()
+                    } else {
+                        c.to_le_bytes()
+                    },
+                );
+            }
+        }
+        for n in [2i32, 2] {
+            put(
+                &mut ply,
+                if big {
+                    n.to_be_bytes()
+                } else {
+                    n.to_le_bytes()
+                },
+            );
+        }
+        std::fs::write(d.join(name), ply).unwrap();
+        hair_scene(&format!("File(\"{name}\")"));
+        let o = tress_within(&["info", "scene.ron"], d, &[], 60);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        assert!(
+            String::from_utf8_lossy(&o.stdout).contains("2 strands"),
+            "{name}"
+        );
+    }
+    // 8 levels of 10 includes each of one small file: 10^8 reads. Imports fan out alike.
+    let curve = "Shape \"curve\" \"point3 P\" [0 0 0 0 1 0 0 2 0 0 3 0] \"float width\" 0.01\n";
+    std::fs::write(d.join("leaf.pbrt"), curve.repeat(20)).unwrap();
+    for keyword in ["Include", "Import"] {
+        for level in 0..8 {
+            let next = if level == 7 {
+                "leaf.pbrt".to_string()
+            } else {
+                format!("l{}.pbrt", level + 1)
+            };
+            std::fs::write(
+                d.join(format!("l{level}.pbrt")),
+                format!("{keyword} \"{next}\"\n").repeat(10),
+            )
+            .unwrap();
+        }
+        hair_scene("File(\"l0.pbrt\")");
+        assert_fails_within(
+            d,
+            &["info", "scene.ron"],
+            &[],
+            &[
+                "l",
+                ".pbrt",
+                "more than 10000 `Include`/`Import` statements",
+            ],
+        );
+    }
+    hair_scene("Procedural(style: Ball, strands: 300, radius: 0.01)");
+    for args in [
+        &[
+            "render",
+            "scene.ron",
+            "--out",
+            "o.exr",
+            "--threads",
+            "10000",
+        ][..],
+        &["calibrate", "scene.ron", "--threads", "100000"],
+        &["study", "scene.ron", "--threads", "4096"],
+    ] {
+        let o = tress_within(args, d, &[], 60);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(
+            stderr(&o).contains("worker threads: at most"),
+            "{args:?}: {}",
+            stderr(&o)
         );
     }
 }
