@@ -72,6 +72,40 @@ impl PbrtFile {
         }
     }
 
+    /// The files [`read`](Self::read) reads: this one and every file it `Include`s or
+    /// `Import`s, each once, so that caches can key on their contents.
+    pub fn files(&self) -> Result<Vec<PathBuf>> {
+        let base = self.path.parent().unwrap_or(Path::new(""));
+        let mut files = vec![self.path.clone()];
+        let mut next = 0;
+        // Each file is scanned once, so cycles and fan-out end; `read` names them.
+        while let Some(path) = files.get(next).cloned() {
+            next += 1;
+            let bytes =
+                tress_core::files::read_regular(&path).map_err(|source| crate::Error::Io {
+                    path: path.clone(),
+                    source,
+                })?;
+            // Not text: `read` says so; there is nothing more to follow.
+            let Ok(text) = std::str::from_utf8(&bytes) else {
+                continue;
+            };
+            let mut lexer = Lexer::new(text);
+            let lex_error = |(pos, message): (Pos, String)| at(&path, pos, message);
+            while let Some(t) = lexer.next().map_err(lex_error)? {
+                if t.kind == TokenKind::Word && matches!(t.text, "Include" | "Import") {
+                    if let Some(name) = lexer.peek().map_err(lex_error)? {
+                        let file = base.join(name.text);
+                        if name.kind == TokenKind::Str && !files.contains(&file) {
+                            files.push(file);
+                        }
+                    }
+                }
+            }
+        }
+        Ok(files)
+    }
+
     /// Reads the file's curves (and those of the files it includes) and validates them.
     pub fn read(&self) -> Result<HairGeometry> {
         let mut reader = CurveReader {

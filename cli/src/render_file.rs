@@ -423,18 +423,27 @@ pub struct PreviewArgs {
 }
 
 impl PreviewArgs {
-    /// Writes the preview of `image` beside `exr` (same name, `.png`) unless disabled.
-    pub fn write(&self, exr: &Path, image: &tress_core::Image) -> Result<()> {
+    /// Writes the EXR at `exr` with `write_exr` and the preview of `image` beside it (same
+    /// name, `.png`) unless disabled: both or neither ([`crate::write_together`]), as an EXR
+    /// without its preview would look like a success.
+    pub fn write_with(
+        &self,
+        exr: &Path,
+        write_exr: impl FnOnce(&Path) -> Result<()>,
+        image: &tress_core::Image,
+    ) -> Result<()> {
+        let png = exr.with_extension("png");
+        let mut outputs: Vec<(&Path, crate::OutputWriter)> = vec![(exr, Box::new(write_exr))];
         if !self.no_preview {
-            image_io::write_png_tonemapped(
-                exr.with_extension("png"),
-                image,
-                self.exposure,
-                self.tonemap,
-            )
-            .map_err(|e| anyhow!("{e}"))?;
+            outputs.push((
+                &png,
+                Box::new(|p: &Path| {
+                    image_io::write_png_tonemapped(p, image, self.exposure, self.tonemap)
+                        .map_err(|e| anyhow!("{e}"))
+                }),
+            ));
         }
-        Ok(())
+        crate::write_together(outputs)
     }
 }
 

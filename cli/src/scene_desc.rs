@@ -38,22 +38,51 @@ pub struct SceneDesc {
 }
 
 impl SceneDesc {
-    /// Every file the scene reads (hair, meshes, environment maps), resolved against
-    /// `scene_path` as [`build`] resolves them.
-    pub fn referenced_files(&self, scene_path: &Path) -> Vec<PathBuf> {
-        let objects = self.objects.iter().filter_map(|o| match o {
-            crate::geometry::ObjectDesc::Hair { source, .. } => source.path(),
-            crate::geometry::ObjectDesc::Mesh { file, .. } => Some(file.as_path()),
-            crate::geometry::ObjectDesc::Sphere { .. } => None,
-        });
-        let lights = self.lights.iter().filter_map(|l| match l {
-            LightDesc::Environment { file, .. } => Some(file.as_path()),
-            _ => None,
-        });
-        objects
-            .chain(lights)
-            .map(|p| resolve(scene_path, p))
-            .collect()
+    /// Every file the scene reads (hair and the files a pbrt groom includes, meshes,
+    /// environment maps), resolved against `scene_path` as [`build`] resolves them.
+    pub fn referenced_files(&self, scene_path: &Path) -> Result<Vec<PathBuf>> {
+        let mut files = Vec::new();
+        for object in &self.objects {
+            match object {
+                crate::geometry::ObjectDesc::Hair { source, .. } => {
+                    let mut source = source.clone();
+                    if let Some(p) = source.path_mut() {
+                        *p = resolve(scene_path, p);
+                    }
+                    files.extend(
+                        source
+                            .files()
+                            .map_err(|e| anyhow!("{}: {e}", scene_path.display()))?,
+                    );
+                }
+                crate::geometry::ObjectDesc::Mesh { file, .. } => {
+                    files.push(resolve(scene_path, file));
+                }
+                crate::geometry::ObjectDesc::Sphere { .. } => {}
+            }
+        }
+        for light in &self.lights {
+            if let LightDesc::Environment { file, .. } = light {
+                files.push(resolve(scene_path, file));
+            }
+        }
+        Ok(files)
+    }
+
+    /// A hash of the contents of every file the scene reads ([`referenced_files`]
+    /// (Self::referenced_files)): part of the keys of study caches and of the scene hash that
+    /// merged pieces must share, so that renders of a file's old contents are not taken for
+    /// renders of its new ones.
+    pub fn files_hash(&self, scene_path: &Path) -> Result<u64> {
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for f in self.referenced_files(scene_path)? {
+            let bytes = tress_core::files::read_regular(&f)
+                .map_err(|e| anyhow!("{}: {}: {e}", scene_path.display(), f.display()))?;
+            for b in bytes.iter().chain(b"|") {
+                h = (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3);
+            }
+        }
+        Ok(h)
     }
 }
 

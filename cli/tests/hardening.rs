@@ -1441,3 +1441,129 @@ fn endless_and_multiplying_inputs_are_bounded() {
         );
     }
 }
+
+/// Outputs that belong together are written together or not at all: `merge`'s EXR and PNG,
+/// `bcsdf plot`'s PNG and SVG (either path failing left the other file behind).
+#[test]
+fn outputs_that_belong_together_are_all_or_nothing() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    render_ok(&["--out", "piece.exr", "--sums", "--quiet"], d);
+    std::fs::create_dir(d.join("m.png")).unwrap();
+    assert_fails_in(d, &["merge", "m.exr", "piece.exr", "--quiet"], &["m.png"]);
+    std::fs::remove_dir(d.join("m.png")).unwrap();
+    let model = "Chiang(beta_m: 0.3, beta_n: 0.3)";
+    for (blocked, other) in [("lobes.svg", "lobes.png"), ("lobes.png", "lobes.svg")] {
+        std::fs::create_dir(d.join(blocked)).unwrap();
+        assert_fails_in(
+            d,
+            &["bcsdf", "plot", "--model", model, "--out", "lobes.png"],
+            &[blocked],
+        );
+        assert!(!d.join(other).exists(), "{other} left behind");
+        std::fs::remove_dir(d.join(blocked)).unwrap();
+    }
+    // With both paths free, both are written.
+    let o = tress(
+        &["bcsdf", "plot", "--model", model, "--out", "lobes.png"],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(d.join("lobes.png").is_file() && d.join("lobes.svg").is_file());
+}
+
+/// Study caches and merged pieces are keyed on the content of every file a scene reads,
+/// the files a pbrt groom includes among them (the scene hash covered only the scene's text,
+/// and the study cache only the files the scene names).
+#[test]
+fn caches_and_merges_key_on_every_file_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let strand = |x: f32| {
+        format!(
+            "Shape \"curve\" \"point3 P\" [{x} -0.5 0 {x} -0.2 0 {x} 0.2 0 {x} 0.5 0] \"float width\" 0.05\n"
+        )
+    };
+    std::fs::write(d.join("main.pbrt"), "Include \"strand.pbrt\"\n").unwrap();
+    std::fs::write(d.join("strand.pbrt"), strand(0.0)).unwrap();
+    let scene = SCENE.replace(
+        "Procedural(style: Ball, strands: 300, radius: 0.01)",
+        "File(\"main.pbrt\")",
+    );
+    std::fs::write(d.join("scene.ron"), &scene).unwrap();
+    let study = format!(
+        "(scenes: [Inline(name: \"pbrt\", scene: {scene})], integrators: [Path(max_depth: 3)], \
+         spp: [1, 2], repetitions: 1, reference: Render(integrator: Path(max_depth: 3), spp: 4))"
+    );
+    std::fs::write(d.join("study.ron"), study).unwrap();
+    let rendered = || {
+        let o = tress(&["study", "study.ron", "--out", "out"], d);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let e = stderr(&o);
+        let at = e.find("rendered ").unwrap_or_else(|| panic!("{e}")) + "rendered ".len();
+        e[at..]
+            .split(|c: char| !c.is_ascii_digit())
+            .next()
+            .unwrap()
+            .parse::<usize>()
+            .unwrap()
+    };
+    let made = rendered();
+    assert!(made > 0);
+    assert_eq!(rendered(), 0, "an unchanged study reuses its renders");
+    std::fs::write(d.join("strand.pbrt"), strand(0.3)).unwrap();
+    assert_eq!(
+        rendered(),
+        made,
+        "a changed included file redoes every render"
+    );
+
+    // Tiles rendered against different contents of one hair file are not merged, whether the
+    // file is named by the scene or included by it.
+    let tile = |window: &str, out: &str| {
+        render_ok(&["--crop", window, "--sums", "--out", out, "--quiet"], d);
+    };
+    let hair_scene = SCENE.replace(
+        "Procedural(style: Ball, strands: 300, radius: 0.01)",
+        "File(\"h.hair\")",
+    );
+    let segs: &[u16] = &[1, 3, 2];
+    for (scene, file, before, after) in [
+        (
+            hair_scene.as_str(),
+            "h.hair",
+            write_hair(b"HAIR", 3, &nine_points(), Some(segs), None, 0.01),
+            write_hair(
+                b"HAIR",
+                3,
+                &nine_points()[..]
+                    .iter()
+                    .map(|p| [p[0], p[1], 0.3])
+                    .collect::<Vec<_>>(),
+                Some(segs),
+                None,
+                0.01,
+            ),
+        ),
+        (
+            scene.as_str(),
+            "strand.pbrt",
+            strand(0.0).into_bytes(),
+            strand(0.3).into_bytes(),
+        ),
+    ] {
+        std::fs::write(d.join("scene.ron"), scene).unwrap();
+        std::fs::write(d.join(file), &before).unwrap();
+        tile("0,0,24,10", "top.exr");
+        tile("0,10,24,20", "bottom.exr");
+        let o = tress(&["merge", "m.exr", "top.exr", "bottom.exr", "--quiet"], d);
+        assert!(o.status.success(), "{file}: {}", stderr(&o));
+        std::fs::write(d.join(file), &after).unwrap();
+        tile("0,10,24,20", "bottom.exr");
+        assert_fails_in(
+            d,
+            &["merge", "m2.exr", "top.exr", "bottom.exr", "--quiet"],
+            &["top.exr", "bottom.exr", "hash"],
+        );
+    }
+}
