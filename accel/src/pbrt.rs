@@ -667,11 +667,28 @@ impl CurveReader {
         let ctm = self.state.ctm;
         let width_scale = DMat3::from_mat4(ctm).determinant().abs().cbrt();
         let n = segments.len();
-        for (s, cps) in segments.iter().enumerate() {
-            let cps = cps.map(|p| ctm.transform_point3(p));
-            let lerp = |t: f64| widths[0] + (widths[1] - widths[0]) * t;
-            let (w0, w1) = (lerp(s as f64 / n as f64), lerp((s + 1) as f64 / n as f64));
-            let pieces = 1u32 << refinement_depth(&cps, w0.max(w1) * width_scale);
+        let lerp = |t: f64| widths[0] + (widths[1] - widths[0]) * t;
+        let refined: Vec<([DVec3; 4], f64, f64, u32)> = segments
+            .iter()
+            .enumerate()
+            .map(|(s, cps)| {
+                let cps = cps.map(|p| ctm.transform_point3(p));
+                let (w0, w1) = (lerp(s as f64 / n as f64), lerp((s + 1) as f64 / n as f64));
+                let pieces = 1u32 << refinement_depth(&cps, w0.max(w1) * width_scale);
+                (cps, w0, w1, pieces)
+            })
+            .collect();
+        // Thin curved curves split up to 1024-fold: counted before they are stored.
+        let points = self.hair.points.len() as f64
+            + 1.0
+            + refined.iter().map(|r| f64::from(r.3)).sum::<f64>();
+        crate::geometry::check_point_memory(
+            &format!("{} (line {})", path.display(), pos.line),
+            "Shape \"curve\"",
+            "refining the curves into straight segments",
+            points,
+        )?;
+        for (s, &(cps, w0, w1, pieces)) in refined.iter().enumerate() {
             let first = to_f32(cps[0]);
             if s == 0 {
                 let continues = self.strand_open

@@ -1567,3 +1567,85 @@ fn caches_and_merges_key_on_every_file_read() {
         );
     }
 }
+
+/// Small inputs that would need more memory than the limit are refused by name before
+/// anything is allocated (they grew to 5–12 GB and aborted, or read `/dev/zero` forever).
+#[test]
+fn memory_blowups_are_refused_before_allocating() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    let hair_scene = |source: &str| {
+        std::fs::write(
+            d.join("scene.ron"),
+            SCENE.replace(
+                "Procedural(style: Ball, strands: 300, radius: 0.01)",
+                source,
+            ),
+        )
+        .unwrap();
+    };
+    hair_scene(
+        "Procedural(style: Straight, strands: 200), options: (children: Some(per_guide: 40000, \
+         radius: 0.05, seed: 1))",
+    );
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &[],
+        &["children.per_guide", "40000", "GiB"],
+    );
+    hair_scene("Procedural(style: Straight, strands: 1000000, points_per_strand: 1000)");
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &[],
+        &[
+            "strands × points_per_strand",
+            "GiB",
+            "TRESS_MEMORY_LIMIT_GIB",
+        ],
+    );
+    // Thin curved curves split 1024-fold: 200 of them are 205 000 points, over 0.01 GiB.
+    let curve = "Shape \"curve\" \"point3 P\" [0 0 0 1 1 0 -1 1 0 0 0 0.1] \"float width\" 1e-6\n";
+    std::fs::write(d.join("thin.pbrt"), curve.repeat(200)).unwrap();
+    hair_scene("File(\"thin.pbrt\")");
+    let low = [("TRESS_MEMORY_LIMIT_GIB", "0.01")];
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &low,
+        &["thin.pbrt", "Shape \"curve\"", "GiB"],
+    );
+    let o = tress_within(&["info", "scene.ron"], d, &[], 60);
+    assert!(
+        o.status.success(),
+        "within the default limit: {}",
+        stderr(&o)
+    );
+    // The same limit holds for every generator: 4000 × 24 points is 0.01 GiB.
+    hair_scene("Procedural(style: Straight, strands: 4000)");
+    assert_fails_within(d, &["info", "scene.ron"], &low, &["strands", "GiB"]);
+    // A study reads only regular files too (`tress render` already refused this one).
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink("/dev/zero", d.join("zero.hair")).unwrap();
+        hair_scene("File(\"zero.hair\")");
+        let scene = std::fs::read_to_string(d.join("scene.ron")).unwrap();
+        std::fs::write(
+            d.join("study.ron"),
+            format!(
+                "(scenes: [Inline(name: \"z\", scene: {scene})], integrators: [Path()], \
+                 spp: [1], repetitions: 1, reference: Render(integrator: Path(), spp: 2))"
+            ),
+        )
+        .unwrap();
+        let o = tress_within(
+            &["study", "study.ron", "--out", "out", "--quiet"],
+            d,
+            &[],
+            60,
+        );
+        assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+        assert!(stderr(&o).contains("zero.hair") && stderr(&o).contains("not a regular file"));
+    }
+}
