@@ -344,7 +344,7 @@ impl Transform {
                 Err(bad(format!("Euler angles must be finite, got {e:?}")))
             }
             Rotation::AxisAngle { axis, degrees }
-                if !(axis.is_finite() && degrees.is_finite() && axis.length_squared() > 0.0) =>
+                if !(degrees.is_finite() && tress_core::math::unit(*axis).is_some()) =>
             {
                 Err(bad(format!(
                     "axis-angle needs a finite non-zero axis and a finite angle, got {axis:?}, {degrees}"
@@ -363,7 +363,9 @@ impl Transform {
                     * glam::Quat::from_rotation_x(e.x.to_radians())
             }
             Rotation::AxisAngle { axis, degrees } => {
-                glam::Quat::from_axis_angle(axis.normalize(), degrees.to_radians())
+                // Any non-zero length: (1e-30, 0, 0) is as good an axis as (1, 0, 0).
+                let axis = tress_core::math::unit(*axis).unwrap_or(Vec3::Y);
+                glam::Quat::from_axis_angle(axis, degrees.to_radians())
             }
         }
     }

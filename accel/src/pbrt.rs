@@ -279,7 +279,12 @@ impl<'a> Lexer<'a> {
                 }
                 let text = &self.text[start..self.at];
                 let c = bytes[start];
-                let kind = if c.is_ascii_digit() || matches!(c, b'-' | b'+' | b'.') {
+                // `nan` and `inf` are numbers too (refused as such by `number`): as words they
+                // ended the statement, which then had "found 0" numbers.
+                let kind = if c.is_ascii_digit()
+                    || matches!(c, b'-' | b'+' | b'.')
+                    || text.parse::<f64>().is_ok()
+                {
                     TokenKind::Number
                 } else if c.is_ascii_alphabetic() {
                     TokenKind::Word
@@ -456,11 +461,13 @@ impl CurveReader {
             "Rotate" => {
                 let v = numbers(4)?;
                 let axis = DVec3::new(v[1], v[2], v[3]);
-                if !(axis.is_finite() && axis.length_squared() > 0.0) {
+                // Scaled first, so that any non-zero length works (1e-200 squares to 0).
+                let largest = axis.abs().max_element();
+                if largest == 0.0 {
                     return Err(err("Rotate needs a non-zero axis".into()));
                 }
                 self.transform(
-                    DMat4::from_axis_angle(axis.normalize(), v[0].to_radians()),
+                    DMat4::from_axis_angle((axis / largest).normalize(), v[0].to_radians()),
                     false,
                 );
             }
@@ -725,9 +732,15 @@ fn number(path: &Path, t: &Token) -> Result<f64> {
             format!("expected a number, found `{}`", t.text),
         ));
     }
-    t.text
-        .parse::<f64>()
-        .map_err(|_| at(path, t.pos, format!("`{}` is not a number", t.text)))
+    match t.text.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(at(
+            path,
+            t.pos,
+            format!("`{}` is not a finite number", t.text),
+        )),
+        Err(_) => Err(at(path, t.pos, format!("`{}` is not a number", t.text))),
+    }
 }
 
 /// Parses a parameter list: `"type name"` then one value or `[` values `]`.

@@ -112,7 +112,7 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
 
 /// The scene file with command-line overrides applied.
 fn load_with_overrides(args: &RenderArgs) -> Result<SceneDesc> {
-    let defines = args.defines.iter().cloned().collect();
+    let defines = scene_desc::defines(&args.defines)?;
     let mut desc = scene_desc::load_with(&args.scene, &defines)?;
     if let Some(name) = &args.integrator {
         desc.integrator = IntegratorDesc::parse_arg(name).map_err(anyhow::Error::msg)?;
@@ -447,7 +447,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
 }
 
 pub fn info(scene: &Path, defines: &[(String, String)]) -> Result<()> {
-    let desc = scene_desc::load_with(scene, &defines.iter().cloned().collect())?;
+    let desc = scene_desc::load_with(scene, &scene_desc::defines(defines)?)?;
     desc.film
         .validate()
         .map_err(|e| anyhow::anyhow!("{}: film: {e}", scene.display()))?;

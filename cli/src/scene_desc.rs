@@ -247,6 +247,18 @@ pub fn load_with(path: &Path, defines: &Defines) -> Result<SceneDesc> {
     parse(&text).map_err(|e| anyhow!("{}:{e}", path.display()))
 }
 
+/// The `-D name=value` arguments as [`Defines`]: a name given twice is refused (the last
+/// value was kept silently).
+pub fn defines(args: &[(String, String)]) -> Result<Defines> {
+    let mut defines = Defines::new();
+    for (name, value) in args {
+        if let Some(first) = defines.insert(name.clone(), value.clone()) {
+            bail!("-D {name} is given twice ({name}={first} and {name}={value}): give it once");
+        }
+    }
+    Ok(defines)
+}
+
 /// One `-D name=value` argument.
 pub fn parse_define(arg: &str) -> std::result::Result<(String, String), String> {
     let (name, value) = arg
@@ -295,6 +307,12 @@ pub fn substitute(text: &str, defines: &Defines) -> std::result::Result<String, 
             Some((name, default)) => (name, Some(default)),
             None => (&body[..end], None),
         };
+        if default.is_some_and(|d| d.contains("${")) {
+            return Err(format!(
+                "{line}:{col}: '${{{name}:-…}}': a default cannot hold another placeholder \
+                 (nested defaults are not supported): write the value itself"
+            ));
+        }
         if !is_placeholder_name(name) {
             return Err(format!(
                 "{line}:{col}: '${{{}}}': a placeholder is ${{name}} or ${{name:-default}}",

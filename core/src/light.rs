@@ -69,8 +69,8 @@ pub enum LightError {
         /// Its value.
         value: Rgb,
     },
-    /// A direction that is zero, not finite, or overflows when normalised.
-    #[error("direction {0} must be finite, non-zero and normalisable")]
+    /// A direction that is zero or not finite.
+    #[error("direction {0} must be finite and non-zero")]
     Direction(Vec3),
     /// A sun disc outside [0, 90) degrees.
     #[error("angular_radius = {0} must lie in [0, 90) degrees")]
@@ -119,10 +119,7 @@ impl Light {
         angular_radius_deg: f32,
     ) -> Result<Self, LightError> {
         let irradiance = non_negative("irradiance", irradiance)?;
-        // `try_normalize` also refuses vectors whose length overflows (3e38, 3e38, 0).
-        let direction = direction
-            .try_normalize()
-            .ok_or(LightError::Direction(direction))?;
+        let direction = crate::math::unit(direction).ok_or(LightError::Direction(direction))?;
         if !(0.0..90.0).contains(&angular_radius_deg) {
             return Err(LightError::AngularRadius(angular_radius_deg));
         }
