@@ -252,23 +252,58 @@ impl CurveData {
     }
 }
 
+/// How far from the origin, in world units, geometry (its points, padded by fiber and sphere
+/// radii) may reach: ray tests square lengths, which overflow f32 beyond about 1e19 (fibers
+/// 1e20 wide vanished under the path tracer).
+pub const MAX_EXTENT: f32 = 1e18;
+
+/// Refuses an object whose world bounds reach beyond [`MAX_EXTENT`].
+fn check_extent(object: &str, bounds: &Aabb) -> Result<()> {
+    let reach = bounds.min.abs().max(bounds.max.abs()).max_element();
+    if reach.is_nan() || reach > MAX_EXTENT {
+        return Err(Error::InvalidGeometry {
+            object: object.to_owned(),
+            reason: format!(
+                "reaches {reach:e} from the origin (bounds {} to {}), beyond the {MAX_EXTENT:e} \
+                 that f32 ray tests can square: scale the scene down",
+                bounds.min, bounds.max
+            ),
+        });
+    }
+    Ok(())
+}
+
 #[derive(Debug)]
 enum GeomData {
     Hair(Arc<CurveData>),
-    Mesh { material: u32 },
-    Spheres { materials: Vec<u32> },
+    Mesh {
+        material: u32,
+    },
+    Spheres {
+        materials: Vec<u32>,
+        centers: Vec<Vec3>,
+    },
 }
 
 impl GeomData {
     /// Whether a candidate hit on primitive `prim` of this geometry (id `geom`) is kept by a
-    /// query excluding `ex`: fibers apply the self-intersection rule, meshes and spheres skip
-    /// only the primitive the ray leaves.
-    fn keep(&self, ex: &Exclude, geom: u32, prim: u32, org: Vec3, dir: Vec3) -> bool {
+    /// query excluding `ex`: fibers apply the self-intersection rule, meshes skip only the
+    /// (flat) triangle the ray leaves, and a ray leaving a sphere meets it again only where it
+    /// leaves it from inside. `ng` is the candidate's geometric normal.
+    fn keep(&self, ex: &Exclude, geom: u32, prim: u32, org: Vec3, dir: Vec3, ng: Vec3) -> bool {
         match self {
             GeomData::Hair(c) => {
                 !ex.skip_hair && (geom != ex.geom || c.keep(ex.prim, prim, org, dir))
             }
-            GeomData::Mesh { .. } | GeomData::Spheres { .. } => geom != ex.geom || prim != ex.prim,
+            GeomData::Mesh { .. } => geom != ex.geom || prim != ex.prim,
+            // A ray leaving a sphere inwards crosses it again on the far side (skipping the
+            // whole sphere let the sky into a sphere seen from inside); the candidate at its
+            // origin is where it enters, so only exits count.
+            GeomData::Spheres { centers, .. } => {
+                geom != ex.geom
+                    || prim != ex.prim
+                    || ((org - centers[prim as usize]).dot(dir) < 0.0 && ng.dot(dir) > 0.0)
+            }
         }
     }
 }
@@ -648,12 +683,7 @@ impl SceneBuilder {
                 reason: "too many control points for one Embree geometry".into(),
             });
         }
-        if !bounds.min.is_finite() || !bounds.max.is_finite() {
-            return Err(Error::InvalidGeometry {
-                object: hair.name.clone(),
-                reason: "the transformed geometry overflows to infinity".into(),
-            });
-        }
+        check_extent(&hair.name, &bounds)?;
 
         let name = &hair.name;
         let mut geometry = self
@@ -707,12 +737,7 @@ impl SceneBuilder {
             .collect();
         let mut bounds = Aabb::EMPTY;
         positions.iter().for_each(|&p| bounds.grow(p));
-        if !bounds.min.is_finite() || !bounds.max.is_finite() {
-            return Err(Error::InvalidGeometry {
-                object: mesh.name.clone(),
-                reason: "the transformed geometry overflows to infinity".into(),
-            });
-        }
+        check_extent(&mesh.name, &bounds)?;
         let name = &mesh.name;
         let mut geometry = self
             .device
@@ -767,15 +792,17 @@ impl SceneBuilder {
                 reason: format!("must be finite and positive, got {radius}"),
             });
         }
+        let bounds = Aabb {
+            min: center - Vec3::splat(radius),
+            max: center + Vec3::splat(radius),
+        };
+        check_extent(&name, &bounds)?;
         self.spheres.push((center.extend(radius), material));
         self.objects.push(ObjectInfo {
             name,
             kind: ObjectKind::Sphere { center, radius },
             materials: material..material + 1,
-            bounds: Aabb {
-                min: center - Vec3::splat(radius),
-                max: center + Vec3::splat(radius),
-            },
+            bounds,
         });
         Ok(self)
     }
@@ -800,7 +827,8 @@ impl SceneBuilder {
                 .zip(&self.spheres)
                 .for_each(|(dst, (s, _))| *dst = s.to_array());
             let materials = self.spheres.iter().map(|&(_, m)| m).collect();
-            self.attach(geometry, GeomData::Spheres { materials });
+            let centers = self.spheres.iter().map(|(s, _)| s.truncate()).collect();
+            self.attach(geometry, GeomData::Spheres { materials, centers });
         }
         // High quality (spatial splits) made the preview example on straight.hair 1.7× faster
         // (1M camera + 1M shadow rays: 0.48 s vs 0.82 s) at about the same build time.
@@ -841,7 +869,7 @@ impl SceneBuilder {
             .map(|g| match g {
                 GeomData::Hair(c) => c.memory_bytes(),
                 GeomData::Mesh { .. } => 0,
-                GeomData::Spheres { materials } => materials.len() * 4,
+                GeomData::Spheres { materials, .. } => materials.len() * 16,
             })
             .sum();
         info.memory_bytes = self.embree_bytes.load(Ordering::Relaxed).max(0) as usize + ours;
@@ -907,7 +935,10 @@ unsafe extern "C" fn context_filter(args: *const RTCFilterFunctionNArguments) {
         // The ray's own origin, in front of the one Embree was given (`EmbreeAccel::embree_ray`).
         let org = Vec3::new(ray_field(0), ray_field(1), ray_field(2)) + ex.origin_shift * dir;
         let (prim, geom) = (*hit.add(5 * n + i), *hit.add(6 * n + i));
-        if !geoms[geom as usize].keep(ex, geom, prim, org, dir) {
+        // Fields 0-2 of the hit are the geometric normal, as floats.
+        let hit_field = |k: usize| *(hit as *const f32).add(k * n + i);
+        let ng = Vec3::new(hit_field(0), hit_field(1), hit_field(2));
+        if !geoms[geom as usize].keep(ex, geom, prim, org, dir, ng) {
             *valid = 0;
         } else if !ex.hits.is_null() {
             // Set only by `count_fibers_crossed`, whose vector outlives the (synchronous) query
@@ -1093,7 +1124,7 @@ impl Accel for EmbreeAccel {
                 (kind, c.material(prim), t)
             }
             GeomData::Mesh { material } => (surface(), *material, t),
-            GeomData::Spheres { materials } => (surface(), materials[prim as usize], t),
+            GeomData::Spheres { materials, .. } => (surface(), materials[prim as usize], t),
         };
         Some(Hit {
             t,
