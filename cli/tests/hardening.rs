@@ -857,41 +857,37 @@ fn warnings_are_plain_text_off_a_terminal() {
     );
 }
 
-/// Hair at extreme scales or with absurd fiber widths under dual scattering: the density grid
-/// refuses it with a message (it panicked on `min > max`, or looped forever in the orientation
-/// integral), and a huge but harmless procedural length still renders.
+/// Tiny hair under dual scattering: the density grid refuses it with a message (it panicked on
+/// `min > max`). Hair reaching beyond 1e18 is refused for every integrator
+/// (`geometry_beyond_what_f32_can_square_is_refused`).
 #[test]
 fn extreme_hair_extents_under_dual_scattering_give_clear_errors() {
     let dual = "DualMis(tables: (theta_nodes: 8, h_nodes: 4, theta_quad: 8, phi_quad: 8, \
                 walks: 64))";
     let ball =
         r#"Hair(source: Procedural(style: Ball, strands: 300, radius: 0.01), material: "hair")"#;
-    let render = [
-        "render",
-        "scene.ron",
-        "--integrator",
-        dual,
-        "--out",
-        "o.exr",
-        "--quiet",
-    ];
-    // Hair reaching beyond 1e18 is refused for every integrator (see
-    // `geometry_beyond_what_f32_can_square_is_refused`); tiny hair only by dual scattering.
-    for (options, expect) in [("transform: (scale: 1e-30)", "spans 1.97")] {
-        let object = format!(
-            r#"Hair(source: Procedural(style: Ball, strands: 300, radius: 0.01), material: "hair", options: ({options}))"#
-        );
-        let (dir, _) = scene_dir(&SCENE.replace(ball, &object));
-        assert_fails_in(
-            dir.path(),
-            &render,
-            &[
-                "scene.ron: integrator dual-mis: density grid: the hair",
-                expect,
-                "scale the hair",
-            ],
-        );
-    }
+    let tiny = ball.replace(
+        "radius: 0.01)",
+        "radius: 0.01), options: (transform: (scale: 1e-30))",
+    );
+    let (dir, _) = scene_dir(&SCENE.replace(ball, &tiny));
+    assert_fails_in(
+        dir.path(),
+        &[
+            "render",
+            "scene.ron",
+            "--integrator",
+            dual,
+            "--out",
+            "o.exr",
+            "--quiet",
+        ],
+        &[
+            "scene.ron: integrator dual-mis: density grid: the hair",
+            "spans 1.97",
+            "scale the hair",
+        ],
+    );
 }
 
 /// `tress diff` on an image holding NaN fails naming the file (it printed NaN metrics with
@@ -1892,4 +1888,101 @@ fn study_references_holding_nan_are_refused() {
         );
         assert!(!d.join("out/summary.csv").exists() && !d.join("out/report.md").exists());
     }
+}
+
+/// Every property of a PLY layout that tress reads is read as declared or refused by name: a
+/// list where one number is read was skipped silently (`x`, `radius`, strand ids: points at 0,
+/// the default radius, one strand) or read as NaN (counts, edges, float index lists).
+#[test]
+fn ply_properties_are_read_as_declared_or_refused() {
+    let (dir, _) = scene_dir(SCENE);
+    let ply = |vertex_props: &str, vertex_rows: &str, rest: &str| -> Vec<u8> {
+        format!(
+            "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
+             property float z\n{vertex_props}{rest}"
+        )
+        .replace("VERTS", vertex_rows)
+        .into_bytes()
+    };
+    let counts = "element strand 2\nproperty int vertex_count\nend_header\nVERTS2\n2\n";
+    let plain = "0 0 0\n0 1 0\n1 0 0\n1 1 0\n";
+    let with = |extra: &str| {
+        ["0 0 0", "0 1 0", "1 0 0", "1 1 0"]
+            .map(|v| format!("{v} {extra}\n"))
+            .concat()
+    };
+    let cases: Vec<(&str, Vec<u8>, &[&str])> = vec![
+        (
+            "x.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 4\nproperty list uchar float x\n\
+              property float y\nproperty float z\nelement strand 2\nproperty int vertex_count\n\
+              end_header\n1 0 0 0\n1 0 1 0\n1 1 0 0\n1 1 1 0\n2\n2\n"
+                .to_vec(),
+            &["`vertex` element's `x`", "a list of Float", "one number"],
+        ),
+        (
+            "radius.ply",
+            ply("property list uchar float radius\n", &with("1 0.1"), counts),
+            &["`radius`", "a list of Float", "one number"],
+        ),
+        (
+            "strand.ply",
+            ply(
+                "property list uchar int strand\nend_header\n",
+                &with("1 0"),
+                "VERTS",
+            ),
+            &["`strand`", "a list of Int", "one number"],
+        ),
+        (
+            "colour.ply",
+            ply(
+                "property list uchar uchar red\nproperty uchar green\nproperty uchar blue\n",
+                &with("1 9 9 9"),
+                counts,
+            ),
+            &["`red`", "a list of UChar", "one number"],
+        ),
+        (
+            "count.ply",
+            ply(
+                "",
+                plain,
+                "element strand 2\nproperty list uchar int vertex_count\nend_header\nVERTS1 2\n1 2\n",
+            ),
+            &["`strand` element's `vertex_count`", "one number"],
+        ),
+        (
+            "indices.ply",
+            ply(
+                "",
+                plain,
+                "element strand 2\nproperty list uchar float vertex_indices\nend_header\nVERTS2 0 1\n2 2 3\n",
+            ),
+            &["`vertex_indices`", "a list of Float", "a list of integers"],
+        ),
+        (
+            "edge.ply",
+            ply(
+                "",
+                plain,
+                "element edge 2\nproperty list uchar int vertex1\nproperty int vertex2\nend_header\nVERTS1 0 1\n1 2 3\n",
+            ),
+            &["`edge` element's `vertex1`", "one number"],
+        ),
+    ];
+    assert_bad_hair_files(dir.path(), cases);
+    // The same files with the types tress reads load.
+    let good = ply("property float radius\n", &with("0.1"), counts);
+    std::fs::write(dir.path().join("good.ply"), good).unwrap();
+    std::fs::write(
+        dir.path().join("scene.ron"),
+        SCENE.replace(
+            "Procedural(style: Ball, strands: 300, radius: 0.01)",
+            "File(\"good.ply\")",
+        ),
+    )
+    .unwrap();
+    let o = tress(&["info", "scene.ron"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
 }
