@@ -115,6 +115,7 @@ impl PbrtFile {
             named: HashMap::new(),
             object_depth: 0,
             includes: 0,
+            bytes_read: 0,
             skipped_in_objects: 0,
             other_shapes: 0,
             hair: HairGeometry::empty(self.path.display().to_string()),
@@ -346,6 +347,8 @@ struct CurveReader {
     object_depth: usize,
     /// `Include`/`Import` statements run so far, in every file.
     includes: usize,
+    /// Bytes of every file read so far, counted each time it is read.
+    bytes_read: u64,
     skipped_in_objects: usize,
     other_shapes: usize,
     hair: HairGeometry,
@@ -368,6 +371,19 @@ impl CurveReader {
             path: path.to_owned(),
             source,
         })?;
+        // Few includes of a large file fan out too: the text read in all is bounded like memory.
+        self.bytes_read += bytes.len() as u64;
+        let limit_gib = tress_core::film::memory_limit_gib();
+        if self.bytes_read as f64 > limit_gib * (1u64 << 30) as f64 {
+            return Err(format_error(
+                path,
+                format!(
+                    "the files included read more than {limit_gib} GiB of text in all (files \
+                     included many times over); set {} to more GiB to read them",
+                    tress_core::film::MEMORY_LIMIT_VAR
+                ),
+            ));
+        }
         if bytes.starts_with(&[0x1f, 0x8b]) {
             return Err(format_error(
                 path,

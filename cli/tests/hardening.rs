@@ -1405,6 +1405,21 @@ fn endless_and_multiplying_inputs_are_bounded() {
             ],
         );
     }
+    // A few includes of a large file fan out too: the text read in all is bounded (by the
+    // memory limit, here 1 MiB: 20 includes of 100 kB).
+    std::fs::write(
+        d.join("big.pbrt"),
+        format!("#{}\n", "x".repeat(99)).repeat(1000),
+    )
+    .unwrap();
+    std::fs::write(d.join("l0.pbrt"), "Include \"big.pbrt\"\n".repeat(20)).unwrap();
+    hair_scene("File(\"l0.pbrt\")");
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &[("TRESS_MEMORY_LIMIT_GIB", "0.001")],
+        &["big.pbrt", "GiB of text in all"],
+    );
     hair_scene("Procedural(style: Ball, strands: 300, radius: 0.01)");
     for args in [
         &[

@@ -175,6 +175,9 @@ def test_bad_render_settings_raise_valueerror(scene):
         scene.render(spp=0)
     with pytest.raises(ValueError, match="crop window"):
         scene.render(crop=(0, 0, 17, 16))
+    # Thousands of threads on a tiny image crawled.
+    with pytest.raises(ValueError, match="100000 worker threads: at most"):
+        scene.render(threads=100000)
     with pytest.raises(ValueError, match="unknown integrator 'bogus'.*path, dual-uniform"):
         scene.render(integrator="bogus")
 
