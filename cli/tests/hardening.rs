@@ -298,7 +298,7 @@ fn bad_scenes_give_clear_errors() {
     assert_bad_scene(&SCENE[..SCENE.len() / 2], &["scene.ron:"]);
     assert_bad_scene("", &["scene.ron:1:"]);
     // (text of SCENE, its replacement, what the message must say)
-    let edits: [(&str, &str, &[&str]); 39] = [
+    let edits: [(&str, &str, &[&str]); 42] = [
         (
             r#""grey": Diffuse"#,
             r#""hair": Diffuse(albedo: (0.5, 0.5, 0.5)), "grey": Diffuse"#,
@@ -407,12 +407,28 @@ fn bad_scenes_give_clear_errors() {
         (
             "Sky()",
             "Sky(scale: 1e37)",
-            &["built-in sky", "overflows f32"],
+            &["built-in sky", "is beyond 1e30"],
         ),
         (
             "irradiance: (2, 2, 2)",
             "irradiance: (3e38, 3e38, 3e38)",
-            &["irradiance", "beyond f32"],
+            &["irradiance", "beyond 1e30"],
+        ),
+        // Finite products that overflowed along paths: samples dropped, the image biased dark.
+        (
+            "Sky()",
+            "Sky(scale: 1e35)",
+            &["built-in sky", "is beyond 1e30", "overflows f32"],
+        ),
+        (
+            "irradiance: (2, 2, 2), angular_radius: 0.5",
+            "irradiance: (1e26, 1e26, 1e26), angular_radius: 0.1",
+            &["irradiance", "a radiance of", "beyond 1e30"],
+        ),
+        (
+            "Sky()",
+            "Constant(radiance: (1e31, 1, 1))",
+            &["radiance", "is beyond 1e30", "scale the lights down"],
         ),
         ("Sky()", "Constant(radiance: (1, 1, -1))", &["radiance"]),
         ("strands: 300", "strands: 0", &["strands"]),
