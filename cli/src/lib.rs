@@ -86,7 +86,8 @@ pub fn write_together(outputs: Vec<(&std::path::Path, OutputWriter<'_>)>) -> any
             .map_or(String::new(), |e| format!(".{}", e.to_string_lossy()));
         let tmp = tress_core::image_io::output_temp_file(dir, &suffix)
             .with_context(|| format!("cannot write in {}", dir.display()))?;
-        write(tmp.path())?;
+        // The writer's message names the temporary file: say which output it was.
+        write(tmp.path()).with_context(|| format!("writing {}", target.display()))?;
         staged.push((target, tmp.into_temp_path()));
     }
     let mut placed = Vec::new();
