@@ -135,6 +135,16 @@ impl ChildStrands {
                 ),
             });
         }
+        crate::geometry::check_point_memory(
+            &guides.name,
+            "children.per_guide",
+            &format!(
+                "{} children on each of {} guides",
+                self.per_guide,
+                guides.strand_count()
+            ),
+            total as f64,
+        )?;
         let roots = (self.blend > 1).then(|| {
             RTree::bulk_load(
                 frames

@@ -6,6 +6,30 @@ use std::ops::Range;
 use tress_core::math::{Aabb, Rgb, Vec3};
 use tress_core::rng::Pcg32;
 
+/// What one hair point costs once loaded and built: its position, radius and colour, and
+/// Embree's curve segment and BVH share (a pbrt groom of 20.5 M segments took 2.5 GB).
+pub const BYTES_PER_POINT: f64 = 128.0;
+
+/// Refuses hair that `points` points would make too large for the memory limit
+/// ([`tress_core::film::memory_limit_gib`], the films' limit), before any is allocated. `how`
+/// says what makes that many (`strands × points_per_strand`) for the message.
+pub fn check_point_memory(object: &str, field: &'static str, how: &str, points: f64) -> Result<()> {
+    let need_gib = points * BYTES_PER_POINT / (1u64 << 30) as f64;
+    let limit_gib = tress_core::film::memory_limit_gib();
+    if need_gib > limit_gib {
+        return Err(Error::InvalidOption {
+            object: object.to_owned(),
+            field,
+            reason: format!(
+                "{how} makes {points:.3e} hair points, about {need_gib:.1} GiB, over the \
+                 {limit_gib} GiB limit: use fewer, or set {} to more GiB",
+                tress_core::film::MEMORY_LIMIT_VAR
+            ),
+        });
+    }
+    Ok(())
+}
+
 /// A per-hair-object attribute that a file may store once, per strand or per point.
 #[derive(Clone, Debug, PartialEq)]
 pub enum HairAttribute<T> {
@@ -320,7 +344,7 @@ impl Transform {
                 Err(bad(format!("Euler angles must be finite, got {e:?}")))
             }
             Rotation::AxisAngle { axis, degrees }
-                if !(axis.is_finite() && degrees.is_finite() && axis.length_squared() > 0.0) =>
+                if !(degrees.is_finite() && tress_core::math::unit(*axis).is_some()) =>
             {
                 Err(bad(format!(
                     "axis-angle needs a finite non-zero axis and a finite angle, got {axis:?}, {degrees}"
@@ -339,7 +363,9 @@ impl Transform {
                     * glam::Quat::from_rotation_x(e.x.to_radians())
             }
             Rotation::AxisAngle { axis, degrees } => {
-                glam::Quat::from_axis_angle(axis.normalize(), degrees.to_radians())
+                // Any non-zero length: (1e-30, 0, 0) is as good an axis as (1, 0, 0).
+                let axis = tress_core::math::unit(*axis).unwrap_or(Vec3::Y);
+                glam::Quat::from_axis_angle(axis, degrees.to_radians())
             }
         }
     }

@@ -55,6 +55,9 @@ use tress_core::math::Vec3;
 
 /// How deeply `Include`/`Import` may nest: deeper is taken for a cycle.
 const MAX_INCLUDE_DEPTH: usize = 32;
+/// How many `Include`/`Import` statements one file may run in all: the depth limit catches
+/// cycles, not fan-out (8 levels of 10 includes of one small file is 10^8 reads).
+const MAX_INCLUDES: usize = 10_000;
 /// pbrt's cap on the refinement depth of one curve segment (2^10 pieces).
 const MAX_REFINE_DEPTH: u32 = 10;
 /// The most points the strands and their instances may make: 2^26, about 1 GiB with the
@@ -82,6 +85,40 @@ impl PbrtFile {
         }
     }
 
+    /// The files [`read`](Self::read) reads: this one and every file it `Include`s or
+    /// `Import`s, each once, so that caches can key on their contents.
+    pub fn files(&self) -> Result<Vec<PathBuf>> {
+        let base = self.path.parent().unwrap_or(Path::new(""));
+        let mut files = vec![self.path.clone()];
+        let mut next = 0;
+        // Each file is scanned once, so cycles and fan-out end; `read` names them.
+        while let Some(path) = files.get(next).cloned() {
+            next += 1;
+            let bytes =
+                tress_core::files::read_regular(&path).map_err(|source| crate::Error::Io {
+                    path: path.clone(),
+                    source,
+                })?;
+            // Not text: `read` says so; there is nothing more to follow.
+            let Ok(text) = std::str::from_utf8(&bytes) else {
+                continue;
+            };
+            let mut lexer = Lexer::new(text);
+            let lex_error = |(pos, message): (Pos, String)| at(&path, pos, message);
+            while let Some(t) = lexer.next().map_err(lex_error)? {
+                if t.kind == TokenKind::Word && matches!(t.text, "Include" | "Import") {
+                    if let Some(name) = lexer.peek().map_err(lex_error)? {
+                        let file = base.join(name.text);
+                        if name.kind == TokenKind::Str && !files.contains(&file) {
+                            files.push(file);
+                        }
+                    }
+                }
+            }
+        }
+        Ok(files)
+    }
+
     /// Reads the file's curves (and those of the files it includes) and validates them.
     pub fn read(&self) -> Result<HairGeometry> {
         let mut reader = CurveReader {
@@ -92,6 +129,8 @@ impl PbrtFile {
             defining: None,
             objects: HashMap::new(),
             instances: Vec::new(),
+            includes: 0,
+            bytes_read: 0,
             other_shapes: 0,
             hair: HairGeometry::empty(self.path.display().to_string()),
             strand_open: false,
@@ -255,7 +294,12 @@ impl<'a> Lexer<'a> {
                 }
                 let text = &self.text[start..self.at];
                 let c = bytes[start];
-                let kind = if c.is_ascii_digit() || matches!(c, b'-' | b'+' | b'.') {
+                // `nan` and `inf` are numbers too (refused as such by `number`): as words they
+                // ended the statement, which then had "found 0" numbers.
+                let kind = if c.is_ascii_digit()
+                    || matches!(c, b'-' | b'+' | b'.')
+                    || text.parse::<f64>().is_ok()
+                {
                     TokenKind::Number
                 } else if c.is_ascii_alphabetic() {
                     TokenKind::Word
@@ -337,6 +381,10 @@ struct CurveReader {
     /// The defined objects' strands, each in the frame of its definition.
     objects: HashMap<String, HairGeometry>,
     instances: Vec<InstanceUse>,
+    /// `Include`/`Import` statements run so far, in every file.
+    includes: usize,
+    /// Bytes of every file read so far, counted each time it is read.
+    bytes_read: u64,
     other_shapes: usize,
     /// The strands read so far (of the object being defined, while there is one).
     hair: HairGeometry,
@@ -359,6 +407,19 @@ impl CurveReader {
             path: path.to_owned(),
             source,
         })?;
+        // Few includes of a large file fan out too: the text read in all is bounded like memory.
+        self.bytes_read += bytes.len() as u64;
+        let limit_gib = tress_core::film::memory_limit_gib();
+        if self.bytes_read as f64 > limit_gib * (1u64 << 30) as f64 {
+            return Err(format_error(
+                path,
+                format!(
+                    "the files included read more than {limit_gib} GiB of text in all (files \
+                     included many times over); set {} to more GiB to read them",
+                    tress_core::film::MEMORY_LIMIT_VAR
+                ),
+            ));
+        }
         if bytes.starts_with(&[0x1f, 0x8b]) {
             return Err(format_error(
                 path,
@@ -452,11 +513,13 @@ impl CurveReader {
             "Rotate" => {
                 let v = numbers(4)?;
                 let axis = DVec3::new(v[1], v[2], v[3]);
-                if !(axis.is_finite() && axis.length_squared() > 0.0) {
+                // Scaled first, so that any non-zero length works (1e-200 squares to 0).
+                let largest = axis.abs().max_element();
+                if largest == 0.0 {
                     return Err(err("Rotate needs a non-zero axis".into()));
                 }
                 self.transform(
-                    DMat4::from_axis_angle(axis.normalize(), v[0].to_radians()),
+                    DMat4::from_axis_angle((axis / largest).normalize(), v[0].to_radians()),
                     false,
                 );
             }
@@ -572,6 +635,13 @@ impl CurveReader {
                         "{} nested more than {MAX_INCLUDE_DEPTH} deep (does a file include \
                          itself?)",
                         keyword.text
+                    )));
+                }
+                self.includes += 1;
+                if self.includes > MAX_INCLUDES {
+                    return Err(err(format!(
+                        "more than {MAX_INCLUDES} `Include`/`Import` statements run in all \
+                         (files including others many times over)"
                     )));
                 }
                 let file = self.base.join(file);
@@ -758,11 +828,28 @@ impl CurveReader {
         let ctm = self.state.ctm;
         let width_scale = DMat3::from_mat4(ctm).determinant().abs().cbrt();
         let n = segments.len();
-        for (s, cps) in segments.iter().enumerate() {
-            let cps = cps.map(|p| ctm.transform_point3(p));
-            let lerp = |t: f64| widths[0] + (widths[1] - widths[0]) * t;
-            let (w0, w1) = (lerp(s as f64 / n as f64), lerp((s + 1) as f64 / n as f64));
-            let pieces = 1u32 << refinement_depth(&cps, w0.max(w1) * width_scale);
+        let lerp = |t: f64| widths[0] + (widths[1] - widths[0]) * t;
+        let refined: Vec<([DVec3; 4], f64, f64, u32)> = segments
+            .iter()
+            .enumerate()
+            .map(|(s, cps)| {
+                let cps = cps.map(|p| ctm.transform_point3(p));
+                let (w0, w1) = (lerp(s as f64 / n as f64), lerp((s + 1) as f64 / n as f64));
+                let pieces = 1u32 << refinement_depth(&cps, w0.max(w1) * width_scale);
+                (cps, w0, w1, pieces)
+            })
+            .collect();
+        // Thin curved curves split up to 1024-fold: counted before they are stored.
+        let points = self.hair.points.len() as f64
+            + 1.0
+            + refined.iter().map(|r| f64::from(r.3)).sum::<f64>();
+        crate::geometry::check_point_memory(
+            &format!("{} (line {})", path.display(), pos.line),
+            "Shape \"curve\"",
+            "refining the curves into straight segments",
+            points,
+        )?;
+        for (s, &(cps, w0, w1, pieces)) in refined.iter().enumerate() {
             let first = to_f32(cps[0]);
             if s == 0 {
                 let continues = self.strand_open
@@ -799,9 +886,15 @@ fn number(path: &Path, t: &Token) -> Result<f64> {
             format!("expected a number, found `{}`", t.text),
         ));
     }
-    t.text
-        .parse::<f64>()
-        .map_err(|_| at(path, t.pos, format!("`{}` is not a number", t.text)))
+    match t.text.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(at(
+            path,
+            t.pos,
+            format!("`{}` is not a finite number", t.text),
+        )),
+        Err(_) => Err(at(path, t.pos, format!("`{}` is not a number", t.text))),
+    }
 }
 
 /// Parses a parameter list: `"type name"` then one value or `[` values `]`.

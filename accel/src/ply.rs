@@ -41,7 +41,9 @@
 use crate::error::{format_error, Result};
 use crate::geometry::{HairAttribute, HairGeometry};
 use ply_rs_bw::parser::{Parser, Reader};
-use ply_rs_bw::ply::{ElementDef, Encoding, Header, PropertyAccess, PropertyAccessResult};
+use ply_rs_bw::ply::{
+    ElementDef, Encoding, Header, PropertyAccess, PropertyAccessResult, PropertyType, ScalarType,
+};
 use serde::{Deserialize, Serialize};
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
@@ -477,6 +479,92 @@ fn choose_layout(header: &Header, options: &PlyFile) -> std::result::Result<Layo
 type Polyline = (Vec<u32>, Option<f64>);
 
 /// Parses a whole PLY file held in memory; `options.path` names it in errors.
+/// How tress reads a property it uses.
+#[derive(Clone, Copy, PartialEq)]
+enum Reads {
+    Number,
+    IntegerList,
+}
+
+/// Refuses a property tress reads whose declared type it would not read as declared (a list
+/// `x`, `radius`, strand id or count was skipped silently; a float index list gave NaN).
+fn check_declared(
+    element: &ElementDef,
+    reads: impl Fn(&str) -> Option<Reads>,
+) -> std::result::Result<(), String> {
+    for property in element.properties.values() {
+        let Some(wanted) = reads(&property.name) else {
+            continue;
+        };
+        let fits = match (wanted, &property.data_type) {
+            (Reads::Number, PropertyType::Scalar(_)) => true,
+            (Reads::IntegerList, PropertyType::List(_, item)) => {
+                !matches!(item, ScalarType::Float | ScalarType::Double)
+            }
+            _ => false,
+        };
+        if !fits {
+            let declared = match &property.data_type {
+                PropertyType::Scalar(t) => format!("a {t:?}"),
+                PropertyType::List(_, t) => format!("a list of {t:?}"),
+            };
+            return Err(format!(
+                "the `{}` element's `{}` is declared as {declared}; tress reads it as {}",
+                element.name,
+                property.name,
+                match wanted {
+                    Reads::Number => "one number",
+                    Reads::IntegerList => "a list of integers",
+                }
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Checks the declared type of every property the chosen layout reads.
+fn check_layout_types(header: &Header, layout: Layout) -> std::result::Result<(), String> {
+    let number = |yes: bool| yes.then_some(Reads::Number);
+    if let Some(vertex) = header.elements.get("vertex") {
+        check_declared(vertex, |n| {
+            number(
+                matches!(n, "x" | "y" | "z")
+                    || radius_rank(n).is_some()
+                    || STRAND_ID_NAMES.contains(&n)
+                    || COLOR_NAMES.iter().any(|c| c.contains(&n)),
+            )
+        })?;
+    }
+    match layout {
+        Layout::StrandElement => {
+            let strand = header
+                .elements
+                .values()
+                .find(|e| STRAND_ELEMENT_NAMES.contains(&e.name.as_str()));
+            if let Some(strand) = strand {
+                check_declared(strand, |n| {
+                    if INDEX_LIST_NAMES.contains(&n) {
+                        Some(Reads::IntegerList)
+                    } else {
+                        number(
+                            VERTEX_COUNT_NAMES.contains(&n)
+                                || SEGMENT_COUNT_NAMES.contains(&n)
+                                || radius_rank(n).is_some(),
+                        )
+                    }
+                })?;
+            }
+        }
+        Layout::Edges => {
+            if let Some(edge) = header.elements.get("edge") {
+                check_declared(edge, |n| number(matches!(n, "vertex1" | "vertex2")))?;
+            }
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
 fn parse(bytes: &[u8], path: &Path, options: &PlyFile) -> Result<HairGeometry> {
     let fail = |reason: String| format_error(path, reason);
     let mut reader = Reader::new(bytes);
@@ -484,6 +572,7 @@ fn parse(bytes: &[u8], path: &Path, options: &PlyFile) -> Result<HairGeometry> {
         .read_header(&mut reader)
         .map_err(|e| fail(crate_error("the header", &e.to_string(), Encoding::Ascii)))?;
     let layout = choose_layout(&header, options).map_err(&fail)?;
+    check_layout_types(&header, layout).map_err(&fail)?;
     let has_colors = header
         .elements
         .get("vertex")
@@ -503,6 +592,12 @@ fn parse(bytes: &[u8], path: &Path, options: &PlyFile) -> Result<HairGeometry> {
                 encoding,
             ))
         };
+        // Records without properties take no bytes in a binary file, so there is nothing to
+        // read: read one by one, `element junk 18446744073709551615` never ended. (An ascii
+        // record is a line, so there the end of the file stops a false count.)
+        if element.properties.is_empty() && encoding != Encoding::Ascii {
+            continue;
+        }
         let name = element.name.as_str();
         if name == "vertex" {
             vertices = Parser::<VertexRecord>::new()

@@ -132,6 +132,12 @@ impl ProceduralHair {
                 "strands × points_per_strand exceeds 2^30 points".into(),
             ));
         }
+        crate::geometry::check_point_memory(
+            &self.name(),
+            "strands",
+            "strands × points_per_strand",
+            self.strands as f64 * self.points_per_strand as f64,
+        )?;
         positive("radius", self.radius)?;
         positive("length", self.length)?;
         positive("sphere_radius", self.sphere_radius)?;

@@ -252,17 +252,45 @@ impl CurveData {
     }
 }
 
+/// How far from the origin, in world units, geometry (its points, padded by fiber and sphere
+/// radii) may reach: ray tests square lengths, which overflow f32 beyond about 1e19 (fibers
+/// 1e20 wide vanished under the path tracer).
+pub const MAX_EXTENT: f32 = 1e18;
+
+/// Refuses an object whose world bounds reach beyond [`MAX_EXTENT`].
+fn check_extent(object: &str, bounds: &Aabb) -> Result<()> {
+    let reach = bounds.min.abs().max(bounds.max.abs()).max_element();
+    if reach.is_nan() || reach > MAX_EXTENT {
+        return Err(Error::InvalidGeometry {
+            object: object.to_owned(),
+            reason: format!(
+                "reaches {reach:e} from the origin (bounds {} to {}), beyond the {MAX_EXTENT:e} \
+                 that f32 ray tests can square: scale the scene down",
+                bounds.min, bounds.max
+            ),
+        });
+    }
+    Ok(())
+}
+
 #[derive(Debug)]
 enum GeomData {
     Hair(Arc<CurveData>),
-    Mesh { material: u32 },
-    Spheres { materials: Vec<u32> },
+    Mesh {
+        material: u32,
+    },
+    Spheres {
+        materials: Vec<u32>,
+        /// Centre and radius of each sphere.
+        spheres: Vec<Vec4>,
+    },
 }
 
 impl GeomData {
     /// Whether a candidate hit on primitive `prim` of this geometry (id `geom`) is kept by a
-    /// query excluding `ex`: fibers apply the self-intersection rule, meshes and spheres skip
-    /// only the primitive the ray leaves.
+    /// query excluding `ex`: fibers apply the self-intersection rule, meshes skip only the
+    /// (flat) triangle the ray leaves, and spheres the whole sphere, which a ray leaving it
+    /// inwards meets again where [`EmbreeAccel::sphere_reentry`] finds.
     fn keep(&self, ex: &Exclude, geom: u32, prim: u32, org: Vec3, dir: Vec3) -> bool {
         match self {
             GeomData::Hair(c) => {
@@ -648,12 +676,7 @@ impl SceneBuilder {
                 reason: "too many control points for one Embree geometry".into(),
             });
         }
-        if !bounds.min.is_finite() || !bounds.max.is_finite() {
-            return Err(Error::InvalidGeometry {
-                object: hair.name.clone(),
-                reason: "the transformed geometry overflows to infinity".into(),
-            });
-        }
+        check_extent(&hair.name, &bounds)?;
 
         let name = &hair.name;
         let mut geometry = self
@@ -707,12 +730,7 @@ impl SceneBuilder {
             .collect();
         let mut bounds = Aabb::EMPTY;
         positions.iter().for_each(|&p| bounds.grow(p));
-        if !bounds.min.is_finite() || !bounds.max.is_finite() {
-            return Err(Error::InvalidGeometry {
-                object: mesh.name.clone(),
-                reason: "the transformed geometry overflows to infinity".into(),
-            });
-        }
+        check_extent(&mesh.name, &bounds)?;
         let name = &mesh.name;
         let mut geometry = self
             .device
@@ -767,15 +785,17 @@ impl SceneBuilder {
                 reason: format!("must be finite and positive, got {radius}"),
             });
         }
+        let bounds = Aabb {
+            min: center - Vec3::splat(radius),
+            max: center + Vec3::splat(radius),
+        };
+        check_extent(&name, &bounds)?;
         self.spheres.push((center.extend(radius), material));
         self.objects.push(ObjectInfo {
             name,
             kind: ObjectKind::Sphere { center, radius },
             materials: material..material + 1,
-            bounds: Aabb {
-                min: center - Vec3::splat(radius),
-                max: center + Vec3::splat(radius),
-            },
+            bounds,
         });
         Ok(self)
     }
@@ -800,7 +820,8 @@ impl SceneBuilder {
                 .zip(&self.spheres)
                 .for_each(|(dst, (s, _))| *dst = s.to_array());
             let materials = self.spheres.iter().map(|&(_, m)| m).collect();
-            self.attach(geometry, GeomData::Spheres { materials });
+            let spheres = self.spheres.iter().map(|&(s, _)| s).collect();
+            self.attach(geometry, GeomData::Spheres { materials, spheres });
         }
         // High quality (spatial splits) made the preview example on straight.hair 1.7× faster
         // (1M camera + 1M shadow rays: 0.48 s vs 0.82 s) at about the same build time.
@@ -841,7 +862,7 @@ impl SceneBuilder {
             .map(|g| match g {
                 GeomData::Hair(c) => c.memory_bytes(),
                 GeomData::Mesh { .. } => 0,
-                GeomData::Spheres { materials } => materials.len() * 4,
+                GeomData::Spheres { materials, .. } => materials.len() * 20,
             })
             .sum();
         info.memory_bytes = self.embree_bytes.load(Ordering::Relaxed).max(0) as usize + ours;
@@ -1069,13 +1090,53 @@ impl EmbreeAccel {
     }
 }
 
+impl EmbreeAccel {
+    /// Where a ray leaving a sphere inwards meets it again, on the far side of its chord, with
+    /// the sphere's material: solved here in f64, since skipping the sphere let rays bounced
+    /// inside a closed sphere reach the sky, and Embree's f32 roots miss the short chords of
+    /// grazing rays.
+    fn sphere_reentry(&self, ray: &Ray) -> Option<(f32, u32, Vec3)> {
+        let ex = ray.exclude?;
+        let GeomData::Spheres { materials, spheres } = self.geoms.get(ex.geom as usize)? else {
+            return None;
+        };
+        let s = spheres[ex.prim as usize];
+        let (center, r) = (s.truncate(), f64::from(s.w));
+        let o = (ray.origin - center).as_dvec3();
+        let d = ray.dir.as_dvec3();
+        let b = o.dot(d);
+        if b >= 0.0 {
+            return None; // leaving outwards
+        }
+        // The far root of |o + t d|² = r², whether rounding put the origin just in or out.
+        let t = (-b + (b * b - (o.length_squared() - r * r)).max(0.0).sqrt()) as f32;
+        (t > 0.0 && t < ray.t_max).then_some((t, materials[ex.prim as usize], center))
+    }
+}
+
 impl Accel for EmbreeAccel {
     fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        let reentry = self.sphere_reentry(ray);
         let mut ctx = self.context(ray);
         let mut rh = RayHit::from(self.embree_ray(ray));
+        if let Some((t, ..)) = reentry {
+            // Nothing beyond the sphere's far side can be hit.
+            rh.ray.tfar = t + self.origin_shift;
+        }
         self.scene.intersect(&mut ctx, &mut rh);
         if !rh.hit.is_valid() {
-            return None;
+            return reentry.map(|(t, material, center)| {
+                let p = ray.at(t);
+                let n = (p - center).try_normalize().unwrap_or(-ray.dir);
+                Hit {
+                    t,
+                    p,
+                    prim: ray.exclude.expect("a re-entry has an excluded sphere"),
+                    material,
+                    // The inside, facing the ray.
+                    kind: HitKind::Surface { normal: -n },
+                }
+            });
         }
         let t = rh.ray.tfar - self.origin_shift;
         let (geom, prim) = (rh.hit.geomID, rh.hit.primID);
@@ -1093,7 +1154,7 @@ impl Accel for EmbreeAccel {
                 (kind, c.material(prim), t)
             }
             GeomData::Mesh { material } => (surface(), *material, t),
-            GeomData::Spheres { materials } => (surface(), materials[prim as usize], t),
+            GeomData::Spheres { materials, .. } => (surface(), materials[prim as usize], t),
         };
         Some(Hit {
             t,
@@ -1105,6 +1166,9 @@ impl Accel for EmbreeAccel {
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
+        if self.sphere_reentry(ray).is_some() {
+            return true;
+        }
         let mut ctx = self.context(ray);
         let mut r = self.embree_ray(ray);
         self.scene.occluded(&mut ctx, &mut r)
@@ -1113,6 +1177,9 @@ impl Accel for EmbreeAccel {
     fn occluded_by_surfaces(&self, ray: &Ray) -> bool {
         if !self.has_surfaces() {
             return false;
+        }
+        if self.sphere_reentry(ray).is_some() {
+            return true;
         }
         let mut ctx = self.context(ray);
         ctx.ext.skip_hair = true;

@@ -81,6 +81,22 @@ impl HairSource {
         }
     }
 
+    /// Every file [`load`](Self::load) reads: the source's file and, for pbrt files, those
+    /// it includes. Empty for generated hair.
+    pub fn files(&self) -> Result<Vec<PathBuf>> {
+        let pbrt = match self {
+            HairSource::Pbrt(f) => f.clone(),
+            HairSource::File(p)
+                if p.extension()
+                    .is_some_and(|e| e.eq_ignore_ascii_case("pbrt")) =>
+            {
+                PbrtFile::new(p)
+            }
+            other => return Ok(other.path().map(Path::to_path_buf).into_iter().collect()),
+        };
+        pbrt.files()
+    }
+
     /// Reads or generates the hair (validated).
     pub fn load(&self) -> Result<HairGeometry> {
         match self {

@@ -5,7 +5,7 @@ use clap::{Args, Subcommand};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
-use tress_core::math::{fiber_direction, Vec3};
+use tress_core::math::{fiber_direction, unit, Vec3};
 use tress_core::{Bcsdf, Sampler};
 use tress_materials::HairModel;
 
@@ -227,10 +227,9 @@ fn eval(a: EvalArgs) -> Result<()> {
             );
         }
         let (wi, wo) = (Vec3::new(v[1], v[2], v[3]), Vec3::new(v[4], v[5], v[6]));
-        if wi.length() == 0.0 || wo.length() == 0.0 {
+        let (Some(wi), Some(wo)) = (unit(wi), unit(wo)) else {
             bail!("{}:{}: zero-length direction", a.input.display(), i + 1);
-        }
-        let (wi, wo) = (wi.normalize(), wo.normalize());
+        };
         let f_cos = bcsdf.eval(wo, wi, h);
         let cos_theta_i = (1.0 - wi.x * wi.x).max(0.0).sqrt();
         let f = if a.with_cosine {

@@ -459,22 +459,28 @@ pub struct DiffArgs {
     pub flip_ppd: f32,
 }
 
+/// Refuses an image (read from `path`) holding NaN or infinite pixels, to be compared with
+/// another: one NaN makes every metric NaN, which `diff` printed, and a study wrote into its
+/// summary, with success.
+pub fn check_finite(image: &Image, path: &Path) -> Result<()> {
+    let bad = image.pixels.iter().filter(|p| !p.is_finite()).count();
+    if bad > 0 {
+        bail!(
+            "{}: {bad} pixels are NaN or infinite; the error metrics would be NaN",
+            path.display()
+        );
+    }
+    Ok(())
+}
+
 pub fn run(args: DiffArgs) -> Result<()> {
     let (a, _) = image_io::read_exr(&args.a)?;
     let (b, _) = image_io::read_exr(&args.b)?;
     let both = || format!("{} vs {}", args.a.display(), args.b.display());
     check_compatible(&a, &b).map_err(|e| anyhow::anyhow!("{}: {e}", both()))?;
     let rect = resolve_region(&a, args.region).map_err(|e| anyhow::anyhow!("{}: {e}", both()))?;
-    // One NaN makes every metric NaN: say where instead of printing NaN with success.
-    for (image, path) in [(&a, &args.a), (&b, &args.b)] {
-        let bad = image.pixels.iter().filter(|p| !p.is_finite()).count();
-        if bad > 0 {
-            bail!(
-                "{}: {bad} pixels are NaN or infinite; the error metrics would be NaN",
-                path.display()
-            );
-        }
-    }
+    check_finite(&a, &args.a)?;
+    check_finite(&b, &args.b)?;
     let m = metrics(&a, &b, rect);
     let display = Display {
         gain: args.exposure.exp2(),

@@ -81,7 +81,7 @@ fn utf8(p: &Path) -> Result<String> {
 }
 
 pub fn run(args: FarmArgs) -> Result<()> {
-    let defines = args.defines.iter().cloned().collect();
+    let defines = scene_desc::defines(&args.defines)?;
     let mut desc = scene_desc::load_with(&args.scene, &defines)?;
     if let Some(spp) = args.spp {
         desc.film.spp = spp;

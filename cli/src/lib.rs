@@ -44,6 +44,66 @@ pub fn ron_options() -> ron::Options {
         .with_default_extension(ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES)
 }
 
+/// `threads` if this machine can use that many worker threads (0: one per core). More than
+/// eight per core (or 64) only add overhead: `--threads 10000` on a 16² image crawled,
+/// starting and switching threads.
+pub fn check_threads(threads: usize) -> Result<usize, String> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let max = (8 * cores).max(64);
+    if threads > max {
+        return Err(format!(
+            "{threads} worker threads: at most {max} on this machine ({cores} cores); \
+             0 or none uses one per core"
+        ));
+    }
+    Ok(threads)
+}
+
+/// [`check_threads`] as a command-line value parser.
+#[doc(hidden)]
+pub fn parse_threads(s: &str) -> Result<usize, String> {
+    check_threads(s.parse().map_err(|e| format!("{e}"))?)
+}
+
+/// A writer of one output, given the path to write (a temporary file beside the target).
+pub type OutputWriter<'a> = Box<dyn FnOnce(&std::path::Path) -> anyhow::Result<()> + 'a>;
+
+/// Writes outputs that belong together (an EXR and its PNG, a plot's PNG and SVG) all or
+/// nothing: each is written to a temporary file beside its target, and only once all are
+/// complete are they renamed into place. A failure before then leaves nothing; a rename failing
+/// part way removes the outputs already renamed.
+pub fn write_together(outputs: Vec<(&std::path::Path, OutputWriter<'_>)>) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let mut staged = Vec::new();
+    for (target, write) in outputs {
+        let dir = target
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(std::path::Path::new("."));
+        // The target's extension, which writers check.
+        let suffix = target
+            .extension()
+            .map_or(String::new(), |e| format!(".{}", e.to_string_lossy()));
+        let tmp = tress_core::image_io::output_temp_file(dir, &suffix)
+            .with_context(|| format!("cannot write in {}", dir.display()))?;
+        // The writer's message names the temporary file: say which output it was.
+        write(tmp.path()).with_context(|| format!("writing {}", target.display()))?;
+        staged.push((target, tmp.into_temp_path()));
+    }
+    let mut placed = Vec::new();
+    for (target, tmp) in staged {
+        if let Err(e) = tmp.persist(target) {
+            for p in placed {
+                let _ = std::fs::remove_file(p);
+            }
+            // The bare io::Error: the PathPersistError would keep the temporary file alive.
+            return Err(e.error).with_context(|| format!("cannot create {}", target.display()));
+        }
+        placed.push(target);
+    }
+    Ok(())
+}
+
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so readers
 /// never see a partial file.
 pub fn atomic_write(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {

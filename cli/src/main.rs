@@ -60,6 +60,14 @@ enum Command {
 }
 
 fn main() {
+    // Rust ignores SIGPIPE, so printing into a closed pipe (`tress info scene.ron | head -1`)
+    // panicked with "Broken pipe"; the default action ends the process quietly, as it does
+    // for other Unix tools. Outputs are files written through temporaries, never stdout.
+    #[cfg(unix)]
+    // SAFETY: first thing in `main`, before any thread exists; SIG_DFL is a valid action.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let matches = Cli::command().get_matches();
     let command = matches.subcommand_name().unwrap_or_default().to_string();
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());

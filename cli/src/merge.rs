@@ -155,8 +155,11 @@ pub fn run(args: MergeArgs) -> Result<()> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("creating output folder {}", dir.display()))?;
     }
-    write_render(&args.out, &merged, args.sums, &identity, &attributes)?;
-    args.preview.write(&args.out, &merged.image())?;
+    args.preview.write_with(
+        &args.out,
+        |p| write_render(p, &merged, args.sums, &identity, &attributes),
+        &merged.image(),
+    )?;
     if !args.quiet {
         let [x0, y0, x1, y1] = plan.window;
         eprintln!(

@@ -45,7 +45,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub seed: Option<u64>,
     /// Worker threads (default: all cores). The image does not depend on it.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::parse_threads)]
     pub threads: Option<usize>,
     /// Render only the pixel window x0,y0,x1,y1 (x1, y1 exclusive). The image equals the same
     /// window of the full render bit for bit.
@@ -113,7 +113,7 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
 
 /// The scene file with command-line overrides applied.
 fn load_with_overrides(args: &RenderArgs) -> Result<SceneDesc> {
-    let defines = args.defines.iter().cloned().collect();
+    let defines = scene_desc::defines(&args.defines)?;
     let mut desc = scene_desc::load_with(&args.scene, &defines)?;
     if let Some(name) = &args.integrator {
         desc.integrator = IntegratorDesc::parse_arg(name).map_err(anyhow::Error::msg)?;
@@ -147,16 +147,21 @@ fn load_with_overrides(args: &RenderArgs) -> Result<SceneDesc> {
 }
 
 /// Identifies the image a scene description renders, whatever its spp and crop: pieces with the
-/// same hash and seed can be merged. FNV-1a of the description's RON text, so the value is the
-/// same on every machine and build.
-fn scene_hash(desc: &SceneDesc) -> Result<String> {
+/// same hash and seed can be merged. FNV-1a of the description's RON text and of the contents of
+/// the files it reads (tiles rendered against different versions of one hair file must not be
+/// merged), so the value is the same on every machine and build.
+fn scene_hash(desc: &SceneDesc, scene_path: &Path) -> Result<String> {
     let mut d = desc.clone();
     d.film.spp = 1;
     d.film.crop = None;
     let text = ron::to_string(&d).context("describing the scene for its hash")?;
-    let hash = text.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
-    });
+    let files = desc.files_hash(scene_path)?;
+    let hash = text
+        .bytes()
+        .chain(files.to_le_bytes())
+        .fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+        });
     Ok(format!("{hash:016x}"))
 }
 
@@ -236,15 +241,11 @@ impl OutputFiles<'_> {
         let turn = std::fs::File::open(folder)
             .and_then(|f| f.lock().map(|()| f))
             .with_context(|| format!("locking {} for writing", folder.display()))?;
-        render_file::write_render(&self.out, sums, self.args.sums, &self.identity, &attributes)?;
-        // Both outputs or neither: an EXR without its preview would look like a success.
-        let written = self
-            .args
-            .preview
-            .write(&self.out, &sums.image())
-            .inspect_err(|_| {
-                let _ = std::fs::remove_file(&self.out);
-            });
+        let written = self.args.preview.write_with(
+            &self.out,
+            |p| render_file::write_render(p, sums, self.args.sums, &self.identity, &attributes),
+            &sums.image(),
+        );
         drop(turn);
         written
     }
@@ -318,7 +319,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
         out: out.clone(),
         identity: Identity {
             seed: desc.film.seed,
-            scene_hash: scene_hash(&desc)?,
+            scene_hash: scene_hash(&desc, &args.scene)?,
         },
         camera: &built.scene.camera,
     };
@@ -479,7 +480,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
 }
 
 pub fn info(scene: &Path, defines: &[(String, String)]) -> Result<()> {
-    let desc = scene_desc::load_with(scene, &defines.iter().cloned().collect())?;
+    let desc = scene_desc::load_with(scene, &scene_desc::defines(defines)?)?;
     desc.film
         .validate()
         .map_err(|e| anyhow::anyhow!("{}: film: {e}", scene.display()))?;

@@ -145,10 +145,11 @@ impl Piece {
 /// Reads and checks a render EXR's header.
 pub fn read_piece(path: &Path) -> Result<Piece> {
     let here = |reason: String| anyhow!("{}: {reason}", path.display());
-    if !path.exists() {
-        return Err(here("file not found".into()));
-    }
-    let meta = ex::MetaData::read_from_file(path, false)
+    let file = tress_core::files::open_regular(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => here("file not found".into()),
+        _ => here(e.to_string()),
+    })?;
+    let meta = ex::MetaData::read_from_unbuffered(file, false)
         .map_err(|e| here(format!("not a readable OpenEXR file: {e}")))?;
     let [header] = meta.headers.as_slice() else {
         bail!(
@@ -341,7 +342,7 @@ pub fn read_sums(piece: &Piece) -> Result<SampleSums> {
         .all_channels()
         .first_valid_layer()
         .all_attributes()
-        .from_file(path)
+        .from_unbuffered(tress_core::files::open_regular(path).map_err(|e| here(e.to_string()))?)
         .map_err(|e| here(format!("cannot read the pixels: {e}")))?;
     let channels: BTreeMap<String, &ex::FlatSamples> = image
         .layer_data
@@ -422,18 +423,27 @@ pub struct PreviewArgs {
 }
 
 impl PreviewArgs {
-    /// Writes the preview of `image` beside `exr` (same name, `.png`) unless disabled.
-    pub fn write(&self, exr: &Path, image: &tress_core::Image) -> Result<()> {
+    /// Writes the EXR at `exr` with `write_exr` and the preview of `image` beside it (same
+    /// name, `.png`) unless disabled: both or neither ([`crate::write_together`]), as an EXR
+    /// without its preview would look like a success.
+    pub fn write_with(
+        &self,
+        exr: &Path,
+        write_exr: impl FnOnce(&Path) -> Result<()>,
+        image: &tress_core::Image,
+    ) -> Result<()> {
+        let png = exr.with_extension("png");
+        let mut outputs: Vec<(&Path, crate::OutputWriter)> = vec![(exr, Box::new(write_exr))];
         if !self.no_preview {
-            image_io::write_png_tonemapped(
-                exr.with_extension("png"),
-                image,
-                self.exposure,
-                self.tonemap,
-            )
-            .map_err(|e| anyhow!("{e}"))?;
+            outputs.push((
+                &png,
+                Box::new(|p: &Path| {
+                    image_io::write_png_tonemapped(p, image, self.exposure, self.tonemap)
+                        .map_err(|e| anyhow!("{e}"))
+                }),
+            ));
         }
-        Ok(())
+        crate::write_together(outputs)
     }
 }
 

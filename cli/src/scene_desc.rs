@@ -38,22 +38,51 @@ pub struct SceneDesc {
 }
 
 impl SceneDesc {
-    /// Every file the scene reads (hair, meshes, environment maps), resolved against
-    /// `scene_path` as [`build`] resolves them.
-    pub fn referenced_files(&self, scene_path: &Path) -> Vec<PathBuf> {
-        let objects = self.objects.iter().filter_map(|o| match o {
-            crate::geometry::ObjectDesc::Hair { source, .. } => source.path(),
-            crate::geometry::ObjectDesc::Mesh { file, .. } => Some(file.as_path()),
-            crate::geometry::ObjectDesc::Sphere { .. } => None,
-        });
-        let lights = self.lights.iter().filter_map(|l| match l {
-            LightDesc::Environment { file, .. } => Some(file.as_path()),
-            _ => None,
-        });
-        objects
-            .chain(lights)
-            .map(|p| resolve(scene_path, p))
-            .collect()
+    /// Every file the scene reads (hair and the files a pbrt groom includes, meshes,
+    /// environment maps), resolved against `scene_path` as [`build`] resolves them.
+    pub fn referenced_files(&self, scene_path: &Path) -> Result<Vec<PathBuf>> {
+        let mut files = Vec::new();
+        for object in &self.objects {
+            match object {
+                crate::geometry::ObjectDesc::Hair { source, .. } => {
+                    let mut source = source.clone();
+                    if let Some(p) = source.path_mut() {
+                        *p = resolve(scene_path, p);
+                    }
+                    files.extend(
+                        source
+                            .files()
+                            .map_err(|e| anyhow!("{}: {e}", scene_path.display()))?,
+                    );
+                }
+                crate::geometry::ObjectDesc::Mesh { file, .. } => {
+                    files.push(resolve(scene_path, file));
+                }
+                crate::geometry::ObjectDesc::Sphere { .. } => {}
+            }
+        }
+        for light in &self.lights {
+            if let LightDesc::Environment { file, .. } = light {
+                files.push(resolve(scene_path, file));
+            }
+        }
+        Ok(files)
+    }
+
+    /// A hash of the contents of every file the scene reads ([`referenced_files`]
+    /// (Self::referenced_files)): part of the keys of study caches and of the scene hash that
+    /// merged pieces must share, so that renders of a file's old contents are not taken for
+    /// renders of its new ones.
+    pub fn files_hash(&self, scene_path: &Path) -> Result<u64> {
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for f in self.referenced_files(scene_path)? {
+            let bytes = tress_core::files::read_regular(&f)
+                .map_err(|e| anyhow!("{}: {}: {e}", scene_path.display(), f.display()))?;
+            for b in bytes.iter().chain(b"|") {
+                h = (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3);
+            }
+        }
+        Ok(h)
     }
 }
 
@@ -218,6 +247,18 @@ pub fn load_with(path: &Path, defines: &Defines) -> Result<SceneDesc> {
     parse(&text).map_err(|e| anyhow!("{}:{e}", path.display()))
 }
 
+/// The `-D name=value` arguments as [`Defines`]: a name given twice is refused (the last
+/// value was kept silently).
+pub fn defines(args: &[(String, String)]) -> Result<Defines> {
+    let mut defines = Defines::new();
+    for (name, value) in args {
+        if let Some(first) = defines.insert(name.clone(), value.clone()) {
+            bail!("-D {name} is given twice ({name}={first} and {name}={value}): give it once");
+        }
+    }
+    Ok(defines)
+}
+
 /// One `-D name=value` argument.
 pub fn parse_define(arg: &str) -> std::result::Result<(String, String), String> {
     let (name, value) = arg
@@ -266,6 +307,12 @@ pub fn substitute(text: &str, defines: &Defines) -> std::result::Result<String, 
             Some((name, default)) => (name, Some(default)),
             None => (&body[..end], None),
         };
+        if default.is_some_and(|d| d.contains("${")) {
+            return Err(format!(
+                "{line}:{col}: '${{{name}:-…}}': a default cannot hold another placeholder \
+                 (nested defaults are not supported): write the value itself"
+            ));
+        }
         if !is_placeholder_name(name) {
             return Err(format!(
                 "{line}:{col}: '${{{}}}': a placeholder is ${{name}} or ${{name:-default}}",

@@ -298,7 +298,7 @@ fn bad_scenes_give_clear_errors() {
     assert_bad_scene(&SCENE[..SCENE.len() / 2], &["scene.ron:"]);
     assert_bad_scene("", &["scene.ron:1:"]);
     // (text of SCENE, its replacement, what the message must say)
-    let edits: [(&str, &str, &[&str]); 39] = [
+    let edits: [(&str, &str, &[&str]); 42] = [
         (
             r#""grey": Diffuse"#,
             r#""hair": Diffuse(albedo: (0.5, 0.5, 0.5)), "grey": Diffuse"#,
@@ -344,8 +344,8 @@ fn bad_scenes_give_clear_errors() {
         ),
         (
             "direction: (0, -1, -1)",
-            "direction: (3e38, 3e38, 0)",
-            &["direction", "normalisable"],
+            "direction: (0, 0, 0)",
+            &["direction", "non-zero"],
         ),
         ("Path(max_depth: 20)", "Bogus()", &["Bogus"]),
         ("Sky()", "Moon()", &["Moon"]),
@@ -407,12 +407,28 @@ fn bad_scenes_give_clear_errors() {
         (
             "Sky()",
             "Sky(scale: 1e37)",
-            &["built-in sky", "overflows f32"],
+            &["built-in sky", "is beyond 1e30"],
         ),
         (
             "irradiance: (2, 2, 2)",
             "irradiance: (3e38, 3e38, 3e38)",
-            &["irradiance", "beyond f32"],
+            &["irradiance", "beyond 1e30"],
+        ),
+        // Finite products that overflowed along paths: samples dropped, the image biased dark.
+        (
+            "Sky()",
+            "Sky(scale: 1e35)",
+            &["built-in sky", "is beyond 1e30", "overflows f32"],
+        ),
+        (
+            "irradiance: (2, 2, 2), angular_radius: 0.5",
+            "irradiance: (1e26, 1e26, 1e26), angular_radius: 0.1",
+            &["irradiance", "a radiance of", "beyond 1e30"],
+        ),
+        (
+            "Sky()",
+            "Constant(radiance: (1e31, 1, 1))",
+            &["radiance", "is beyond 1e30", "scale the lights down"],
         ),
         ("Sky()", "Constant(radiance: (1, 1, -1))", &["radiance"]),
         ("strands: 300", "strands: 0", &["strands"]),
@@ -857,50 +873,36 @@ fn warnings_are_plain_text_off_a_terminal() {
     );
 }
 
-/// Hair at extreme scales or with absurd fiber widths under dual scattering: the density grid
-/// refuses it with a message (it panicked on `min > max`, or looped forever in the orientation
-/// integral), and a huge but harmless procedural length still renders.
+/// Tiny hair under dual scattering: the density grid refuses it with a message (it panicked on
+/// `min > max`). Hair reaching beyond 1e18 is refused for every integrator
+/// (`geometry_beyond_what_f32_can_square_is_refused`).
 #[test]
 fn extreme_hair_extents_under_dual_scattering_give_clear_errors() {
     let dual = "DualMis(tables: (theta_nodes: 8, h_nodes: 4, theta_quad: 8, phi_quad: 8, \
                 walks: 64))";
     let ball =
         r#"Hair(source: Procedural(style: Ball, strands: 300, radius: 0.01), material: "hair")"#;
-    let render = [
-        "render",
-        "scene.ron",
-        "--integrator",
-        dual,
-        "--out",
-        "o.exr",
-        "--quiet",
-    ];
-    for (options, expect) in [
-        ("transform: (scale: 1e30)", "spans 1.97"),
-        ("transform: (scale: 1e-30)", "spans 1.97"),
-        ("radius_scale: 3e38", "wide on average"),
-    ] {
-        let object = format!(
-            r#"Hair(source: Procedural(style: Ball, strands: 300, radius: 0.01), material: "hair", options: ({options}))"#
-        );
-        let (dir, _) = scene_dir(&SCENE.replace(ball, &object));
-        assert_fails_in(
-            dir.path(),
-            &render,
-            &[
-                "scene.ron: integrator dual-mis: density grid: the hair",
-                expect,
-                "scale the hair",
-            ],
-        );
-    }
-    let long = ball.replace("radius: 0.01", "radius: 0.01, length: 1e30");
-    let (dir, _) = scene_dir(&SCENE.replace(ball, &long));
-    let o = tress(&render, dir.path());
-    assert!(
-        o.status.success() && !stderr(&o).contains("panicked"),
-        "{}",
-        stderr(&o)
+    let tiny = ball.replace(
+        "radius: 0.01)",
+        "radius: 0.01), options: (transform: (scale: 1e-30))",
+    );
+    let (dir, _) = scene_dir(&SCENE.replace(ball, &tiny));
+    assert_fails_in(
+        dir.path(),
+        &[
+            "render",
+            "scene.ron",
+            "--integrator",
+            dual,
+            "--out",
+            "o.exr",
+            "--quiet",
+        ],
+        &[
+            "scene.ron: integrator dual-mis: density grid: the hair",
+            "spans 1.97",
+            "scale the hair",
+        ],
     );
 }
 
@@ -1144,4 +1146,873 @@ fn usc_hairsalon_files_load_and_broken_ones_are_named() {
     assert!(out.contains("2 strands"), "{out}");
     std::fs::write(d.join("style.data"), &bytes[..bytes.len() - 5]).unwrap();
     assert_bad_hair(d, "File(\"style.data\")", &["style.data", "past the end"]);
+}
+
+/// `tress args` in `dir`, killed and reported if it runs longer than `secs` (a hang).
+fn tress_within(
+    args: &[&str],
+    dir: &Path,
+    env: &[(&str, &str)],
+    secs: u64,
+) -> std::process::Output {
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tress"))
+        .args(args)
+        .envs(env.iter().copied())
+        .current_dir(dir)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(secs) {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            panic!("{args:?}: still running after {secs} s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+/// As [`assert_fails_in`], but a hang fails the test instead of blocking it.
+fn assert_fails_within(dir: &Path, args: &[&str], env: &[(&str, &str)], expect: &[&str]) {
+    let before = files_in(dir);
+    let o = tress_within(args, dir, env, 60);
+    let err = stderr(&o);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{args:?}: expected failure: {err}"
+    );
+    for e in expect {
+        assert!(err.contains(e), "{args:?}: message lacks '{e}': {err}");
+    }
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(files_in(dir), before, "{args:?}: output left behind");
+}
+
+/// Printing into a pipe whose reader is gone ends the command quietly, as it does other Unix
+/// tools (`tress info scene.ron | true` panicked "failed printing to stdout: Broken pipe").
+#[cfg(unix)]
+#[test]
+fn closed_stdout_pipes_end_commands_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    std::fs::write(d.join("dirs.csv"), "0.2,0,0,1,0.5,0,1\n").unwrap();
+    render_ok(&["--out", "a.exr", "--quiet"], d);
+    let model = "Chiang(beta_m: 0.3, beta_n: 0.3)";
+    for args in [
+        &["info", "scene.ron"][..],
+        &["farm", "scene.ron", "--tiles", "2"],
+        &[
+            "bcsdf",
+            "furnace",
+            "--model",
+            model,
+            "--csv",
+            "--samples",
+            "1000",
+        ],
+        &["bcsdf", "eval", "--model", model, "--input", "dirs.csv"],
+        &["diff", "a.exr", "a.exr"],
+    ] {
+        // The reading end is closed before tress starts, so its first write meets EPIPE.
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_tress"))
+            .args(args)
+            .current_dir(d)
+            .stdout(writer)
+            .output()
+            .unwrap();
+        let err = stderr(&o);
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert!(
+            o.status.success() || o.status.signal() == Some(libc::SIGPIPE),
+            "{args:?}: {:?} {err}",
+            o.status
+        );
+    }
+}
+
+/// FIFOs given as any input are refused at once (opening one waited for a writer forever):
+/// hair files of every format, OBJ meshes, scenes, pbrt includes, study files, `bcsdf eval`
+/// inputs and `merge` pieces.
+#[cfg(unix)]
+#[test]
+fn fifos_as_inputs_are_refused_without_blocking() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    for name in [
+        "f.hair",
+        "f.tfx",
+        "f.ply",
+        "f.obj",
+        "f.ron",
+        "f.pbrt",
+        "study.ron",
+        "dirs.csv",
+        "f.exr",
+    ] {
+        let made = std::process::Command::new("mkfifo")
+            .arg(d.join(name))
+            .status()
+            .unwrap();
+        assert!(made.success());
+    }
+    for name in ["f.hair", "f.tfx", "f.ply"] {
+        std::fs::write(
+            d.join("scene.ron"),
+            SCENE.replace(
+                "Procedural(style: Ball, strands: 300, radius: 0.01)",
+                &format!("File(\"{name}\")"),
+            ),
+        )
+        .unwrap();
+        assert_fails_within(
+            d,
+            &["info", "scene.ron"],
+            &[],
+            &[name, "not a regular file"],
+        );
+    }
+    std::fs::write(d.join("main.pbrt"), "Include \"f.pbrt\"\n").unwrap();
+    std::fs::write(
+        d.join("scene.ron"),
+        SCENE.replace(
+            "Procedural(style: Ball, strands: 300, radius: 0.01)",
+            "File(\"main.pbrt\")",
+        ),
+    )
+    .unwrap();
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &[],
+        &["f.pbrt", "not a regular file"],
+    );
+    std::fs::write(
+        d.join("scene.ron"),
+        SCENE.replace(
+            "Sphere(center: (0, -2, 0), radius: 1, material: \"grey\")",
+            "Mesh(file: \"f.obj\", material: \"grey\")",
+        ),
+    )
+    .unwrap();
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &[],
+        &["f.obj", "not a regular file"],
+    );
+    std::fs::write(d.join("scene.ron"), SCENE).unwrap();
+    let model = "Chiang(beta_m: 0.3, beta_n: 0.3)";
+    render_ok(&["--out", "piece.exr", "--quiet", "--sums"], d);
+    for (args, name) in [
+        (&["info", "f.ron"][..], "f.ron"),
+        (&["render", "f.ron", "--quiet"], "f.ron"),
+        (&["study", "study.ron", "--quiet"], "study.ron"),
+        (
+            &["bcsdf", "eval", "--model", model, "--input", "dirs.csv"],
+            "dirs.csv",
+        ),
+        (&["merge", "m.exr", "piece.exr", "f.exr"], "f.exr"),
+        (&["diff", "piece.exr", "f.exr"], "f.exr"),
+    ] {
+        assert_fails_within(d, args, &[], &[name, "not a regular file"]);
+    }
+}
+
+/// Inputs that multiply or never end are bounded: a binary PLY element with no properties and
+/// 2^64 − 1 records, pbrt `Include` fan-out, and thread counts far beyond the machine.
+#[test]
+fn endless_and_multiplying_inputs_are_bounded() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    let hair_scene = |source: &str| {
+        std::fs::write(
+            d.join("scene.ron"),
+            SCENE.replace(
+                "Procedural(style: Ball, strands: 300, radius: 0.01)",
+                source,
+            ),
+        )
+        .unwrap();
+    };
+    // Two strands of two points each, then an element with no properties: its records take no
+    // bytes, so they are read (as nothing) at once, in both byte orders.
+    for (format, name) in [
+        ("binary_little_endian", "le.ply"),
+        ("binary_big_endian", "be.ply"),
+    ] {
+        let mut ply = format!(
+            "ply\nformat {format} 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
+             property float z\nelement junk 18446744073709551615\nelement strand 2\n\
+             property int vertex_count\nend_header\n"
+        )
+        .into_bytes();
+        let big = format == "binary_big_endian";
+        let put = |ply: &mut Vec<u8>, v: [u8; 4]| ply.extend(v);
+        for p in [
+            [0.0f32, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+        ] {
+            for c in p {
+                put(
+                    &mut ply,
+                    if big {
+                        c.to_be_bytes()
+                    } else {
+                        c.to_le_bytes()
+                    },
+                );
+            }
+        }
+        for n in [2i32, 2] {
+            put(
+                &mut ply,
+                if big {
+                    n.to_be_bytes()
+                } else {
+                    n.to_le_bytes()
+                },
+            );
+        }
+        std::fs::write(d.join(name), ply).unwrap();
+        hair_scene(&format!("File(\"{name}\")"));
+        let o = tress_within(&["info", "scene.ron"], d, &[], 60);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        assert!(
+            String::from_utf8_lossy(&o.stdout).contains("2 strands"),
+            "{name}"
+        );
+    }
+    // 8 levels of 10 includes each of one small file: 10^8 reads. Imports fan out alike.
+    let curve = "Shape \"curve\" \"point3 P\" [0 0 0 0 1 0 0 2 0 0 3 0] \"float width\" 0.01\n";
+    std::fs::write(d.join("leaf.pbrt"), curve.repeat(20)).unwrap();
+    for keyword in ["Include", "Import"] {
+        for level in 0..8 {
+            let next = if level == 7 {
+                "leaf.pbrt".to_string()
+            } else {
+                format!("l{}.pbrt", level + 1)
+            };
+            std::fs::write(
+                d.join(format!("l{level}.pbrt")),
+                format!("{keyword} \"{next}\"\n").repeat(10),
+            )
+            .unwrap();
+        }
+        hair_scene("File(\"l0.pbrt\")");
+        assert_fails_within(
+            d,
+            &["info", "scene.ron"],
+            &[],
+            &[
+                "l",
+                ".pbrt",
+                "more than 10000 `Include`/`Import` statements",
+            ],
+        );
+    }
+    // A few includes of a large file fan out too: the text read in all is bounded (by the
+    // memory limit, here 1 MiB: 20 includes of 100 kB).
+    std::fs::write(
+        d.join("big.pbrt"),
+        format!("#{}\n", "x".repeat(99)).repeat(1000),
+    )
+    .unwrap();
+    std::fs::write(d.join("l0.pbrt"), "Include \"big.pbrt\"\n".repeat(20)).unwrap();
+    hair_scene("File(\"l0.pbrt\")");
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &[("TRESS_MEMORY_LIMIT_GIB", "0.001")],
+        &["big.pbrt", "GiB of text in all"],
+    );
+    hair_scene("Procedural(style: Ball, strands: 300, radius: 0.01)");
+    for args in [
+        &[
+            "render",
+            "scene.ron",
+            "--out",
+            "o.exr",
+            "--threads",
+            "10000",
+        ][..],
+        &["calibrate", "scene.ron", "--threads", "100000"],
+        &["study", "scene.ron", "--threads", "4096"],
+    ] {
+        let o = tress_within(args, d, &[], 60);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(
+            stderr(&o).contains("worker threads: at most"),
+            "{args:?}: {}",
+            stderr(&o)
+        );
+    }
+}
+
+/// Outputs that belong together are written together or not at all: `merge`'s EXR and PNG,
+/// `bcsdf plot`'s PNG and SVG (either path failing left the other file behind).
+#[test]
+fn outputs_that_belong_together_are_all_or_nothing() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    render_ok(&["--out", "piece.exr", "--sums", "--quiet"], d);
+    std::fs::create_dir(d.join("m.png")).unwrap();
+    assert_fails_in(d, &["merge", "m.exr", "piece.exr", "--quiet"], &["m.png"]);
+    std::fs::remove_dir(d.join("m.png")).unwrap();
+    let model = "Chiang(beta_m: 0.3, beta_n: 0.3)";
+    for (blocked, other) in [("lobes.svg", "lobes.png"), ("lobes.png", "lobes.svg")] {
+        std::fs::create_dir(d.join(blocked)).unwrap();
+        assert_fails_in(
+            d,
+            &["bcsdf", "plot", "--model", model, "--out", "lobes.png"],
+            &[blocked],
+        );
+        assert!(!d.join(other).exists(), "{other} left behind");
+        std::fs::remove_dir(d.join(blocked)).unwrap();
+    }
+    // With both paths free, both are written.
+    let o = tress(
+        &["bcsdf", "plot", "--model", model, "--out", "lobes.png"],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(d.join("lobes.png").is_file() && d.join("lobes.svg").is_file());
+}
+
+/// Study caches and merged pieces are keyed on the content of every file a scene reads,
+/// the files a pbrt groom includes among them (the scene hash covered only the scene's text,
+/// and the study cache only the files the scene names).
+#[test]
+fn caches_and_merges_key_on_every_file_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let strand = |x: f32| {
+        format!(
+            "Shape \"curve\" \"point3 P\" [{x} -0.5 0 {x} -0.2 0 {x} 0.2 0 {x} 0.5 0] \"float width\" 0.05\n"
+        )
+    };
+    std::fs::write(d.join("main.pbrt"), "Include \"strand.pbrt\"\n").unwrap();
+    std::fs::write(d.join("strand.pbrt"), strand(0.0)).unwrap();
+    let scene = SCENE.replace(
+        "Procedural(style: Ball, strands: 300, radius: 0.01)",
+        "File(\"main.pbrt\")",
+    );
+    std::fs::write(d.join("scene.ron"), &scene).unwrap();
+    let study = format!(
+        "(scenes: [Inline(name: \"pbrt\", scene: {scene})], integrators: [Path(max_depth: 3)], \
+         spp: [1, 2], repetitions: 1, reference: Render(integrator: Path(max_depth: 3), spp: 4))"
+    );
+    std::fs::write(d.join("study.ron"), study).unwrap();
+    let rendered = || {
+        let o = tress(&["study", "study.ron", "--out", "out"], d);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let e = stderr(&o);
+        let at = e.find("rendered ").unwrap_or_else(|| panic!("{e}")) + "rendered ".len();
+        e[at..]
+            .split(|c: char| !c.is_ascii_digit())
+            .next()
+            .unwrap()
+            .parse::<usize>()
+            .unwrap()
+    };
+    let made = rendered();
+    assert!(made > 0);
+    assert_eq!(rendered(), 0, "an unchanged study reuses its renders");
+    std::fs::write(d.join("strand.pbrt"), strand(0.3)).unwrap();
+    assert_eq!(
+        rendered(),
+        made,
+        "a changed included file redoes every render"
+    );
+
+    // Tiles rendered against different contents of one hair file are not merged, whether the
+    // file is named by the scene or included by it.
+    let tile = |window: &str, out: &str| {
+        render_ok(&["--crop", window, "--sums", "--out", out, "--quiet"], d);
+    };
+    let hair_scene = SCENE.replace(
+        "Procedural(style: Ball, strands: 300, radius: 0.01)",
+        "File(\"h.hair\")",
+    );
+    let segs: &[u16] = &[1, 3, 2];
+    for (scene, file, before, after) in [
+        (
+            hair_scene.as_str(),
+            "h.hair",
+            write_hair(b"HAIR", 3, &nine_points(), Some(segs), None, 0.01),
+            write_hair(
+                b"HAIR",
+                3,
+                &nine_points()[..]
+                    .iter()
+                    .map(|p| [p[0], p[1], 0.3])
+                    .collect::<Vec<_>>(),
+                Some(segs),
+                None,
+                0.01,
+            ),
+        ),
+        (
+            scene.as_str(),
+            "strand.pbrt",
+            strand(0.0).into_bytes(),
+            strand(0.3).into_bytes(),
+        ),
+    ] {
+        std::fs::write(d.join("scene.ron"), scene).unwrap();
+        std::fs::write(d.join(file), &before).unwrap();
+        tile("0,0,24,10", "top.exr");
+        tile("0,10,24,20", "bottom.exr");
+        let o = tress(&["merge", "m.exr", "top.exr", "bottom.exr", "--quiet"], d);
+        assert!(o.status.success(), "{file}: {}", stderr(&o));
+        std::fs::write(d.join(file), &after).unwrap();
+        tile("0,10,24,20", "bottom.exr");
+        assert_fails_in(
+            d,
+            &["merge", "m2.exr", "top.exr", "bottom.exr", "--quiet"],
+            &["top.exr", "bottom.exr", "hash"],
+        );
+    }
+}
+
+/// Small inputs that would need more memory than the limit are refused by name before
+/// anything is allocated (they grew to 5–12 GB and aborted, or read `/dev/zero` forever).
+#[test]
+fn memory_blowups_are_refused_before_allocating() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    let hair_scene = |source: &str| {
+        std::fs::write(
+            d.join("scene.ron"),
+            SCENE.replace(
+                "Procedural(style: Ball, strands: 300, radius: 0.01)",
+                source,
+            ),
+        )
+        .unwrap();
+    };
+    hair_scene(
+        "Procedural(style: Straight, strands: 200), options: (children: Some(per_guide: 40000, \
+         radius: 0.05, seed: 1))",
+    );
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &[],
+        &["children.per_guide", "40000", "GiB"],
+    );
+    hair_scene("Procedural(style: Straight, strands: 1000000, points_per_strand: 1000)");
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &[],
+        &[
+            "strands × points_per_strand",
+            "GiB",
+            "TRESS_MEMORY_LIMIT_GIB",
+        ],
+    );
+    // Thin curved curves split 1024-fold: 200 of them are 205 000 points, over 0.01 GiB.
+    let curve = "Shape \"curve\" \"point3 P\" [0 0 0 1 1 0 -1 1 0 0 0 0.1] \"float width\" 1e-6\n";
+    std::fs::write(d.join("thin.pbrt"), curve.repeat(200)).unwrap();
+    hair_scene("File(\"thin.pbrt\")");
+    let low = [("TRESS_MEMORY_LIMIT_GIB", "0.01")];
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &low,
+        &["thin.pbrt", "Shape \"curve\"", "GiB"],
+    );
+    let o = tress_within(&["info", "scene.ron"], d, &[], 60);
+    assert!(
+        o.status.success(),
+        "within the default limit: {}",
+        stderr(&o)
+    );
+    // The same limit holds for every generator: 4000 × 24 points is 0.01 GiB.
+    hair_scene("Procedural(style: Straight, strands: 4000)");
+    assert_fails_within(d, &["info", "scene.ron"], &low, &["strands", "GiB"]);
+    // A study reads only regular files too (`tress render` already refused this one).
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink("/dev/zero", d.join("zero.hair")).unwrap();
+        hair_scene("File(\"zero.hair\")");
+        let scene = std::fs::read_to_string(d.join("scene.ron")).unwrap();
+        std::fs::write(
+            d.join("study.ron"),
+            format!(
+                "(scenes: [Inline(name: \"z\", scene: {scene})], integrators: [Path()], \
+                 spp: [1], repetitions: 1, reference: Render(integrator: Path(), spp: 2))"
+            ),
+        )
+        .unwrap();
+        let o = tress_within(
+            &["study", "study.ron", "--out", "out", "--quiet"],
+            d,
+            &[],
+            60,
+        );
+        assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+        assert!(stderr(&o).contains("zero.hair") && stderr(&o).contains("not a regular file"));
+    }
+}
+
+/// Errors that used to mislead: pbrt `nan`/`inf` tokens, tiny non-zero directions called zero,
+/// nested placeholder defaults, and a `-D` name given twice.
+#[test]
+fn misleading_errors_are_named() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    let pbrt_scene = || {
+        std::fs::write(
+            d.join("scene.ron"),
+            SCENE.replace(
+                "Procedural(style: Ball, strands: 300, radius: 0.01)",
+                "File(\"h.pbrt\")",
+            ),
+        )
+        .unwrap();
+    };
+    pbrt_scene();
+    let curve = |p: &str, width: &str| {
+        format!("Shape \"curve\" \"point3 P\" [{p}] \"float width\" {width}\n")
+    };
+    let good = "0 0 0 0 1 0 0 2 0 0 3 0";
+    for (text, bad) in [
+        (curve("0 nan 0 0 1 0 0 2 0 0 3 0", "0.01"), "`nan`"),
+        (curve(good, "inf"), "`inf`"),
+        (curve(good, "[ -Infinity ]"), "`-Infinity`"),
+        (format!("Scale nan 1 1\n{}", curve(good, "0.01")), "`nan`"),
+        (
+            format!("Translate 1e999 0 0\n{}", curve(good, "0.01")),
+            "`1e999`",
+        ),
+    ] {
+        std::fs::write(d.join("h.pbrt"), &text).unwrap();
+        assert_fails_in(
+            d,
+            &["info", "scene.ron"],
+            &["h.pbrt", bad, "is not a finite number"],
+        );
+    }
+    // Any non-zero length is a direction: 1e-30 squares to zero in f32.
+    std::fs::write(
+        d.join("h.pbrt"),
+        format!("Rotate 30 1e-200 0 0\n{}", curve(good, "0.01")),
+    )
+    .unwrap();
+    let o = tress(&["info", "scene.ron"], d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for (from, to) in [
+        ("direction: (0, -1, -1)", "direction: (0, -1e-30, -1e-30)"),
+        (
+            "radius: 0.01)",
+            "radius: 0.01), options: (transform: (rotate: AxisAngle(axis: (1e-30, 0, 0), degrees: 30)))",
+        ),
+    ] {
+        std::fs::write(d.join("scene.ron"), SCENE.replace(from, to)).unwrap();
+        render_ok(&["--out", "o.exr", "--quiet"], d);
+    }
+    std::fs::write(d.join("dirs.csv"), "0.2,1e-30,0,0,0,0,1e-30\n").unwrap();
+    let o = tress(
+        &[
+            "bcsdf",
+            "eval",
+            "--model",
+            "Chiang(beta_m: 0.3, beta_n: 0.3)",
+            "--input",
+            "dirs.csv",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(String::from_utf8_lossy(&o.stdout).lines().count(), 2);
+    std::fs::write(
+        d.join("scene.ron"),
+        SCENE.replace("spp: 6", "spp: ${a:-${b:-1}}"),
+    )
+    .unwrap();
+    assert_fails_in(
+        d,
+        &["info", "scene.ron"],
+        &["scene.ron", "${a:-…}", "nested defaults are not supported"],
+    );
+    std::fs::write(d.join("scene.ron"), SCENE.replace("spp: 6", "spp: ${spp}")).unwrap();
+    for command in ["render", "info", "farm"] {
+        assert_fails_in(
+            d,
+            &[command, "scene.ron", "-D", "spp=4", "-D", "spp=8"],
+            &["-D spp is given twice", "spp=4", "spp=8"],
+        );
+    }
+}
+
+/// Geometry whose squared lengths overflow f32 is refused by name for every integrator: fibers
+/// wider than about 1e20 vanished under the path tracer while dual scattering refused them.
+#[test]
+fn geometry_beyond_what_f32_can_square_is_refused() {
+    let ball =
+        r#"Hair(source: Procedural(style: Ball, strands: 300, radius: 0.01), material: "hair")"#;
+    let sphere = r#"Sphere(center: (0, -2, 0), radius: 1, material: "grey")"#;
+    for (from, to, name) in [
+        (
+            ball,
+            ball.replace(
+                "radius: 0.01)",
+                "radius: 0.01), options: (radius_scale: 1e22)",
+            ),
+            "procedural ball hair",
+        ),
+        (
+            ball,
+            ball.replace(
+                "radius: 0.01)",
+                "radius: 0.01), options: (transform: (scale: 1e30))",
+            ),
+            "procedural ball hair",
+        ),
+        (
+            ball,
+            ball.replace(
+                "radius: 0.01)",
+                "radius: 0.01), options: (transform: (translate: (2e19, 0, 0)))",
+            ),
+            "procedural ball hair",
+        ),
+        (
+            sphere,
+            sphere.replace("radius: 1,", "radius: 1e20,"),
+            "sphere #0",
+        ),
+        (
+            sphere,
+            sphere.replace("(0, -2, 0)", "(0, -2e19, 0)"),
+            "sphere #0",
+        ),
+    ] {
+        let (dir, _) = scene_dir(&SCENE.replace(from, &to));
+        for integrator in ["path", "dual-mis"] {
+            assert_fails_in(
+                dir.path(),
+                &[
+                    "render",
+                    "scene.ron",
+                    "--integrator",
+                    integrator,
+                    "--out",
+                    "o.exr",
+                    "--quiet",
+                ],
+                &["scene.ron", name, "beyond the 1e18", "scale the scene down"],
+            );
+        }
+    }
+    // Meshes too, through their transform.
+    let (dir, _) = scene_dir(&SCENE.replace(
+        sphere,
+        r#"Mesh(file: "t.obj", material: "grey", transform: (scale: 1e19))"#,
+    ));
+    std::fs::write(
+        dir.path().join("t.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    )
+    .unwrap();
+    assert_fails_in(
+        dir.path(),
+        &["info", "scene.ron"],
+        &["t.obj", "beyond the 1e18"],
+    );
+}
+
+/// A closed surface seen from inside lets no light in: rays leaving a sphere inwards used to
+/// skip the whole sphere and reach the sky, and grazing ones to slip through Embree's f32
+/// roots (meshes skip only the flat triangle they leave).
+#[test]
+fn closed_surfaces_seen_from_inside_are_dark() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    std::fs::write(
+        d.join("box.obj"),
+        "v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\nv -1 1 1\n\
+         f 1 2 3 4\nf 5 8 7 6\nf 1 5 6 2\nf 2 6 7 3\nf 3 7 8 4\nf 4 8 5 1\n",
+    )
+    .unwrap();
+    for (object, camera) in [
+        (
+            r#"Sphere(center: (0, 0, 0), radius: 1, material: "grey")"#,
+            "(0, 0, 0)",
+        ),
+        (
+            r#"Sphere(center: (0, 0, 0), radius: 1, material: "grey")"#,
+            "(0.3, 0.5, -0.2)",
+        ),
+        (
+            r#"Sphere(center: (1e3, 0, 0), radius: 1e3, material: "grey")"#,
+            "(1, 0.1, 0)",
+        ),
+        (
+            r#"Mesh(file: "box.obj", material: "grey")"#,
+            "(0.2, 0.1, 0)",
+        ),
+    ] {
+        let scene = format!(
+            r#"(
+    camera: (look_from: {camera}, look_at: (0, 0, -5), fov: 60),
+    film: (width: 16, height: 16, spp: 16, seed: 3),
+    materials: {{ "grey": Diffuse(albedo: (0.8, 0.8, 0.8)) }},
+    objects: [{object}],
+    lights: [Sky(), Distant(direction: (0, -1, -1), irradiance: (2, 2, 2), angular_radius: 0.5)],
+)"#
+        );
+        std::fs::write(d.join("scene.ron"), scene).unwrap();
+        render_ok(&["--out", "inside.exr", "--quiet"], d);
+        let (image, _) = tress_core::image_io::read_exr(d.join("inside.exr")).unwrap();
+        let lit = image
+            .pixels
+            .iter()
+            .filter(|p| p.max_element() > 0.0)
+            .count();
+        assert_eq!(lit, 0, "{object} from {camera}: {lit} pixels see light");
+    }
+}
+
+/// A study whose reference EXR holds NaN pixels is refused as `tress diff` refuses it (it wrote
+/// NaN errors into summary.csv and report.md and exited 0).
+#[test]
+fn study_references_holding_nan_are_refused() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    let mut img = tress_core::Image::new(24, 20);
+    img.pixels
+        .iter_mut()
+        .for_each(|p| *p = tress_core::Rgb::splat(0.5));
+    img.pixels[7] = tress_core::Rgb::new(0.5, f32::NAN, 0.5);
+    tress_core::image_io::write_exr(d.join("ref.exr"), &img, &[]).unwrap();
+    img.pixels[7] = tress_core::Rgb::new(0.5, 0.5, f32::INFINITY);
+    tress_core::image_io::write_exr(d.join("inf.exr"), &img, &[]).unwrap();
+    for reference in ["ref.exr", "inf.exr"] {
+        std::fs::write(
+            d.join("study.ron"),
+            format!(
+                "(scenes: [File(\"scene.ron\")], integrators: [Path(max_depth: 3)], spp: [1], \
+                 repetitions: 1, reference: Exr(\"{reference}\"))"
+            ),
+        )
+        .unwrap();
+        let o = tress(&["study", "study.ron", "--out", "out", "--quiet"], d);
+        assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+        let err = stderr(&o);
+        assert!(
+            err.contains(reference) && err.contains("1 pixels are NaN or infinite"),
+            "{err}"
+        );
+        assert!(!d.join("out/summary.csv").exists() && !d.join("out/report.md").exists());
+    }
+}
+
+/// Every property of a PLY layout that tress reads is read as declared or refused by name: a
+/// list where one number is read was skipped silently (`x`, `radius`, strand ids: points at 0,
+/// the default radius, one strand) or read as NaN (counts, edges, float index lists).
+#[test]
+fn ply_properties_are_read_as_declared_or_refused() {
+    let (dir, _) = scene_dir(SCENE);
+    let ply = |vertex_props: &str, vertex_rows: &str, rest: &str| -> Vec<u8> {
+        format!(
+            "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
+             property float z\n{vertex_props}{rest}"
+        )
+        .replace("VERTS", vertex_rows)
+        .into_bytes()
+    };
+    let counts = "element strand 2\nproperty int vertex_count\nend_header\nVERTS2\n2\n";
+    let plain = "0 0 0\n0 1 0\n1 0 0\n1 1 0\n";
+    let with = |extra: &str| {
+        ["0 0 0", "0 1 0", "1 0 0", "1 1 0"]
+            .map(|v| format!("{v} {extra}\n"))
+            .concat()
+    };
+    let cases: Vec<(&str, Vec<u8>, &[&str])> = vec![
+        (
+            "x.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 4\nproperty list uchar float x\n\
+              property float y\nproperty float z\nelement strand 2\nproperty int vertex_count\n\
+              end_header\n1 0 0 0\n1 0 1 0\n1 1 0 0\n1 1 1 0\n2\n2\n"
+                .to_vec(),
+            &["`vertex` element's `x`", "a list of Float", "one number"],
+        ),
+        (
+            "radius.ply",
+            ply("property list uchar float radius\n", &with("1 0.1"), counts),
+            &["`radius`", "a list of Float", "one number"],
+        ),
+        (
+            "strand.ply",
+            ply(
+                "property list uchar int strand\nend_header\n",
+                &with("1 0"),
+                "VERTS",
+            ),
+            &["`strand`", "a list of Int", "one number"],
+        ),
+        (
+            "colour.ply",
+            ply(
+                "property list uchar uchar red\nproperty uchar green\nproperty uchar blue\n",
+                &with("1 9 9 9"),
+                counts,
+            ),
+            &["`red`", "a list of UChar", "one number"],
+        ),
+        (
+            "count.ply",
+            ply(
+                "",
+                plain,
+                "element strand 2\nproperty list uchar int vertex_count\nend_header\nVERTS1 2\n1 2\n",
+            ),
+            &["`strand` element's `vertex_count`", "one number"],
+        ),
+        (
+            "indices.ply",
+            ply(
+                "",
+                plain,
+                "element strand 2\nproperty list uchar float vertex_indices\nend_header\nVERTS2 0 1\n2 2 3\n",
+            ),
+            &["`vertex_indices`", "a list of Float", "a list of integers"],
+        ),
+        (
+            "edge.ply",
+            ply(
+                "",
+                plain,
+                "element edge 2\nproperty list uchar int vertex1\nproperty int vertex2\nend_header\nVERTS1 0 1\n1 2 3\n",
+            ),
+            &["`edge` element's `vertex1`", "one number"],
+        ),
+    ];
+    assert_bad_hair_files(dir.path(), cases);
+    // The same files with the types tress reads load.
+    let good = ply("property float radius\n", &with("0.1"), counts);
+    std::fs::write(dir.path().join("good.ply"), good).unwrap();
+    std::fs::write(
+        dir.path().join("scene.ron"),
+        SCENE.replace(
+            "Procedural(style: Ball, strands: 300, radius: 0.01)",
+            "File(\"good.ply\")",
+        ),
+    )
+    .unwrap();
+    let o = tress(&["info", "scene.ron"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
 }

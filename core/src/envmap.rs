@@ -182,12 +182,15 @@ impl EnvironmentMap {
                 *p = p.max(Rgb::ZERO);
             }
             let scaled = *p * scale;
-            // Finite texels can overflow once scaled (3e38 × 10): refuse, or the image is black.
-            if !scaled.is_finite() {
+            // Finite texels can overflow once scaled (3e38 × 10): refuse, or the image is black;
+            // beyond the lights' limit, paths multiplying them overflow.
+            if !(scaled.is_finite() && scaled.max_element() <= crate::light::MAX_LIGHT) {
                 return Err(invalid(format!(
-                    "pixel ({}, {}) = {p} times scale {scale} overflows f32",
+                    "pixel ({}, {}) = {p} times scale {scale} is beyond {:e} (a path's \
+                     throughput times it overflows f32)",
                     k % w,
-                    k / w
+                    k / w,
+                    crate::light::MAX_LIGHT
                 )));
             }
             *p = scaled;

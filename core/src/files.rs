@@ -1,21 +1,42 @@
-//! Reading input files: regular files only, and no more than their size when opened.
+//! Reading input files: regular files only, and no more than their size when opened. Every
+//! reader of tress's inputs (scenes, hair, meshes, images, studies, pieces) opens them here.
 
+use std::fs::{File, OpenOptions};
 use std::io::{Error, ErrorKind, Read};
 use std::path::Path;
 
-/// The whole of a regular file. Devices, FIFOs and directories are refused (a symlink to
-/// `/dev/zero` given as a hair file grew the process to many GB), and a file growing while it
-/// is read is read up to the size it had when opened.
-pub fn read_regular(path: &Path) -> std::io::Result<Vec<u8>> {
-    let file = std::fs::File::open(path)?;
-    let meta = file.metadata()?;
-    if !meta.is_file() {
-        return Err(Error::new(
-            ErrorKind::InvalidInput,
-            "not a regular file (a directory, device or pipe)",
-        ));
+fn not_regular() -> Error {
+    Error::new(
+        ErrorKind::InvalidInput,
+        "not a regular file (a directory, device or pipe)",
+    )
+}
+
+/// `path` opened for reading if it is a regular file. Devices, FIFOs and directories are
+/// refused without blocking: opening a FIFO waits for a writer, which may never come.
+pub fn open_regular(path: &Path) -> std::io::Result<File> {
+    if !std::fs::metadata(path)?.is_file() {
+        return Err(not_regular());
     }
-    let len = meta.len();
+    let mut options = OpenOptions::new();
+    options.read(true);
+    // Should the path become a FIFO after the check, the open still returns at once (the flag
+    // changes nothing for a regular file) and the check below refuses it.
+    #[cfg(unix)]
+    std::os::unix::fs::OpenOptionsExt::custom_flags(&mut options, libc::O_NONBLOCK);
+    let file = options.open(path)?;
+    if !file.metadata()?.is_file() {
+        return Err(not_regular());
+    }
+    Ok(file)
+}
+
+/// The whole of a regular file ([`open_regular`]). A symlink to `/dev/zero` given as a hair
+/// file grew the process to many GB; a file growing while it is read is read up to the size it
+/// had when opened.
+pub fn read_regular(path: &Path) -> std::io::Result<Vec<u8>> {
+    let file = open_regular(path)?;
+    let len = file.metadata()?.len();
     let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
     file.take(len).read_to_end(&mut bytes)?;
     Ok(bytes)
@@ -43,6 +64,14 @@ mod tests {
             let link = dir.path().join("zero.hair");
             std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
             let err = read_regular(&link).unwrap_err();
+            assert!(err.to_string().contains("not a regular file"), "{err}");
+            let fifo = dir.path().join("fifo.hair");
+            let made = std::process::Command::new("mkfifo")
+                .arg(&fifo)
+                .status()
+                .unwrap();
+            assert!(made.success());
+            let err = open_regular(&fifo).unwrap_err();
             assert!(err.to_string().contains("not a regular file"), "{err}");
         }
     }

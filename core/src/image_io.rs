@@ -245,9 +245,9 @@ pub fn read_rgb(path: impl AsRef<Path>) -> Result<(u32, u32, Vec<Rgb>), ImageErr
 /// `Display`), sorted by name; matrices are left out ([`read_exr_attributes`] has them).
 pub fn read_exr(path: impl AsRef<Path>) -> Result<(Image, Vec<(String, String)>), ImageError> {
     let path = path.as_ref();
-    check_exists(path)?;
     // Header first: it names the compression for a precise error and bounds the allocation.
-    let meta = ex::MetaData::read_from_file(path, false).map_err(|e| exr_read_error(path, e))?;
+    let meta = ex::MetaData::read_from_unbuffered(open(path)?, false)
+        .map_err(|e| exr_read_error(path, e))?;
     let Some(header) = meta.headers.iter().find(|h| has_rgb(h)) else {
         let channels: Vec<String> = meta
             .headers
@@ -278,7 +278,7 @@ pub fn read_exr(path: impl AsRef<Path>) -> Result<(Image, Vec<(String, String)>)
         )
         .first_valid_layer()
         .all_attributes()
-        .from_file(path)
+        .from_unbuffered(open(path)?)
         .map_err(|e| match e {
             exr::error::Error::NotSupported(reason) if reason.contains("compression") => {
                 ImageError::UnsupportedCompression {
@@ -344,8 +344,8 @@ pub fn read_exr(path: impl AsRef<Path>) -> Result<(Image, Vec<(String, String)>)
 /// [`Attribute`] holds.
 pub fn read_exr_attributes(path: impl AsRef<Path>) -> Result<Vec<(String, Attribute)>, ImageError> {
     let path = path.as_ref();
-    check_exists(path)?;
-    let meta = ex::MetaData::read_from_file(path, false).map_err(|e| exr_read_error(path, e))?;
+    let meta = ex::MetaData::read_from_unbuffered(open(path)?, false)
+        .map_err(|e| exr_read_error(path, e))?;
     let Some(header) = meta.headers.first() else {
         return Ok(Vec::new());
     };
@@ -774,12 +774,7 @@ fn write_atomically(
 
 fn read_hdr(path: &Path) -> Result<(u32, u32, Vec<Rgb>), ImageError> {
     use image::ImageDecoder;
-    check_exists(path)?;
-    let file = File::open(path).map_err(|source| ImageError::Io {
-        path: path.to_owned(),
-        action: "open",
-        source,
-    })?;
+    let file = open(path)?;
     let decoder = image::codecs::hdr::HdrDecoder::new(BufReader::new(file))
         .map_err(|e| hdr_error(path, e))?;
     let (w, h) = decoder.dimensions();
@@ -828,7 +823,7 @@ fn hdr_error(path: &Path, e: image::ImageError) -> ImageError {
 /// `-Y h +X w` (e.g. `+Y 512 -X 1024`), which the decoder reports only as a bad header.
 fn hdr_nonstandard_orientation(path: &Path) -> Option<String> {
     let mut head = Vec::new();
-    File::open(path)
+    crate::files::open_regular(path)
         .ok()?
         .take(64 * 1024)
         .read_to_end(&mut head)
@@ -908,18 +903,10 @@ fn extension(path: &Path) -> String {
         .unwrap_or_default()
 }
 
-/// The file exists and is a regular file (a device such as /dev/zero would be read forever).
-fn check_exists(path: &Path) -> Result<(), ImageError> {
-    match std::fs::metadata(path) {
-        Ok(m) if m.is_file() => Ok(()),
-        Ok(_) => Err(ImageError::Io {
-            path: path.to_owned(),
-            action: "read",
-            source: std::io::Error::new(
-                std::io::ErrorKind::InvalidInput,
-                "not a regular file (a directory, device or pipe)",
-            ),
-        }),
+/// `path` opened through [`crate::files::open_regular`], with a missing file named as such.
+fn open(path: &Path) -> Result<File, ImageError> {
+    match crate::files::open_regular(path) {
+        Ok(file) => Ok(file),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(ImageError::NotFound {
             path: path.to_owned(),
         }),

@@ -69,16 +69,18 @@ pub enum LightError {
         /// Its value.
         value: Rgb,
     },
-    /// A direction that is zero, not finite, or overflows when normalised.
-    #[error("direction {0} must be finite, non-zero and normalisable")]
+    /// A direction that is zero or not finite.
+    #[error("direction {0} must be finite and non-zero")]
     Direction(Vec3),
     /// A sun disc outside [0, 90) degrees.
     #[error("angular_radius = {0} must lie in [0, 90) degrees")]
     AngularRadius(f32),
-    /// A finite irradiance spread over so small a disc that its radiance overflows f32.
+    /// A finite irradiance spread over so small a disc that its radiance overflows f32 or
+    /// exceeds [`MAX_LIGHT`].
     #[error(
         "irradiance {irradiance} from a disc of {angular_radius_deg}° is a radiance of \
-         {radiance}, beyond f32: lower the irradiance or widen the disc"
+         {radiance}, beyond {max:e}: lower the irradiance or widen the disc",
+        max = MAX_LIGHT
     )]
     Overflow {
         /// The irradiance asked for.
@@ -88,17 +90,35 @@ pub enum LightError {
         /// The radiance it would take.
         radiance: Rgb,
     },
+    /// A radiance, irradiance or intensity beyond [`MAX_LIGHT`].
+    #[error(
+        "{name} {value} is beyond {max:e}: a path's throughput times it overflows f32 (the \
+         samples were dropped and the image came out biased dark); scale the lights down",
+        max = MAX_LIGHT
+    )]
+    TooBright {
+        /// Which quantity.
+        name: &'static str,
+        /// Its value.
+        value: Rgb,
+    },
     /// A point light position that is not finite.
     #[error("position {0} must be finite")]
     Position(Vec3),
 }
 
+/// The brightest radiance, irradiance or intensity a light may have: paths multiply it by
+/// throughputs well above 1 (BSDF over pdf), and a product beyond f32 is a dropped sample.
+pub const MAX_LIGHT: f32 = 1e30;
+
 fn non_negative(name: &'static str, value: Rgb) -> Result<Rgb, LightError> {
-    if value.is_finite() && value.min_element() >= 0.0 {
-        Ok(value)
-    } else {
-        Err(LightError::Negative { name, value })
+    if !(value.is_finite() && value.min_element() >= 0.0) {
+        return Err(LightError::Negative { name, value });
     }
+    if value.max_element() > MAX_LIGHT {
+        return Err(LightError::TooBright { name, value });
+    }
+    Ok(value)
 }
 
 impl Light {
@@ -119,10 +139,7 @@ impl Light {
         angular_radius_deg: f32,
     ) -> Result<Self, LightError> {
         let irradiance = non_negative("irradiance", irradiance)?;
-        // `try_normalize` also refuses vectors whose length overflows (3e38, 3e38, 0).
-        let direction = direction
-            .try_normalize()
-            .ok_or(LightError::Direction(direction))?;
+        let direction = crate::math::unit(direction).ok_or(LightError::Direction(direction))?;
         if !(0.0..90.0).contains(&angular_radius_deg) {
             return Err(LightError::AngularRadius(angular_radius_deg));
         }
@@ -139,7 +156,7 @@ impl Light {
         } else {
             irradiance
         };
-        if !radiance.is_finite() {
+        if !(radiance.is_finite() && radiance.max_element() <= MAX_LIGHT) {
             return Err(LightError::Overflow {
                 irradiance,
                 angular_radius_deg,

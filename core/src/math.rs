@@ -3,6 +3,16 @@
 pub use glam::{Mat3, Mat4, Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 
+/// `v` scaled to unit length, for every finite non-zero `v`: normalised in f64, where neither a
+/// tiny length (1e-30, whose square is 0 in f32) nor a huge one (3e38, whose square overflows)
+/// is lost. `None` for zero or non-finite vectors.
+pub fn unit(v: Vec3) -> Option<Vec3> {
+    if !v.is_finite() {
+        return None;
+    }
+    v.as_dvec3().try_normalize().map(|d| d.as_vec3())
+}
+
 /// Linear RGB radiance or reflectance. Plain `Vec3` so all of glam's arithmetic applies.
 pub type Rgb = Vec3;
 

@@ -10,7 +10,20 @@ use serde_json::{Map, Number, Value};
 /// and `None`; path-like objects become their path, NumPy arrays and scalars their
 /// `tolist()`. `at` names where `obj` sits (`objects[0].radius`) for the error.
 pub fn to_json(obj: &Bound<'_, PyAny>, at: &str) -> PyResult<Value> {
+    nested(obj, at, 0)
+}
+
+/// Deeper than any scene is written: a dict that contains itself, or a list nested 100 000
+/// deep, overflowed the stack and killed the interpreter.
+const MAX_DEPTH: usize = 64;
+
+fn nested(obj: &Bound<'_, PyAny>, at: &str, depth: usize) -> PyResult<Value> {
     let here = |what: &str| format!("{}: {what}", if at.is_empty() { "scene" } else { at });
+    if depth > MAX_DEPTH {
+        return Err(PyValueError::new_err(here(&format!(
+            "nested more than {MAX_DEPTH} levels deep (does it contain itself?)"
+        ))));
+    }
     if obj.is_none() {
         return Ok(Value::Null);
     }
@@ -49,7 +62,7 @@ pub fn to_json(obj: &Bound<'_, PyAny>, at: &str) -> PyResult<Value> {
             } else {
                 format!("{at}.{key}")
             };
-            map.insert(key, to_json(&v, &inner)?);
+            map.insert(key, nested(&v, &inner, depth + 1)?);
         }
         return Ok(Value::Object(map));
     }
@@ -62,20 +75,20 @@ pub fn to_json(obj: &Bound<'_, PyAny>, at: &str) -> PyResult<Value> {
         return items
             .iter()
             .enumerate()
-            .map(|(i, v)| to_json(v, &format!("{at}[{i}]")))
+            .map(|(i, v)| nested(v, &format!("{at}[{i}]"), depth + 1))
             .collect::<PyResult<Vec<_>>>()
             .map(Value::Array);
     }
     let py = obj.py();
     if obj.is_instance(&py.import("os")?.getattr("PathLike")?)? {
         let path = py.import("os")?.call_method1("fspath", (obj,))?;
-        return to_json(&path, at);
+        return nested(&path, at, depth + 1);
     }
     // NumPy arrays and scalars (a `numpy.float32` is not a Python float).
     if obj.hasattr("tolist")? {
         let plain = obj.call_method0("tolist")?;
         if !plain.is(obj) {
-            return to_json(&plain, at);
+            return nested(&plain, at, depth + 1);
         }
     }
     Err(PyTypeError::new_err(here(&format!(

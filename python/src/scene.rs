@@ -208,7 +208,9 @@ impl Scene {
             None => self.desc.integrator.clone(),
         };
         let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads.unwrap_or(0))
+            .num_threads(
+                tress_cli::check_threads(threads.unwrap_or(0)).map_err(PyValueError::new_err)?,
+            )
             .build()
             .map_err(|e| PyRuntimeError::new_err(format!("creating the thread pool: {e}")))?;
         let scene = &self.built.scene;

@@ -1,6 +1,7 @@
 //! `tress.study` (its Rust half): runs a study as `tress study` does.
 
 use crate::to_py_err;
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
@@ -23,7 +24,10 @@ pub fn run_study<'py>(
         study: path,
         quick,
         out,
-        threads,
+        threads: threads
+            .map(tress_cli::check_threads)
+            .transpose()
+            .map_err(PyValueError::new_err)?,
         quiet: !verbose,
     };
     let outputs = py

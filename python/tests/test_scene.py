@@ -163,11 +163,33 @@ def test_values_json_cannot_hold_are_refused(scene_dict):
         tress.Scene.from_dict(scene_dict)
 
 
+def test_self_containing_and_very_deep_values_are_refused(scene_dict):
+    # Both overflowed the stack and killed the interpreter.
+    scene_dict["camera"]["look_from"] = scene_dict
+    with pytest.raises(ValueError, match=r"camera\.look_from.*nested more than 64 levels"):
+        tress.Scene.from_dict(scene_dict)
+    deep = []
+    for _ in range(100_000):
+        deep = [deep]
+    scene_dict["camera"]["look_from"] = deep
+    with pytest.raises(ValueError, match="nested more than 64 levels"):
+        tress.Scene.from_dict(scene_dict)
+    # A tuple holding itself through a list: the bound is on depth, whatever the container.
+    loop = [1.0]
+    loop.append((loop,))
+    scene_dict["film"] = {"width": loop}
+    with pytest.raises(ValueError, match="nested more than 64 levels"):
+        tress.Scene.from_dict(scene_dict)
+
+
 def test_bad_render_settings_raise_valueerror(scene):
     with pytest.raises(ValueError, match="spp must be at least 1"):
         scene.render(spp=0)
     with pytest.raises(ValueError, match="crop window"):
         scene.render(crop=(0, 0, 17, 16))
+    # Thousands of threads on a tiny image crawled.
+    with pytest.raises(ValueError, match="100000 worker threads: at most"):
+        scene.render(threads=100000)
     with pytest.raises(ValueError, match="unknown integrator 'bogus'.*path, dual-uniform"):
         scene.render(integrator="bogus")
 

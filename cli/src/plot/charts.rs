@@ -38,10 +38,10 @@ pub fn write_charts(stem: &Path, charts: &[Chart], panel_width: u32, height: u32
         check(chart).map_err(|e| anyhow!("chart '{}': {e}", chart.title))?;
     }
     let size = (panel_width * charts.len() as u32, height);
-    let svg = stem.with_extension("svg");
-    // Also creates the folder the SVG goes to.
-    write_bitmap(&stem.with_extension("png"), size, |root| draw(root, charts))?;
-
+    let (png, svg) = (stem.with_extension("png"), stem.with_extension("svg"));
+    if let Some(dir) = stem.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     let mut svg_text = String::new();
     {
         let root =
@@ -50,7 +50,20 @@ pub fn write_charts(stem: &Path, charts: &[Chart], panel_width: u32, height: u32
         root.present()
             .map_err(|e| anyhow!("drawing {}: {e}", svg.display()))?;
     }
-    crate::atomic_write(&svg, svg_text.as_bytes())
+    // Both or neither: a PNG left without its SVG looked like a finished plot.
+    crate::write_together(vec![
+        (
+            &png,
+            Box::new(|p: &Path| write_bitmap(p, size, |root| draw(root, charts))),
+        ),
+        (
+            &svg,
+            Box::new(|p: &Path| {
+                std::fs::write(p, svg_text.as_bytes())
+                    .with_context(|| format!("writing {}", svg.display()))
+            }),
+        ),
+    ])
 }
 
 /// The chart's bands match their series and are labelled.

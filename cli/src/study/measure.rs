@@ -206,6 +206,13 @@ pub(super) fn execute(
                         film.height
                     );
                 }
+                crate::diff::check_finite(&img, &file).with_context(|| {
+                    format!(
+                        "{}: reference of scene '{}'",
+                        plan.study_path.display(),
+                        scene.name
+                    )
+                })?;
                 img
             }
         };

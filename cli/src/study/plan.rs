@@ -358,14 +358,11 @@ impl Plan {
             keyed.integrator = IntegratorDesc::default();
             // The files' contents and tress's version too: replacing an environment map (or
             // updating tress) must not reuse renders of the old one.
-            let mut files = String::new();
-            for f in desc.referenced_files(&base) {
-                let bytes = std::fs::read(&f)
-                    .map_err(|e| here(format!("scene '{name}': {}: {e}", f.display())))?;
-                files.push_str(&format!("{:016x}|", bytes_hash(&bytes)));
-            }
+            let files = desc
+                .files_hash(&base)
+                .map_err(|e| here(format!("scene '{name}': {e}")))?;
             let content = str_hash(&format!(
-                "{}|{}|{files}|tress {}",
+                "{}|{}|{files:016x}|tress {}",
                 ron::to_string(&keyed).unwrap_or_else(|_| format!("{keyed:?}")),
                 base.display(),
                 env!("CARGO_PKG_VERSION")
