@@ -120,6 +120,7 @@ fn study_end_to_end_resumable_and_deterministic() {
         "seed",
         "cpu_s",
         "wall_s",
+        "precompute_s",
         "rays",
         "reference",
     ] {
@@ -255,7 +256,11 @@ fn study_end_to_end_resumable_and_deterministic() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(renders.join("path-2_00016spp_rep01.exr").exists());
     let (_, rows_again) = read_csv(&out.join("results.csv"));
-    let timings = [column(&header, "cpu_s"), column(&header, "wall_s")];
+    let timings = [
+        column(&header, "cpu_s"),
+        column(&header, "wall_s"),
+        column(&header, "precompute_s"),
+    ];
     let strip = |rows: &[Vec<String>]| -> Vec<Vec<String>> {
         rows.iter()
             .map(|r| {

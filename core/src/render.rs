@@ -779,7 +779,12 @@ pub fn render_outputs(
     let integrator = prepared
         .as_ref()
         .map_or(integrator, |p| p.integrator.as_ref());
-    let precompute = start.elapsed();
+    // Nothing to report for integrators without a per-film precomputation.
+    let precompute = if prepared.is_some() {
+        start.elapsed()
+    } else {
+        Duration::ZERO
+    };
     let window = film.window();
     let [x0, y0, x1, y1] = window;
     let tiles: Vec<[u32; 4]> = (y0..y1)
