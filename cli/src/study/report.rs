@@ -327,7 +327,8 @@ pub(super) fn write_report(
             let shortest = precompute.iter().copied().fold(f64::INFINITY, f64::min);
             let _ = write!(
                 s,
-                "; its per-film precomputation took {shortest:.3}–{longest:.3} s of wall time                  per render, included in its render times"
+                "; its per-film precomputation took {shortest:.3}–{longest:.3} s of wall time \
+                 per render, included in its render times"
             );
         }
         s.push('\n');
