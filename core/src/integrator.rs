@@ -92,6 +92,30 @@ pub fn scatter(
     Some((sp.spawn(s.wi), s.pdf))
 }
 
+/// Russian roulette after a path's scattering event number `depth` (from 0), from `rr_depth`
+/// on: a path whose `throughput` has fallen below 1 survives with that probability (at most
+/// 0.95) and is reweighted. Returns the probability the throughput was divided by (1 without
+/// roulette), or `None` when the path ends. Only paths that have lost energy are rouletted:
+/// white hair keeps a throughput of ~1 over hundreds of bounces, and rouletting it anyway would
+/// make the surviving paths' weights grow geometrically (heavy-tailed noise).
+pub fn roulette(
+    depth: u32,
+    rr_depth: u32,
+    throughput: &mut Rgb,
+    sampler: &mut Sampler,
+) -> Option<f32> {
+    let max_throughput = throughput.max_element();
+    if depth + 1 < rr_depth || max_throughput >= 1.0 {
+        return Some(1.0);
+    }
+    let survive = max_throughput.min(0.95);
+    if sampler.next_1d() >= survive {
+        return None;
+    }
+    *throughput /= survive;
+    Some(survive)
+}
+
 /// Next-event estimation at `sp` toward `light`, chosen with probability `select_pdf`: what
 /// it adds to a path of weight `throughput`, MIS-weighted (power heuristic) against sampling
 /// the scattering function, which cannot find delta lights (their weight is 1). Zero when the

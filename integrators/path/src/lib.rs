@@ -10,7 +10,7 @@
 
 use serde::{Deserialize, Serialize};
 use tress_core::integrator::BuildError;
-use tress_core::integrator::{direct_light, escaped_light, scatter};
+use tress_core::integrator::{direct_light, escaped_light, roulette, scatter};
 use tress_core::prepare::Preparation;
 use tress_core::{Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint};
 
@@ -105,16 +105,8 @@ impl Integrator for PathTracer {
             scatter_pdf = Some(pdf);
             ray = next;
 
-            // Roulette only paths that have lost energy: white hair keeps a throughput of ~1
-            // over hundreds of bounces, and rouletting it anyway would make the surviving
-            // paths' weights grow geometrically (heavy-tailed noise).
-            let max_throughput = throughput.max_element();
-            if depth + 1 >= self.settings.rr_depth && max_throughput < 1.0 {
-                let survive = max_throughput.min(0.95);
-                if sampler.next_1d() >= survive {
-                    break;
-                }
-                throughput /= survive;
+            if roulette(depth, self.settings.rr_depth, &mut throughput, sampler).is_none() {
+                break;
             }
         }
         radiance

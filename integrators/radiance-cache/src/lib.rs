@@ -30,7 +30,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 use tress_core::film::FilmSettings;
-use tress_core::integrator::{direct_light, escaped_light, BuildError, FilmIntegrator};
+use tress_core::integrator::{
+    direct_light, escaped_light, roulette, scatter, BuildError, FilmIntegrator,
+};
 use tress_core::math::Vec3;
 use tress_core::prepare::Preparation;
 use tress_core::rng::hash_words;
@@ -382,34 +384,21 @@ fn training_path(
             radiance: direct,
             weight: Rgb::ZERO,
         };
-        let Some(s) = sp
-            .sample(sampler.next_4d())
-            .filter(|s| s.pdf > 0.0 && s.f != Rgb::ZERO)
-        else {
+        let mut weight = Rgb::ONE;
+        let Some((next, pdf)) = scatter(&sp, sampler, &mut weight) else {
             vertices.push(vertex);
             break;
         };
-        vertex.weight = s.f / s.pdf;
-        throughput *= vertex.weight;
-        // The path tracer's roulette: only paths that have lost energy.
-        let max_throughput = throughput.max_element();
-        let mut survives = true;
-        if depth + 1 >= settings.rr_depth && max_throughput < 1.0 {
-            let survive = max_throughput.min(0.95);
-            if sampler.next_1d() >= survive {
-                survives = false;
-            } else {
-                throughput /= survive;
-                vertex.weight /= survive;
-            }
-        }
-        ray = sp.spawn(s.wi);
-        scatter_pdf = s.pdf;
-        vertices.push(vertex);
-        if !survives {
-            vertices.last_mut().expect("just pushed").weight = Rgb::ZERO;
+        throughput *= weight;
+        // The path tracer's roulette; a path it ends keeps this vertex's direct light only.
+        let Some(survive) = roulette(depth, settings.rr_depth, &mut throughput, sampler) else {
+            vertices.push(vertex);
             break;
-        }
+        };
+        vertex.weight = weight / survive;
+        vertices.push(vertex);
+        ray = next;
+        scatter_pdf = pdf;
     }
     let mut after = escaped;
     for v in vertices.iter_mut().rev() {
@@ -456,22 +445,13 @@ fn trace(
         if let Some((light, select_pdf)) = scene.lights.choose(u_select) {
             radiance += direct_light(scene, &sp, light, u_light, select_pdf, throughput);
         }
-        let Some(s) = sp
-            .sample(sampler.next_4d())
-            .filter(|s| s.pdf > 0.0 && s.f != Rgb::ZERO)
-        else {
+        let Some((next, pdf)) = scatter(&sp, sampler, &mut throughput) else {
             break;
         };
-        throughput *= s.f / s.pdf;
-        scatter_pdf = Some(s.pdf);
-        ray = sp.spawn(s.wi);
-        let max_throughput = throughput.max_element();
-        if depth + 1 >= settings.rr_depth && max_throughput < 1.0 {
-            let survive = max_throughput.min(0.95);
-            if sampler.next_1d() >= survive {
-                break;
-            }
-            throughput /= survive;
+        scatter_pdf = Some(pdf);
+        ray = next;
+        if roulette(depth, settings.rr_depth, &mut throughput, sampler).is_none() {
+            break;
         }
     }
     radiance
