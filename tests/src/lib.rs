@@ -111,3 +111,16 @@ pub fn mean_and_standard_error(values: &[f64]) -> (f64, f64) {
     let (mean, var) = mean_and_variance(values);
     (mean, (var / values.len() as f64).sqrt())
 }
+
+/// Asserts that two images of one size hold the same bits in every pixel (`what` names the
+/// comparison in the message).
+pub fn assert_bit_identical(a: &tress_core::Image, b: &tress_core::Image, what: &str) {
+    assert_eq!(a.pixels.len(), b.pixels.len());
+    for (i, (p, q)) in a.pixels.iter().zip(&b.pixels).enumerate() {
+        assert_eq!(
+            p.to_array().map(f32::to_bits),
+            q.to_array().map(f32::to_bits),
+            "{what}: pixel {i}"
+        );
+    }
+}

@@ -8,7 +8,7 @@ use tress_core::render::render;
 use tress_core::Scene;
 use tress_materials::pigment::Pigment;
 use tress_materials::HairModel;
-use tress_tests::{film, hair_ball_scene, on_threads};
+use tress_tests::{assert_bit_identical, film, hair_ball_scene, on_threads};
 
 /// Dark hair under a sky so dim (scale 1e-36) that most radiance values are denormal floats, so
 /// any thread computing in another floating-point mode (flush-to-zero) shows in the bits.
@@ -45,17 +45,6 @@ fn render_with(
         let integrator = integrator.build(&scene, &Default::default()).unwrap();
         render(&scene, integrator.as_ref(), film, &|_| {}).image
     })
-}
-
-fn assert_bit_identical(a: &tress_core::Image, b: &tress_core::Image, what: &str) {
-    assert_eq!(a.pixels.len(), b.pixels.len());
-    for (i, (p, q)) in a.pixels.iter().zip(&b.pixels).enumerate() {
-        assert_eq!(
-            p.to_array().map(f32::to_bits),
-            q.to_array().map(f32::to_bits),
-            "{what}: pixel {i}"
-        );
-    }
 }
 
 #[test]

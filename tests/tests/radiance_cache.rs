@@ -10,7 +10,7 @@ use tress_materials::pigment::{Pigment, NO_TINT};
 use tress_materials::HairModel;
 use tress_path::{PathSettings, PathTracer};
 use tress_radiance_cache::{CacheSettings, RadianceCacheIntegrator};
-use tress_tests::{film, hair_ball_scene, white_environment};
+use tress_tests::{assert_bit_identical, film, hair_ball_scene, white_environment};
 
 fn chiang(eumelanin: f32, beta: f32) -> Arc<dyn tress_core::Bcsdf> {
     HairModel::Chiang(tress_materials::chiang::Params {
@@ -61,13 +61,11 @@ fn tracing_every_vertex_is_the_path_tracer_bit_for_bit() {
         &f,
     );
     assert!(expected.mean() > 0.0);
-    for (i, (a, b)) in expected.pixels.iter().zip(&traced.pixels).enumerate() {
-        assert_eq!(
-            a.to_array().map(f32::to_bits),
-            b.to_array().map(f32::to_bits),
-            "pixel {i}"
-        );
-    }
+    assert_bit_identical(
+        &expected,
+        &traced,
+        "path tracer against every vertex traced",
+    );
 }
 
 /// Non-absorbing fibers under a white environment: every radiance in the scene is 1, so every
@@ -115,16 +113,12 @@ fn light_hair_converges_to_the_path_tracer() {
     )
     .image;
     let cached = cache_render(&scene, CacheSettings::default(), &film(32, 32, 64, 4));
-    let channel_means = |image: &Image| {
-        let n = image.pixels.len() as f32;
-        image.pixels.iter().fold(glam::Vec3::ZERO, |a, p| a + *p) / n
-    };
-    let (p, c) = (channel_means(&path), channel_means(&cached));
-    eprintln!("path {p}, radiance cache {c}, ratio {}", c / p);
+    let (p, c) = (path.mean_rgb(), cached.mean_rgb());
+    eprintln!("path {p:?}, radiance cache {c:?}");
     for k in 0..3 {
         assert!(
             (c[k] / p[k] - 1.0).abs() < 0.03,
-            "channel {k}: path {p}, cache {c}"
+            "channel {k}: path {p:?}, cache {c:?}"
         );
     }
 }

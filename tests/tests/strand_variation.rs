@@ -313,16 +313,22 @@ fn varied_renders_differ_from_plain_ones_and_not_between_thread_counts() {
     }
 }
 
+/// The path-traced ball's mean with `variation`, and without any.
+fn path_means(variation: &str) -> (f64, f64) {
+    let path = IntegratorDesc::all_for_tests().remove(0);
+    assert_eq!(path.name(), "path");
+    let varied = render_scene(&ball_scene(variation), &path, 2, 16).mean();
+    let plain = render_scene(&ball_scene(""), &path, 2, 16).mean();
+    (varied, plain)
+}
+
 #[test]
 fn lighter_tips_make_lighter_hair() {
     // The melanin falls linearly from the root to a tenth at the tip: the path-traced hair is
     // clearly brighter (measured +12% at these settings; over seeds 3–6 either mean moved by
     // under 1%).
-    let path = IntegratorDesc::all_for_tests().remove(0);
-    assert_eq!(path.name(), "path");
-    let lighter = ball_scene("variation: Some(gradient: Some(tip: Scale(0.1), start: 0.0))");
-    let varied = render_scene(&lighter, &path, 2, 16).mean();
-    let plain = render_scene(&ball_scene(""), &path, 2, 16).mean();
+    let (varied, plain) =
+        path_means("variation: Some(gradient: Some(tip: Scale(0.1), start: 0.0))");
     assert!(varied > 1.06 * plain, "varied {varied} vs plain {plain}");
 }
 
@@ -331,11 +337,8 @@ fn darker_roots_make_darker_hair() {
     // The inner half of every strand darkens, up to 4 × the melanin at the root: the
     // path-traced ball is darker (measured −3.7% at these settings; the roots lie mostly
     // under the outer hair, and a seed moves either mean by under 1%).
-    let path = IntegratorDesc::all_for_tests().remove(0);
-    assert_eq!(path.name(), "path");
-    let darker = ball_scene("variation: Some(darken_roots: Some(amount: 3.0, length: 0.5))");
-    let varied = render_scene(&darker, &path, 2, 16).mean();
-    let plain = render_scene(&ball_scene(""), &path, 2, 16).mean();
+    let (varied, plain) =
+        path_means("variation: Some(darken_roots: Some(amount: 3.0, length: 0.5))");
     assert!(varied < 0.98 * plain, "varied {varied} vs plain {plain}");
 }
 
