@@ -27,13 +27,18 @@ fn assert_fails_in(dir: &Path, args: &[&str], expect: &[&str]) {
     assert_eq!(files_in(dir), before, "{args:?}: output left behind");
 }
 
-/// A scene whose only hair object is `source`, rendered and inspected: both must fail.
-fn assert_bad_hair(dir: &Path, source: &str, expect: &[&str]) {
+/// Writes `dir/scene.ron`: [`SCENE`] with `source` as its hair.
+fn write_hair_scene(dir: &Path, source: &str) {
     let text = SCENE.replace(
         "Procedural(style: Ball, strands: 300, radius: 0.01)",
         source,
     );
     std::fs::write(dir.join("scene.ron"), text).unwrap();
+}
+
+/// A scene whose only hair object is `source`, rendered and inspected: both must fail.
+fn assert_bad_hair(dir: &Path, source: &str, expect: &[&str]) {
+    write_hair_scene(dir, source);
     let mut e = expect.to_vec();
     e.push("scene.ron");
     assert_fails_in(
@@ -1265,14 +1270,7 @@ fn fifos_as_inputs_are_refused_without_blocking() {
         assert!(made.success());
     }
     for name in ["f.hair", "f.tfx", "f.ply"] {
-        std::fs::write(
-            d.join("scene.ron"),
-            SCENE.replace(
-                "Procedural(style: Ball, strands: 300, radius: 0.01)",
-                &format!("File(\"{name}\")"),
-            ),
-        )
-        .unwrap();
+        write_hair_scene(d, &format!("File(\"{name}\")"));
         assert_fails_within(
             d,
             &["info", "scene.ron"],
@@ -1281,14 +1279,7 @@ fn fifos_as_inputs_are_refused_without_blocking() {
         );
     }
     std::fs::write(d.join("main.pbrt"), "Include \"f.pbrt\"\n").unwrap();
-    std::fs::write(
-        d.join("scene.ron"),
-        SCENE.replace(
-            "Procedural(style: Ball, strands: 300, radius: 0.01)",
-            "File(\"main.pbrt\")",
-        ),
-    )
-    .unwrap();
+    write_hair_scene(d, "File(\"main.pbrt\")");
     assert_fails_within(
         d,
         &["info", "scene.ron"],
@@ -1333,16 +1324,7 @@ fn fifos_as_inputs_are_refused_without_blocking() {
 fn endless_and_multiplying_inputs_are_bounded() {
     let (dir, _) = scene_dir(SCENE);
     let d = dir.path();
-    let hair_scene = |source: &str| {
-        std::fs::write(
-            d.join("scene.ron"),
-            SCENE.replace(
-                "Procedural(style: Ball, strands: 300, radius: 0.01)",
-                source,
-            ),
-        )
-        .unwrap();
-    };
+    let hair_scene = |source: &str| write_hair_scene(d, source);
     // Two strands of two points each, then an element with no properties: its records take no
     // bytes, so they are read (as nothing) at once, in both byte orders.
     for (format, name) in [
@@ -1591,16 +1573,7 @@ fn caches_and_merges_key_on_every_file_read() {
 fn memory_blowups_are_refused_before_allocating() {
     let (dir, _) = scene_dir(SCENE);
     let d = dir.path();
-    let hair_scene = |source: &str| {
-        std::fs::write(
-            d.join("scene.ron"),
-            SCENE.replace(
-                "Procedural(style: Ball, strands: 300, radius: 0.01)",
-                source,
-            ),
-        )
-        .unwrap();
-    };
+    let hair_scene = |source: &str| write_hair_scene(d, source);
     hair_scene(
         "Procedural(style: Straight, strands: 200), options: (children: Some(per_guide: 40000, \
          radius: 0.05, seed: 1))",
@@ -1673,17 +1646,7 @@ fn memory_blowups_are_refused_before_allocating() {
 fn misleading_errors_are_named() {
     let (dir, _) = scene_dir(SCENE);
     let d = dir.path();
-    let pbrt_scene = || {
-        std::fs::write(
-            d.join("scene.ron"),
-            SCENE.replace(
-                "Procedural(style: Ball, strands: 300, radius: 0.01)",
-                "File(\"h.pbrt\")",
-            ),
-        )
-        .unwrap();
-    };
-    pbrt_scene();
+    write_hair_scene(d, "File(\"h.pbrt\")");
     let curve = |p: &str, width: &str| {
         format!("Shape \"curve\" \"point3 P\" [{p}] \"float width\" {width}\n")
     };
