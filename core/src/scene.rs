@@ -47,12 +47,14 @@ struct DensityKey {
 }
 
 /// The scene's lights and the subsets integrators choose from, found once when the scene is
-/// made (`Vec<Light>::into()`), not per sample: all of them (path tracing's next-event
-/// estimation picks one uniformly), those with area (non-delta: dual scattering's light
+/// made (`Vec<Light>::into()`), not per sample: those next-event estimation samples (path
+/// tracing picks one uniformly: every light but uniform skies, see
+/// [`Light::is_sampled_directly`]), those with area (non-delta: dual scattering's light
 /// strategy mixes them) and the delta lights (evaluated one by one).
 #[derive(Clone, Debug, Default)]
 pub struct Lights {
     all: Vec<Light>,
+    sampled: Vec<usize>,
     non_delta: Vec<usize>,
     delta: Vec<usize>,
 }
@@ -60,8 +62,12 @@ pub struct Lights {
 impl From<Vec<Light>> for Lights {
     fn from(all: Vec<Light>) -> Self {
         let (delta, non_delta) = (0..all.len()).partition(|&i| all[i].is_delta());
+        let sampled = (0..all.len())
+            .filter(|&i| all[i].is_sampled_directly())
+            .collect();
         Lights {
             all,
+            sampled,
             non_delta,
             delta,
         }
@@ -79,18 +85,29 @@ impl Lights {
         self.all.is_empty()
     }
 
-    /// One light chosen uniformly by `u` ∈ [0, 1), with the probability of that choice.
+    /// One of the lights next-event estimation samples, chosen uniformly by `u` ∈ [0, 1),
+    /// with the probability of that choice.
     pub fn choose(&self, u: f32) -> Option<(&Light, f32)> {
-        let i = choose(self.all.len(), u)?;
-        Some((&self.all[i], self.select_pdf()))
+        let i = choose(self.sampled.len(), u)?;
+        Some((&self.all[self.sampled[i]], self.select_pdf()))
     }
 
-    /// Probability with which [`Self::choose`] picks any one light (0 when there is none).
+    /// Probability with which [`Self::choose`] picks any one light it can pick (0 when none).
     pub fn select_pdf(&self) -> f32 {
-        if self.all.is_empty() {
+        if self.sampled.is_empty() {
             0.0
         } else {
-            1.0 / self.all.len() as f32
+            1.0 / self.sampled.len() as f32
+        }
+    }
+
+    /// Probability with which [`Self::choose`] picks `light`: 0 for a light it never samples,
+    /// whose radiance found by a scattered ray then takes the whole MIS weight.
+    pub fn select_pdf_of(&self, light: &Light) -> f32 {
+        if light.is_sampled_directly() {
+            self.select_pdf()
+        } else {
+            0.0
         }
     }
 
@@ -244,13 +261,15 @@ mod tests {
         };
         let lights: Lights = vec![point, sky, sun(0.0), sun(0.01)].into();
         assert_eq!(lights.all().len(), 4);
-        assert_eq!(lights.select_pdf(), 0.25);
-        // Uniform over all: u picks ⌊4u⌋; u = 1 stays on the last.
-        for (u, want) in [(0.0, 0), (0.3, 1), (0.74, 2), (0.99, 3), (1.0, 3)] {
+        assert_eq!(lights.select_pdf(), 1.0 / 3.0);
+        // Uniform over all but the uniform sky: u picks ⌊3u⌋; u = 1 stays on the last.
+        for (u, want) in [(0.0, 0), (0.34, 2), (0.66, 2), (0.67, 3), (1.0, 3)] {
             let (l, pdf) = lights.choose(u).unwrap();
             assert!(std::ptr::eq(l, &lights.all()[want]), "u = {u}");
-            assert_eq!(pdf, 0.25);
+            assert_eq!(pdf, 1.0 / 3.0);
         }
+        assert_eq!(lights.select_pdf_of(&lights.all()[1]), 0.0);
+        assert_eq!(lights.select_pdf_of(&lights.all()[3]), 1.0 / 3.0);
         // The sky and the disc sun have area; the point and the zero-width sun are delta.
         let non_delta: Vec<_> = lights.non_delta().collect();
         assert_eq!(non_delta.len(), 2);

@@ -1,6 +1,7 @@
 //! Unidirectional path tracing — tress's ground truth.
 //!
-//! At every vertex: next-event estimation toward one light chosen uniformly, combined by
+//! At every vertex: next-event estimation toward one light chosen uniformly (constant skies are
+//! left to the scattered ray: `Light::is_sampled_directly`), combined by
 //! multiple importance sampling (power heuristic) with the scattering-sampled direction, which
 //! is reused as the ray that finds lights at infinity. Russian roulette after `rr_depth` bounces.
 //!
@@ -72,7 +73,6 @@ impl IntegratorKind for PathTracer {
 
 impl Integrator for PathTracer {
     fn li(&self, camera_ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb {
-        let light_select_pdf = scene.lights.select_pdf();
         let mut radiance = Rgb::ZERO;
         let mut throughput = Rgb::ONE;
         let mut ray = *camera_ray;
@@ -82,8 +82,8 @@ impl Integrator for PathTracer {
         for depth in 0.. {
             let Some(hit) = scene.intersect(&ray) else {
                 for light in scene.lights.infinite() {
-                    radiance +=
-                        escaped_light(light, ray.dir, scatter_pdf, light_select_pdf, throughput);
+                    let select_pdf = scene.lights.select_pdf_of(light);
+                    radiance += escaped_light(light, ray.dir, scatter_pdf, select_pdf, throughput);
                 }
                 break;
             };

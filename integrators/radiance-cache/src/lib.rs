@@ -352,7 +352,6 @@ fn training_path(
     vertices: &mut Vec<Vertex>,
 ) {
     vertices.clear();
-    let select_pdf = scene.lights.select_pdf();
     let mut ray = *camera_ray;
     let mut throughput = Rgb::ONE;
     // What arrives at the last vertex from its continuation when that escapes.
@@ -363,6 +362,7 @@ fn training_path(
         let Some(hit) = scene.intersect(&ray) else {
             if !vertices.is_empty() {
                 for light in scene.lights.infinite() {
+                    let select_pdf = scene.lights.select_pdf_of(light);
                     escaped +=
                         escaped_light(light, ray.dir, Some(scatter_pdf), select_pdf, Rgb::ONE);
                 }
@@ -417,7 +417,6 @@ fn trace(
     scene: &Scene,
     sampler: &mut Sampler,
 ) -> Rgb {
-    let light_select_pdf = scene.lights.select_pdf();
     let mut radiance = Rgb::ZERO;
     let mut throughput = Rgb::ONE;
     let mut ray = *camera_ray;
@@ -425,8 +424,8 @@ fn trace(
     for depth in 0.. {
         let Some(hit) = scene.intersect(&ray) else {
             for light in scene.lights.infinite() {
-                radiance +=
-                    escaped_light(light, ray.dir, scatter_pdf, light_select_pdf, throughput);
+                let select_pdf = scene.lights.select_pdf_of(light);
+                radiance += escaped_light(light, ray.dir, scatter_pdf, select_pdf, throughput);
             }
             break;
         };
