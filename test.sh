@@ -10,6 +10,20 @@ else
 fi
 cargo test --workspace --release "$@"
 
+# The book (docs/): cargo test has checked its links (tests/tests/docs_links.rs). Where mdBook is
+# installed it is also built, outside the source tree; mdBook exits 0 on a broken include or
+# unclosed HTML, so any warning or error it prints fails the run.
+if command -v mdbook >/dev/null 2>&1; then
+    book_dir="${CARGO_TARGET_DIR:-$PWD/target}/book"
+    mdbook build docs --dest-dir "$book_dir" 2>&1 | tee "$book_dir.log"
+    if grep -qE 'WARN|ERROR' "$book_dir.log"; then
+        echo "test.sh: mdbook build docs printed warnings or errors (above)" >&2
+        exit 1
+    fi
+else
+    echo "test.sh: mdbook is not installed: the book's links were checked, the book not built" >&2
+fi
+
 # The Python package (python/): maturin builds the extension module into a virtualenv kept in
 # the target folder, reusing the crates built above, and pytest runs its suite.
 target_dir="${CARGO_TARGET_DIR:-$PWD/target}"

@@ -11,7 +11,8 @@
 //! `n = ∫ σ(x) · s(x, ω) ds`,  σ = Σ 2r·l / V  (projected fiber area per unit volume),
 //!
 //! with `s` the area-weighted mean of sin∠(t, ω) over the fibers at x. Unlike strand length per
-//! voxel (hair-math.md §6.6 (a)) this needs no calibration constant.
+//! voxel this needs no calibration constant
+//! (docs/src/reference/hair-maths.md#counting-fibers-crossed).
 //!
 //! # Build
 //!

@@ -81,8 +81,8 @@
 //! through hair it should meet: shadow rays from the fibers a camera saw in a layer of fibers
 //! 1.4 deep passed 62 % of the time where the fibers' positions give 33 %, and fixing this
 //! alone made the path tracer's hair on the studies' scenes 3–16 % darker, whatever its colour
-//! (the README's "Dual scattering and hair colour" has the net change with the tube walls
-//! above). Every query therefore reaches Embree from slightly behind its origin (2.05 of the
+//! (docs/src/research/dual-scattering-accuracy.md#the-path-tracer-was-wrong-fixed has the net
+//! change with the tube walls above). Every query therefore reaches Embree from slightly behind its origin (2.05 of the
 //! scene's largest fiber radius) with its interval moved by as much: the culling never
 //! applies, and the rule above alone decides.
 

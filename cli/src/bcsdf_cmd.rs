@@ -57,7 +57,7 @@ pub struct EvalArgs {
     #[arg(long)]
     pub model: String,
     /// CSV rows `h, wi_x, wi_y, wi_z, wo_x, wo_y, wo_z` in the local fiber frame (x = tangent,
-    /// z toward the viewer; see the README). A header line is allowed.
+    /// z toward the viewer; see docs/src/guide/scenes.md). A header line is allowed.
     #[arg(long)]
     pub input: PathBuf,
     /// Output CSV (default: standard output).

@@ -10,7 +10,8 @@
 //! channels' means over the hair pixels against the path tracer's. A traced bounce only moves
 //! where the estimate is taken, so the means stay bilinear: each candidate `path_bounces` gets
 //! its own four corners and fit, and the one whose fitted means come closest is kept (dark hair
-//! gains from a traced bounce, light hair loses: README). A last render checks the choice.
+//! gains from a traced bounce, light hair loses: docs/src/guide/calibrate.md). A last render
+//! checks the choice.
 
 use crate::diff::REL_EPSILON;
 use crate::render_cmd::progress_bar;

@@ -23,7 +23,7 @@ pub fn scene_reference() -> String {
          `[a, b, …]`; a vector `(x, y, z)`. Fields with a default may be left out; every other \
          field is required, and unknown fields are errors. Paths are relative to the scene \
          file's folder. Placeholders `${name}` and `${name:-default}` are filled by `-D \
-         name=value` on the command line (README, \"Scenes\").\n\n",
+         name=value` on the command line (the book's chapter \"Scenes\").\n\n",
     );
     section(&mut out, "Scene", &schema, defs);
     for (name, def) in defs {

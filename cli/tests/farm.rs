@@ -95,7 +95,7 @@ fn tiles_times_passes_merge_into_the_full_render() {
         && l.contains("scene-farm/")));
 }
 
-/// The README's recipe with a real engine: `tress farm … | parallel -j 2`, then the printed
+/// The book's recipe (docs/src/guide/farms.md#render-farms) with a real engine: `tress farm … | parallel -j 2`, then the printed
 /// merge piped to `sh`, gives the single full render bit for bit. GNU parallel is required, not
 /// optional: `.ci/install-deps` installs it (Debian's `parallel`).
 #[test]
@@ -160,7 +160,7 @@ fn free_port() -> u16 {
     listener.local_addr().unwrap().port()
 }
 
-/// The README's Slurm recipe on a one-node cluster of the test's own (munge with its own key
+/// The book's Slurm recipe on a one-node cluster of the test's own (munge with its own key
 /// and socket, slurmctld and slurmd on free ports, all in a temporary folder): an array job of
 /// the farm's lines, then the merge as a job depending on it, gives the single full render bit
 /// for bit. Slurm is required, not optional: `.ci/install-deps` installs it (`slurm-wlm`).

@@ -71,8 +71,8 @@ pub fn hash_words(words: &[u64]) -> u64 {
 /// independent of each other. Each number alone is uniform, so estimators stay unbiased, and a
 /// pixel's light, BCSDF and lens samples cover their domains evenly. How much noise that takes
 /// out depends on how alike the integrands of a pixel's samples are: on hair, whose samples
-/// hit different fibers, 7–16 % of dual-mis's variance (README, "Why not under an
-/// environment"). Only a sample's first [`STRATIFIED_DRAWS`] draws are stratified — the lens
+/// hit different fibers, 7–16 % of dual-mis's variance
+/// (docs/src/research/dual-scattering-speed.md#why-not-under-an-environment). Only a sample's first [`STRATIFIED_DRAWS`] draws are stratified — the lens
 /// and the first two bounces' light, BCSDF and light-choice numbers, where stratification
 /// pays — and the rest come from a PCG32 stream of the sample: a scrambled Sobol draw costs
 /// about 15 ns against a PCG draw's 3, which a long path (light hair: tens of bounces, four

@@ -938,7 +938,8 @@ mod tests {
             let total: f32 = m.lobe_weights(row).iter().sum();
             assert!((total - 1.0).abs() < 1e-5, "row {j}: Σ_p ∫N_p dφ = {total}");
         }
-        // hair-math §2.5/§8.9: Σ_{p≤2} ½∫A_p dh = 0.992 / 0.986 / 0.886 at 0 / 45 / 80°.
+        // Σ_{p≤2} ½∫A_p dh = 0.992 / 0.986 / 0.886 at 0 / 45 / 80°
+        // (docs/src/reference/hair-maths.md#energy-without-the-residual).
         for (deg, want) in [(0.0f32, 0.992f32), (45.0, 0.986), (80.0, 0.886)] {
             let row = RowLerp::new(deg.to_radians().cos());
             let w = m.lobe_weights(row);

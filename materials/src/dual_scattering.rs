@@ -1,6 +1,7 @@
 //! Dual scattering (Zinke, Yuksel, Weber & Keyser 2008) for *any* [`Bcsdf`]: the per-θ tables,
 //! built by deterministic quadrature of `eval_lobe`, and the shading function both
-//! dual-scattering integrators share (hair-math.md §6).
+//! dual-scattering integrators share. The maths is in the book's chapter
+//! docs/src/reference/hair-maths.md#dual-scattering; "(maths: …)" below names its sections.
 //!
 //! # What the tables measure
 //! For a fixed direction `w_fix` at inclination θ (local fiber frame, φ = π/2, so
@@ -25,10 +26,11 @@
 //!   the light's inclination by 2x, and an inclination spread of variance V widens the θ_h of
 //!   the next scattering by V/4, so n crossings add exactly n·β̄_f² to M^G's variance.
 //! * `ᾱ_{f|b} = Σ_t a_{f|b}^t α_t / Σ_t a_{f|b}^t`, `β̄²_{f|b}` likewise with the weights on
-//!   the variances (§6.2, §6.9).
+//!   the variances (maths: the tables; notation).
 //! * `Ā_b`, `Δ_b` (eqs. 14, 16), on the effective ā_f, ā_b of the next item.
-//! * **Non-conserving models.** Marschner's model scatters ≈ 2× the incident energy (§2.5), so
-//!   its ā_f exceeds 1 and `1/(1 − ā_f²)` passes its pole. Clamping ā_f to 0.99 alone (§6.5) is
+//! * **Non-conserving models.** Marschner's model scatters ≈ 2× the incident energy (maths:
+//!   Marschner's energy), so its ā_f exceeds 1 and `1/(1 − ā_f²)` passes its pole. Clamping ā_f
+//!   to 0.99 alone (maths: sanity checks on the tables) is
 //!   not enough: Marschner's blond then gets Ā_b ≈ 10³ (measured). The multiple-scattering
 //!   terms therefore use `ā_{f|b} / max(1, ā_f + ā_b)` — the forward/backward *split* of the
 //!   energy, which a fiber cannot exceed — and then clamp ā_f to [`A_F_MAX`]. For an
@@ -50,7 +52,8 @@
 //! [`MultipleScattering::FiberMedium`], the default, measures the scattered transmittance and
 //! the back-scattering of the fibers by random walks in a homogeneous medium of them
 //! ([`crate::fiber_medium`]): the closed forms treat a fiber as passing light straight on or
-//! straight back, and make light hair 35–45 % too dark in red (README).
+//! straight back, and make light hair 35–45 % too dark in red
+//! (docs/src/research/dual-scattering-accuracy.md#as-first-built-the-papers-closed-forms).
 //!
 //! # Quadrature
 //! Midpoint rule in θ ∈ [−π/2, π/2] (`theta_quad` nodes) and in φ over the whole circle
@@ -71,10 +74,11 @@
 //! fiber); lookups interpolate linearly and clamp beyond the first/last node.
 //!
 //! # Shading
-//! [`DualScatteringShading::eval`] is the paper's F (§6.3) in tress's value convention
-//! (cos θ_i included: `L_o = ∫ L(ω_d) F dω_d`), with each term normalised to the energy the
-//! paper assigns it (see `eval` for why the literal constants cannot be used here). The tables are indexed by **θ of the light
-//! direction ω_d** (θ_i; §6.8), consistent with how they were built; the per-lobe α_t, β_t²
+//! [`DualScatteringShading::eval`] is the paper's F (maths: the shading function F) in tress's
+//! value convention (cos θ_i included: `L_o = ∫ L(ω_d) F dω_d`), with each term normalised to
+//! the energy the paper assigns it (see `eval` for why the literal constants cannot be used
+//! here). The tables are indexed by **θ of the light direction ω_d** (θ_i; maths: which
+//! inclination indexes the tables), consistent with how they were built; the per-lobe α_t, β_t²
 //! and N_t^G of `f_s_scatter` come from the same lookup.
 //!
 //! As specified, F is not normalised in tress's units: with M^G and the back-scattering
@@ -604,7 +608,7 @@ enum HDomain {
     /// The model ignores h (far-field models such as Marschner's and d'Eon's integrate it
     /// analytically): one node suffices.
     Ignored,
-    /// Mirror symmetry of a circular fiber, `f(h, Δφ) = f(−h, −Δφ)` (hair-math §8.11): the
+    /// Mirror symmetry of a circular fiber, `f(h, Δφ) = f(−h, −Δφ)` (maths: symmetry): the
     /// mirror Δφ → −Δφ keeps both half-spaces and θ, so every moment of −h equals that of h and
     /// h ∈ [0, 1] suffices.
     Mirror,
@@ -855,7 +859,7 @@ fn ratio(num: DVec3, den: DVec3) -> DVec3 {
 }
 
 impl NodeMoments {
-    /// Per-lobe statistics and the global quantities of §6.2.
+    /// Per-lobe statistics and the global quantities (maths: the tables).
     fn finish(self) -> (DsGlobals, Vec<DsLobe>, Vec<Rgb>) {
         let mut a_f = DVec3::ZERO;
         let mut a_b = DVec3::ZERO;
@@ -1003,7 +1007,8 @@ fn longitudinal_density(s: f32, theta_o: f32, mean: Rgb, var: Rgb) -> Rgb {
     }))
 }
 
-/// The forward-scattering state of the light after crossing `n` fibers (§6.1).
+/// The forward-scattering state of the light after crossing `n` fibers (maths: the
+/// decomposition).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ForwardScattering {
     /// T_f = d_f · ā_f(θ)^n, with the effective ā_f ([`DsGlobals::a_f_eff`]).
@@ -1012,8 +1017,8 @@ pub struct ForwardScattering {
     pub sigma2_f: Rgb,
 }
 
-/// The dual-scattering shading function F of one hair material (§6.3), shared by both
-/// dual-scattering integrators.
+/// The dual-scattering shading function F of one hair material (maths: the shading function
+/// F), shared by both dual-scattering integrators.
 #[derive(Clone, Debug)]
 pub struct DualScatteringShading {
     bcsdf: Arc<dyn Bcsdf>,
@@ -1113,13 +1118,14 @@ impl DualScatteringShading {
     ///
     /// `f_s = bcsdf.eval(wo, wi, h)` (cos θ_i included, tress's convention), so
     /// `L_o = ∫ L(ω_d) F dω_d`. d_f appears both inside T_f and as the factor of the scattered
-    /// term, as in the paper's pseudo-code and hair-math §6.3. The clamp at 0 is ours: with
+    /// term, as in the paper's pseudo-code. The clamp at 0 is ours: with
     /// n = 0 the paper's T_f = d_f < 1 = direct would make the scattered term negative; with it
-    /// F at n = 0, direct = 1 is exactly `f_s + d_b f_back_direct cos θ_i` (§8.14).
+    /// F at n = 0, direct = 1 is exactly `f_s + d_b f_back_direct cos θ_i` (maths:
+    /// dual-scattering limits).
     ///
     /// **Normalisation.** The paper's constants (`2Ā_b g/(π cos²θ_d)` for f_back, `π` before
     /// f_back_scatter, Gaussians of unit area in θ_h) were written for Marschner's lobes, which
-    /// return about twice the incident energy (hair-math §2.5: dθ_i = 2 dθ_h). Taken literally
+    /// return about twice the incident energy (maths: Marschner's energy). Taken literally
     /// with tress's energy-conserving models, F returns ≈3× the light a white fiber receives
     /// (measured: ∫F dω_d = 2.98 for a white Chiang fiber at n = 0). Here every term is a
     /// proper density carrying the energy the paper assigns it: the longitudinal Gaussian in
@@ -1469,7 +1475,7 @@ mod tests {
         assert_eq!(t.lobe(0.1, 99), DsLobe::default());
     }
 
-    /// §6.5 ranges on every registered model (coarse tables).
+    /// The ranges of the maths' sanity checks on every registered model (coarse tables).
     #[test]
     fn tables_lie_in_the_sanity_ranges_for_every_model() {
         for (name, b, _) in all_models() {
@@ -1687,13 +1693,14 @@ mod tests {
                     g.a_b
                 );
             }
-            // ā_b rises toward grazing inclinations (§6.5).
+            // ā_b rises toward grazing inclinations (maths: sanity checks on the tables).
             assert!(t.globals(1.3).a_b.cmpgt(t.globals(0.0).a_b).all(), "{name}");
         }
         assert!(checked >= 2, "only {checked} blond test instances");
     }
 
-    /// §8.14: opaque fibers only reflect (Fresnel), so ā_f is the R lobe's forward part and the
+    /// Maths, dual-scattering limits:
+    /// opaque fibers only reflect (Fresnel), so ā_f is the R lobe's forward part and the
     /// multiple back-scattering vanishes.
     #[test]
     fn opaque_fibers_have_no_transmission_and_no_multiple_back_scattering() {
@@ -1744,7 +1751,8 @@ mod tests {
         shading_with(MultipleScattering::Paper, b, factors)
     }
 
-    /// §8.14: with no fibers in the way and the light fully visible, F is the single-fiber BCSDF
+    /// Maths, dual-scattering limits:
+    /// with no fibers in the way and the light fully visible, F is the single-fiber BCSDF
     /// plus the local back-scattering term, exactly.
     #[test]
     fn with_no_fibers_crossed_f_is_single_scattering_plus_local_back_scattering() {

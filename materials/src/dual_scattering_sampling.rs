@@ -1,8 +1,9 @@
 //! Importance sampling of the dual-scattering shading function F (for the `dual-mis`
 //! integrator), with a pdf that is exactly the density of the sampler.
 //!
-//! F is a sum of terms with known shapes (hair-math §6.3), so directions are drawn from a
-//! mixture whose weights follow the terms' attenuations at the specular cone of `wo`:
+//! F is a sum of terms with known shapes (docs/src/reference/hair-maths.md#sampling-f), so
+//! directions are drawn from a mixture whose weights follow the terms' attenuations at the
+//! specular cone of `wo`:
 //! - the BCSDF's own importance sampling (the direct single-scattering term f_s; for the
 //!   registered models this is d'Eon et al. 2013-style lobe / longitudinal / azimuthal
 //!   sampling with an exact pdf);
@@ -11,7 +12,7 @@
 //! - the forward-scattered term at three spreads β̄_f²·(1 + n) for n ∈ {2, 8, 32} fibers
 //!   crossed (σ̄_f² = n β̄_f² grows with depth, which is unknown until a direction is chosen),
 //!   any azimuth;
-//! - a defensive uniform-sphere component (hair-math §6.7), so every direction has density.
+//! - a defensive uniform-sphere component, so every direction has density.
 //!
 //! The longitudinal components are logistic distributions in s = sin θ_i, truncated to
 //! [−1, 1]: their CDF inverts in closed form and, since dω = ds dφ, their solid-angle density

@@ -48,8 +48,8 @@
 //! layer: light that the hair below returns and the fibers above reflect back down is missing,
 //! so a white furnace returns 0.95 at a fiber on the surface of a half-space but 0.83 for the
 //! fibers a camera sees a fiber or two deep (a slab), 0.62–0.92 on a ball of fibers over
-//! β = 0.001…0.9 (path: 1). Against the path tracer (converged, mean over hair pixels, README
-//! "Dual scattering and hair colour") light hair is up to 19 % dark in red (platinum
+//! β = 0.001…0.9 (path: 1). Against the path tracer (converged, mean over hair pixels,
+//! docs/src/research/dual-scattering-accuracy.md#where-it-stands-now) light hair is up to 19 % dark in red (platinum
 //! straight.hair; the blond head within 3 %); brown and dark hair within 3.4 %.
 //!
 //! Every θ node walks its own seeded stream, so the tables do not depend on the thread count.

@@ -19,7 +19,8 @@
 //! `h`**.
 //!
 //! **Not energy conserving.** With σ_a = 0 the white-furnace integral ∫ S cos θ_i dω_i is ≈ 2 at
-//! normal incidence (≈ 1.96 at θ_o = 0, 1.62 at 80°, 2.47 at 89° for β_R = 5°, hair-math §2.5):
+//! normal incidence (≈ 1.96 at θ_o = 0, 1.62 at 80°, 2.47 at 89° for β_R = 5°; the book,
+//! docs/src/reference/hair-maths.md#marschners-energy):
 //! M_p is unit-area in θ_h but the integral runs over θ_i = 2θ_h − θ_o, so dθ_i = 2 dθ_h doubles
 //! it; 1/cos²θ_d and the truncation of θ_i to [−π/2, π/2] add the θ_o dependence, and the glints
 //! add energy on top. Every test instance is therefore flagged `white_furnace: false`.
@@ -552,7 +553,8 @@ mod tests {
         fiber_direction(theta.sin() as f32, theta.cos() as f32, phi as f32)
     }
 
-    /// The configuration of the hair-math §2.5 oracle: α = 0, σ_a = 0, no caustic treatment and
+    /// The configuration of the oracle in docs/src/reference/hair-maths.md#marschners-energy:
+    /// α = 0, σ_a = 0, no caustic treatment and
     /// unpolarised Fresnel. "Polarisation ignored" there means the exact dielectric Fresnel with η
     /// at the 3D incidence angle (cos θ_d cos γ), not Fresnel with η' in the cross-section: only the
     /// former reproduces its Σ_p ½∫A_p dh = 0.992 / 0.986 / 0.886 at θ_d = 0/45/80° (η' gives
@@ -633,7 +635,8 @@ mod tests {
         e
     }
 
-    /// hair-math §2.5 / §8 item 10: Marschner is not energy conserving; regression oracle.
+    /// Marschner is not energy conserving; regression oracle
+    /// (docs/src/reference/hair-maths.md#marschners-energy).
     #[test]
     fn energy_matches_the_published_oracle() {
         let m = oracle_config(5.0);
@@ -660,7 +663,8 @@ mod tests {
         }
     }
 
-    /// §8 item 11: S(ω_i, ω_o) = S(ω_o, ω_i) (θ_h, |θ_d|, |φ| and cos 2φ_h are all symmetric).
+    /// S(ω_i, ω_o) = S(ω_o, ω_i) (θ_h, |θ_d|, |φ| and cos 2φ_h are all symmetric;
+    /// docs/src/reference/hair-maths.md#symmetry).
     #[test]
     fn reciprocity() {
         let mut rng = Sampler::from_seed(11);

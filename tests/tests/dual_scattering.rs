@@ -213,7 +213,8 @@ fn with_no_fibers_to_cross_and_no_back_scattering_dual_scattering_is_single_scat
 /// which fibers a pixel's rays hit, while the path tracer samples every bounce of the multiple
 /// scattering: at equal spp its noise must be far below the path tracer's (measured on this
 /// ball: 10–17× less variance over four seeds; under an environment, whose light integral both
-/// estimate with the same shadow rays, the two come within 2× of each other: README).
+/// estimate with the same shadow rays, the two come within 2× of each other:
+/// docs/src/research/dual-scattering-speed.md#why-not-under-an-environment).
 #[test]
 fn under_a_directional_light_dual_mis_is_far_less_noisy_than_the_path_tracer_on_light_hair() {
     let scene = sunlit_ball(0.3, 1500);

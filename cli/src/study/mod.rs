@@ -1,7 +1,8 @@
 //! `tress study STUDY.ron`: comparative convergence studies of integrators, following the
-//! protocol of hair-math.md §7.2 — an independent converged reference, MSE and relative MSE,
-//! K repetitions with independent seeds and 95 % confidence intervals, equal-spp and equal-time
-//! comparisons, efficiency and the MSE·spp convergence check.
+//! protocol of docs/src/reference/hair-maths.md#measuring-an-estimator — an independent
+//! converged reference, MSE and relative MSE, K repetitions with independent seeds and 95 %
+//! confidence intervals, equal-spp and equal-time comparisons, efficiency and the MSE·spp
+//! convergence check.
 //!
 //! A study file (RON; paths relative to it):
 //!

@@ -60,8 +60,8 @@ pub struct DualSettings {
     /// shades the first hair hit a camera ray finds. 1 traces the light reflected between
     /// neighbouring fibers, which dual scattering returns only about half of: on the study's
     /// grooms dark and brown hair come within 1 % of the path tracer at about the same cost,
-    /// light hair 1.3–4.7 points darker than with 0 (README, "Dual scattering and hair
-    /// colour").
+    /// light hair 1.3–4.7 points darker than with 0 (the book's research notes, "Dual
+    /// scattering: accuracy").
     pub path_bounces: u32,
 }
 

@@ -14,8 +14,8 @@
 //! cells can be much coarser than the fibers. The cache holds the whole outgoing radiance, not the part
 //! left after next-event estimation: that part depends on how open each point is, which a
 //! cell averages, and a point more open than its cell's average would get its direct light
-//! twice (measured: a white furnace at β = 0.9 returned 1.034). The README's "The radiance
-//! cache" measures it against the path tracer.
+//! twice (measured: a white furnace at β = 0.9 returned 1.034).
+//! docs/src/research/radiance-cache.md measures it against the path tracer.
 //!
 //! RON: `RadianceCache(training_spp: 8, traced_bounces: 2)`
 

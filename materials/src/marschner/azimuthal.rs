@@ -22,7 +22,7 @@ pub(super) enum FresnelMode {
     /// Marschner: ½(F_⊥(η', γ) + F_∥(η'', γ)) in the 2D cross-section problem.
     Bravais,
     /// Unpolarised dielectric Fresnel with η at the true 3D incidence angle, cos = cos θ·cos γ
-    /// (pbrt's choice). Only the test configuration that reproduces the hair-math §2.5 energy
+    /// (pbrt's choice). Only the test configuration that reproduces the Marschner energy
     /// oracle uses it: that oracle was computed this way.
     #[cfg(test)]
     Unpolarised3d,
@@ -272,7 +272,8 @@ mod tests {
         Slice::new(eta_perp, 0.0, 1.0, FresnelMode::Bravais)
     }
 
-    /// §8 item 12: every returned root maps back to φ, one of them is the h we started from, and
+    /// Root oracle (docs/src/reference/hair-maths.md#marschners-roots-and-glints): every
+    /// returned root maps back to φ, one of them is the h we started from, and
     /// three roots occur only for η' < 2 inside the caustic range.
     #[test]
     fn roots_reproduce_h() {
@@ -348,7 +349,8 @@ mod tests {
         }
     }
 
-    /// §8 item 13: N_TRT finite everywhere, and continuous in η' across 2 where the glint fades.
+    /// Glint oracle (the same section):
+    /// N_TRT finite everywhere, and continuous in η' across 2 where the glint fades.
     #[test]
     fn trt_caustic_is_finite_and_continuous_across_eta_2() {
         let glint = Glint {
