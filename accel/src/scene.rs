@@ -315,23 +315,24 @@ enum GeomData {
     },
 }
 
+/// A candidate hit as [`context_filter`] sees it: geometry and primitive ids, the curve
+/// parameter `u` (curves only) and the distance `t` from the ray's own origin.
+#[derive(Clone, Copy, Debug)]
+struct Candidate {
+    geom: u32,
+    prim: u32,
+    u: f32,
+    t: f32,
+}
+
 impl GeomData {
-    /// Whether a candidate hit on primitive `prim` of this geometry (id `geom`) at curve
-    /// parameter `u` and distance `t` is kept by a query excluding `ex`: fibers apply the
-    /// self-intersection rule and, with [`Overlaps::PassThrough`], drop hits where the ray
-    /// leaves a fiber it started inside; meshes skip only the (flat) triangle the ray leaves,
-    /// and spheres the whole sphere, which a ray leaving it inwards meets again where
-    /// [`EmbreeAccel::sphere_reentry`] finds.
-    fn keep(
-        &self,
-        ex: &Exclude,
-        geom: u32,
-        prim: u32,
-        u: f32,
-        org: Vec3,
-        dir: Vec3,
-        t: f32,
-    ) -> bool {
+    /// Whether candidate `hit` on this geometry is kept by a query along `org + t·dir`
+    /// excluding `ex`: fibers apply the self-intersection rule and, with
+    /// [`Overlaps::PassThrough`], drop hits where the ray leaves a fiber it started inside;
+    /// meshes skip only the (flat) triangle the ray leaves, and spheres the whole sphere, which
+    /// a ray leaving it inwards meets again where [`EmbreeAccel::sphere_reentry`] finds.
+    fn keep(&self, ex: &Exclude, hit: Candidate, org: Vec3, dir: Vec3) -> bool {
+        let Candidate { geom, prim, u, t } = hit;
         match self {
             GeomData::Hair(c) => {
                 !ex.skip_hair
@@ -974,14 +975,18 @@ unsafe extern "C" fn context_filter(args: *const RTCFilterFunctionNArguments) {
         let (prim, geom) = (*hit.add(5 * n + i), *hit.add(6 * n + i));
         // Field 3 of the hit is its curve parameter u; field 8 of the ray the candidate's
         // distance, measured from the shifted origin.
-        let u = f32::from_bits(*hit.add(3 * n + i));
-        let t = ray_field(8) - ex.origin_shift;
-        if !geoms[geom as usize].keep(ex, geom, prim, u, org, dir, t) {
+        let candidate = Candidate {
+            geom,
+            prim,
+            u: f32::from_bits(*hit.add(3 * n + i)),
+            t: ray_field(8) - ex.origin_shift,
+        };
+        if !geoms[geom as usize].keep(ex, candidate, org, dir) {
             *valid = 0;
         } else if !ex.hits.is_null() {
             // Set only by `count_fibers_crossed`, whose vector outlives the (synchronous) query
             // and is not otherwise touched during it.
-            (*ex.hits).push((PrimId { geom, prim }, t));
+            (*ex.hits).push((PrimId { geom, prim }, candidate.t));
             *valid = 0;
         }
     }
