@@ -38,6 +38,25 @@ pub enum CurveShape {
     Round,
 }
 
+/// What a ray that starts inside another fiber meets of it. The fibers of real grooms
+/// interpenetrate, so a ray leaving one fiber often starts inside a second.
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
+pub enum Overlaps {
+    /// The ray scatters off the fiber where it leaves it, as if the overlap were that fiber's
+    /// own material: tubes always; ribbons, which Embree meets at the depth of the axis, when
+    /// the ray starts on the near side of the axis (from beyond it the ribbon lies behind the
+    /// ray and is not met).
+    #[default]
+    Scatter,
+    /// The ray passes through the fiber it starts inside, and is stopped only by fibers it
+    /// enters from outside: Mitsuba 3's convention (its Embree culls the back faces of round
+    /// curves, so `linearcurve` and `bsplinecurve` are never hit from inside). Lighter hair
+    /// where fibers interpenetrate; the same image where they do not.
+    PassThrough,
+}
+
 impl CurveBasis {
     pub(crate) fn geometry_kind(self, shape: CurveShape) -> GeometryKind {
         match (shape, self) {

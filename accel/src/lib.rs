@@ -109,7 +109,7 @@ pub mod usc;
 pub mod usd;
 
 pub use children::ChildStrands;
-pub use curves::{CurveBasis, CurveShape};
+pub use curves::{CurveBasis, CurveShape, Overlaps};
 pub use cyhair::HairFile;
 pub use density::{DensityGrid, DensityInfo, DensitySettings};
 pub use error::{Error, Result};

@@ -2,7 +2,7 @@
 //! ray queries with [`tress_core::Hit`]s. See the crate docs for the fiber frame, the sign of
 //! `h` and the self-intersection rule.
 
-use crate::curves::{Capsule, CurveBasis, CurveShape};
+use crate::curves::{Capsule, CurveBasis, CurveShape, Overlaps};
 use crate::error::{Error, Result};
 use crate::fp_mode;
 use crate::geometry::{HairGeometry, Transform};
@@ -48,6 +48,8 @@ pub(crate) struct CurveData {
     basis: CurveBasis,
     /// Ribbons or tubes: a ribbon hit is moved to the depth of the tube's wall.
     shape: CurveShape,
+    /// Whether rays that start inside one of these fibers may hit it ([`Overlaps`]).
+    overlaps: Overlaps,
     materials: SegmentMaterials,
     /// Per primitive (segment): its `basis.order()` control points (position and radius),
     /// copied out of the strand's so that a hit finds them from the primitive id alone: one
@@ -196,14 +198,8 @@ impl CurveData {
     fn fiber_hit(&self, prim: u32, u: f32, ray: &Ray, t: f32) -> (HitKind, f32) {
         let p = ray.at(t);
         let prim = prim as usize;
-        let cps = self.control_points(prim);
-        let (axis, deriv) = self.basis.eval(cps, u);
+        let (axis, tangent) = self.axis_at(prim, u);
         let cap = &self.capsules[prim];
-        let tangent = deriv
-            .truncate()
-            .try_normalize()
-            .or_else(|| (cap.b - cap.a).try_normalize())
-            .unwrap_or(Vec3::Y);
         let radius = axis.w.max(f32::MIN_POSITIVE);
         let frame = FiberFrame::new(tangent, -ray.dir);
         let h = ((p - axis.truncate()).dot(frame.width_axis()) / radius).clamp(-1.0, 1.0);
@@ -229,6 +225,39 @@ impl CurveData {
             },
             t,
         )
+    }
+
+    /// The curve point (position and radius) of primitive `prim` at parameter `u`, and the
+    /// unit tangent there (the segment's chord where the derivative vanishes).
+    fn axis_at(&self, prim: usize, u: f32) -> (Vec4, Vec3) {
+        let (axis, deriv) = self.basis.eval(self.control_points(prim), u);
+        let cap = &self.capsules[prim];
+        let tangent = deriv
+            .truncate()
+            .try_normalize()
+            .or_else(|| (cap.b - cap.a).try_normalize())
+            .unwrap_or(Vec3::Y);
+        (axis, tangent)
+    }
+
+    /// Whether the ray from `org` along `dir` that meets primitive `prim` at curve parameter
+    /// `u` and distance `t` started inside the fiber there, so that the hit is where it leaves
+    /// the fiber: on a tube, a wall facing away from the ray (a back face); on a ribbon, whose
+    /// hit lies at the depth of the axis, a chord through the tube that begins behind `org`.
+    fn leaves_from_inside(&self, prim: u32, u: f32, org: Vec3, dir: Vec3, t: f32) -> bool {
+        let prim = prim as usize;
+        let (axis, tangent) = self.axis_at(prim, u);
+        let p = org + t * dir;
+        match self.shape {
+            // The outward normal of a swept sphere at `p` is `p − axis`.
+            CurveShape::Round => (p - axis.truncate()).dot(dir) > 0.0,
+            CurveShape::Flat => {
+                let radius = axis.w.max(f32::MIN_POSITIVE);
+                let cap = &self.capsules[prim];
+                tube_chord(p, dir, axis.truncate(), tangent, radius, cap)
+                    .is_some_and(|(t_in, _)| t + t_in < 0.0)
+            }
+        }
     }
 
     /// The material of primitive `prim`.
@@ -286,15 +315,30 @@ enum GeomData {
     },
 }
 
+/// A candidate hit as [`context_filter`] sees it: geometry and primitive ids, the curve
+/// parameter `u` (curves only) and the distance `t` from the ray's own origin.
+#[derive(Clone, Copy, Debug)]
+struct Candidate {
+    geom: u32,
+    prim: u32,
+    u: f32,
+    t: f32,
+}
+
 impl GeomData {
-    /// Whether a candidate hit on primitive `prim` of this geometry (id `geom`) is kept by a
-    /// query excluding `ex`: fibers apply the self-intersection rule, meshes skip only the
-    /// (flat) triangle the ray leaves, and spheres the whole sphere, which a ray leaving it
-    /// inwards meets again where [`EmbreeAccel::sphere_reentry`] finds.
-    fn keep(&self, ex: &Exclude, geom: u32, prim: u32, org: Vec3, dir: Vec3) -> bool {
+    /// Whether candidate `hit` on this geometry is kept by a query along `org + t·dir`
+    /// excluding `ex`: fibers apply the self-intersection rule and, with
+    /// [`Overlaps::PassThrough`], drop hits where the ray leaves a fiber it started inside;
+    /// meshes skip only the (flat) triangle the ray leaves, and spheres the whole sphere, which
+    /// a ray leaving it inwards meets again where [`EmbreeAccel::sphere_reentry`] finds.
+    fn keep(&self, ex: &Exclude, hit: Candidate, org: Vec3, dir: Vec3) -> bool {
+        let Candidate { geom, prim, u, t } = hit;
         match self {
             GeomData::Hair(c) => {
-                !ex.skip_hair && (geom != ex.geom || c.keep(ex.prim, prim, org, dir))
+                !ex.skip_hair
+                    && (geom != ex.geom || c.keep(ex.prim, prim, org, dir))
+                    && (c.overlaps == Overlaps::Scatter
+                        || !c.leaves_from_inside(prim, u, org, dir, t))
             }
             GeomData::Mesh { .. } | GeomData::Spheres { .. } => geom != ex.geom || prim != ex.prim,
         }
@@ -562,6 +606,7 @@ impl SceneBuilder {
         let mut data = CurveData {
             basis,
             shape: options.curve,
+            overlaps: options.overlaps,
             materials: SegmentMaterials::Uniform(0),
             seg_cps: Vec::new(),
             segs: Vec::new(),
@@ -928,12 +973,20 @@ unsafe extern "C" fn context_filter(args: *const RTCFilterFunctionNArguments) {
         // The ray's own origin, in front of the one Embree was given (`EmbreeAccel::embree_ray`).
         let org = Vec3::new(ray_field(0), ray_field(1), ray_field(2)) + ex.origin_shift * dir;
         let (prim, geom) = (*hit.add(5 * n + i), *hit.add(6 * n + i));
-        if !geoms[geom as usize].keep(ex, geom, prim, org, dir) {
+        // Field 3 of the hit is its curve parameter u; field 8 of the ray the candidate's
+        // distance, measured from the shifted origin.
+        let candidate = Candidate {
+            geom,
+            prim,
+            u: f32::from_bits(*hit.add(3 * n + i)),
+            t: ray_field(8) - ex.origin_shift,
+        };
+        if !geoms[geom as usize].keep(ex, candidate, org, dir) {
             *valid = 0;
         } else if !ex.hits.is_null() {
             // Set only by `count_fibers_crossed`, whose vector outlives the (synchronous) query
-            // and is not otherwise touched during it. Field 8 is the candidate's distance.
-            (*ex.hits).push((PrimId { geom, prim }, ray_field(8) - ex.origin_shift));
+            // and is not otherwise touched during it.
+            (*ex.hits).push((PrimId { geom, prim }, candidate.t));
             *valid = 0;
         }
     }

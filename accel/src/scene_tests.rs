@@ -785,3 +785,60 @@ fn chained_hits_count_every_fiber_of_a_dense_layer() {
         );
     }
 }
+
+/// Where two fibers interpenetrate, a ray leaving one from inside the other scatters off the
+/// second where it leaves it (`Overlaps::Scatter`, the default), or passes through it to the
+/// next fiber (`Overlaps::PassThrough`, Mitsuba 3's convention); a fiber entered from outside
+/// is hit either way — for every basis, ribbons and tubes, intersection and occlusion.
+#[test]
+fn rays_starting_inside_another_fiber_follow_the_overlap_convention() {
+    let r = 0.1;
+    // A along x at the origin; B overlapping it from below (axes 1.2 r apart); C free, lower.
+    // Rays cross at x = 0, mid-segment, away from the joints' rounded ends.
+    let at = |z: f32| line(Vec3::new(-1.0, 0.0, z), Vec3::new(1.0, 0.0, z), 4);
+    let strands = [at(0.0), at(-1.2 * r), at(-10.0 * r)];
+    for overlaps in [Overlaps::Scatter, Overlaps::PassThrough] {
+        for options in all_curves() {
+            let options = HairOptions {
+                overlaps,
+                ..options
+            };
+            let accel = SceneBuilder::new()
+                .unwrap()
+                .add_hair(&hair(&strands, r), &options, 0)
+                .unwrap()
+                .build()
+                .unwrap();
+            let down = Ray::new(Vec3::new(0.0, 0.0, 1.0), -Vec3::Z);
+            let top_of_a = accel.intersect(&down).expect("A");
+            assert_eq!(fiber(&top_of_a).3, 0, "{options:?}");
+            // Leaving A's underside, 0.2 r inside B, straight down.
+            let origin = Vec3::new(0.0, 0.0, -r);
+            let leaving = Ray::leaving(origin, -Vec3::Z, top_of_a.prim);
+            let next = accel.intersect(&leaving).expect("B or C");
+            let (strand, t) = match overlaps {
+                Overlaps::Scatter => (1, 1.2 * r),     // B's lower wall
+                Overlaps::PassThrough => (2, 8.0 * r), // C's upper wall
+            };
+            assert_eq!(fiber(&next).3, strand, "{options:?}");
+            assert!(
+                (next.t - t).abs() < 1e-3,
+                "{options:?}: t = {}, want {t}",
+                next.t
+            );
+            assert_eq!(
+                accel.occluded(&leaving.with_t_max(4.0 * r)),
+                overlaps == Overlaps::Scatter,
+                "{options:?}"
+            );
+            // Leaving C's top upwards: B is entered from outside, whatever the convention.
+            let up = Ray::new(Vec3::new(0.0, 0.0, -20.0 * r), Vec3::Z);
+            let bottom_of_c = accel.intersect(&up).expect("C");
+            assert_eq!(fiber(&bottom_of_c).3, 2, "{options:?}");
+            let leaving_c = Ray::leaving(Vec3::new(0.0, 0.0, -9.0 * r), Vec3::Z, bottom_of_c.prim);
+            let b = accel.intersect(&leaving_c).expect("B");
+            assert_eq!(fiber(&b).3, 1, "{options:?}");
+            assert!((b.t - 6.8 * r).abs() < 1e-3, "{options:?}: t = {}", b.t);
+        }
+    }
+}

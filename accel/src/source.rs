@@ -2,7 +2,7 @@
 //! applied when it is added to the scene.
 
 use crate::children::ChildStrands;
-use crate::curves::{CurveBasis, CurveShape};
+use crate::curves::{CurveBasis, CurveShape, Overlaps};
 use crate::cyhair::HairFile;
 use crate::error::{format_error, Result};
 use crate::geometry::{HairGeometry, Transform};
@@ -144,6 +144,10 @@ pub struct HairOptions {
     pub basis: CurveBasis,
     /// Ray-facing ribbons (`Flat`, the default) or tubes (`Round`).
     pub curve: CurveShape,
+    /// What a ray that starts inside another fiber meets of it: `Scatter` (the default: it
+    /// scatters where it leaves that fiber) or `PassThrough` (Mitsuba 3's convention, for
+    /// matching its images).
+    pub overlaps: Overlaps,
     /// Multiplies every radius.
     pub radius_scale: f32,
     /// Root-to-tip taper: the radius is multiplied by `1 + (tip_scale − 1)·v` with v = 0 at the
@@ -165,6 +169,7 @@ impl Default for HairOptions {
         HairOptions {
             basis: CurveBasis::Linear,
             curve: CurveShape::Flat,
+            overlaps: Overlaps::Scatter,
             radius_scale: 1.0,
             tip_scale: 1.0,
             transform: Transform::default(),
