@@ -1,17 +1,8 @@
 //! The ray-intersection interface implemented by `tress-accel` (Embree).
 
 use crate::math::{Aabb, Ray, Vec3};
+pub use crate::math::PrimId;
 use std::sync::Arc;
-
-/// Identifies one primitive: an Embree geometry and a primitive (curve segment, triangle, sphere)
-/// inside it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct PrimId {
-    /// Embree geometry id: one per hair object or mesh, one shared by all spheres.
-    pub geom: u32,
-    /// Primitive index within that geometry.
-    pub prim: u32,
-}
 
 /// What was hit.
 #[derive(Clone, Copy, Debug)]
