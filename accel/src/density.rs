@@ -98,22 +98,25 @@
 //! # Use
 //!
 //! ```no_run
-//! use tress_accel::{DensityGrid, DensitySettings, HairFile, HairOptions, SceneBuilder};
+//! use tress_accel::{DensitySettings, HairFile, HairOptions, SceneBuilder};
 //! use tress_core::{FiberDensity, math::{Ray, Vec3}};
 //!
 //! # fn main() -> Result<(), tress_accel::Error> {
 //! let hair = HairFile::new("straight.hair").read()?;
 //! let accel = SceneBuilder::new()?.add_hair(&hair, &HairOptions::default(), 0)?.build()?;
 //! // Built from the accelerator's own fibers; build it before boxing the accelerator.
-//! let grid = DensityGrid::build(&accel, &DensitySettings::default())?;
+//! let grid = accel.density_grid(&DensitySettings::default())?;
 //! println!("{}", grid.info());
 //! let n = grid.fibers_crossed(&Ray::new(Vec3::new(0.0, 40.0, 0.0), Vec3::Y));
 //! # Ok(()) }
 //! ```
+//!
+//! [`EmbreeAccel`]: crate::EmbreeAccel
+//! [`EmbreeAccel::count_fibers_crossed`]: crate::EmbreeAccel::count_fibers_crossed
 
+use crate::curve_data::CurveData;
 use crate::curves::CurveBasis;
 use crate::error::{Error, Result};
-use crate::scene::{CurveData, EmbreeAccel};
 use glam::{UVec3, Vec4};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -434,11 +437,15 @@ impl fmt::Debug for DensityGrid {
 }
 
 impl DensityGrid {
-    /// Builds the grid from the hair of `accel` (meshes and spheres are ignored). A scene
-    /// without hair gives an empty grid (every count 0).
-    pub fn build(accel: &EmbreeAccel, settings: &DensitySettings) -> Result<DensityGrid> {
+    /// Builds the grid from `curves`, an accelerator's hair objects with their geometry ids
+    /// ([`EmbreeAccel::density_grid`]). No curves give an empty grid (every count 0).
+    ///
+    /// [`EmbreeAccel::density_grid`]: crate::EmbreeAccel::density_grid
+    pub(crate) fn build(
+        curves: Vec<(u32, &Arc<CurveData>)>,
+        settings: &DensitySettings,
+    ) -> Result<DensityGrid> {
         settings.validate()?;
-        let curves: Vec<(u32, &Arc<CurveData>)> = accel.hair_curves().collect();
         let mut hair = Vec::new();
         for &(id, c) in &curves {
             hair.resize(hair.len().max(id as usize + 1), None);
@@ -1072,7 +1079,7 @@ fn sym_eigenvalues(a: [[f64; 3]; 3]) -> [f64; 3] {
 mod tests {
     use super::*;
     use crate::test_util::{hair, line, rng_dir, shared_data};
-    use crate::{HairGeometry, HairOptions, HairStyle, ProceduralHair, SceneBuilder};
+    use crate::{EmbreeAccel, HairGeometry, HairOptions, HairStyle, ProceduralHair, SceneBuilder};
     use glam::Quat;
     use std::f32::consts::PI;
     use std::time::Instant;
@@ -1089,14 +1096,12 @@ mod tests {
     }
 
     fn grid(accel: &EmbreeAccel, resolution: Option<u32>, direction: bool) -> DensityGrid {
-        DensityGrid::build(
-            accel,
-            &DensitySettings {
+        accel
+            .density_grid(&DensitySettings {
                 resolution,
                 direction,
-            },
-        )
-        .unwrap()
+            })
+            .unwrap()
     }
 
     fn mean(v: &[f32]) -> f64 {
@@ -1624,7 +1629,7 @@ mod tests {
             .unwrap()
             .build()
             .unwrap();
-        let grid = DensityGrid::build(&accel, &DensitySettings::default()).unwrap();
+        let grid = accel.density_grid(&DensitySettings::default()).unwrap();
         assert_eq!(grid.info().occupied_voxels, 0);
         assert_eq!(grid.fibers_crossed(&Ray::new(Vec3::Z * 5.0, -Vec3::Z)), 0.0);
     }
@@ -1639,15 +1644,13 @@ mod tests {
         assert!(ron::from_str::<DensitySettings>("(resolutoin: Some(64))").is_err());
         let accel = accel(&slab());
         for bad in [0, MAX_RESOLUTION + 1] {
-            let e = DensityGrid::build(
-                &accel,
-                &DensitySettings {
+            let e = accel
+                .density_grid(&DensitySettings {
                     resolution: Some(bad),
                     direction: true,
-                },
-            )
-            .unwrap_err()
-            .to_string();
+                })
+                .unwrap_err()
+                .to_string();
             assert!(
                 e.contains("resolution") && e.contains(&bad.to_string()),
                 "{e}"

@@ -474,7 +474,7 @@ fn bench_model(
     // The grid the dual-scattering integrators read at their default resolution (its cost is
     // part of the build); the scene below hands it to them.
     let t2 = Instant::now();
-    let grid = big_pool.install(|| DensityGrid::build(&accel, &DensitySettings::default()))?;
+    let grid = big_pool.install(|| accel.density_grid(&DensitySettings::default()))?;
     let grid_time = t2.elapsed();
     let build_peak = peak_rss();
     // The baseline: the same curves, basis and build quality with no filter support, built
