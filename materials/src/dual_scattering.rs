@@ -420,7 +420,8 @@ impl DualScatteringTables {
             half_circle_energy.extend(w);
         }
         let medium = (settings.multiple_scattering == MultipleScattering::FiberMedium).then(|| {
-            FiberMedium::build(bcsdf, &globals, |k| node_theta(k, n) as f32, settings.walks)
+            let albedo: Vec<Rgb> = globals.iter().map(|g| g.a_f + g.a_b).collect();
+            FiberMedium::build(bcsdf, &albedo, |k| node_theta(k, n) as f32, settings.walks)
         });
         let settled = match &medium {
             Some(m) => SettledCounts {

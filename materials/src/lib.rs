@@ -18,89 +18,14 @@ pub mod dual_scattering_sampling;
 pub mod fiber_medium;
 pub mod lambertian_fiber;
 pub mod marschner;
+mod parallel;
+mod params;
 pub mod pigment;
 #[cfg(test)]
 mod test_util;
 
-/// An invalid model parameter.
-#[derive(Debug, Clone, thiserror::Error, PartialEq)]
-#[error("{field} = {value}: {reason}")]
-pub struct ParamError {
-    /// Name of the parameter, as written in scene files.
-    pub field: &'static str,
-    /// The rejected value, as text.
-    pub value: String,
-    /// What the value must be, e.g. `must lie in [0, 1]`.
-    pub reason: String,
-}
-
-impl ParamError {
-    /// An error saying that `field` = `value` breaks `reason`.
-    pub fn new(
-        field: &'static str,
-        value: impl std::fmt::Display,
-        reason: impl Into<String>,
-    ) -> Self {
-        ParamError {
-            field,
-            value: value.to_string(),
-            reason: reason.into(),
-        }
-    }
-}
-
-/// `f(0), …, f(n − 1)` on all cores: thread j computes j, j + threads, … (interleaving balances
-/// cheap and expensive items), so the result does not depend on the thread count.
-pub(crate) fn parallel_map<T: Send>(n: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |c| c.get())
-        .min(n)
-        .max(1);
-    let mut out: Vec<Option<T>> = (0..n).map(|_| None).collect();
-    std::thread::scope(|s| {
-        let f = &f;
-        let handles: Vec<_> = (0..threads)
-            .map(|j| {
-                s.spawn(move || {
-                    (j..n)
-                        .step_by(threads)
-                        .map(|k| (k, f(k)))
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        for h in handles {
-            for (k, v) in h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)) {
-                out[k] = Some(v);
-            }
-        }
-    });
-    out.into_iter().flatten().collect()
-}
-
-/// Checks that `value` lies in `[lo, hi]` (and is finite).
-pub fn check_range(field: &'static str, value: f32, lo: f32, hi: f32) -> Result<(), ParamError> {
-    if value.is_finite() && value >= lo && value <= hi {
-        Ok(())
-    } else {
-        Err(ParamError::new(
-            field,
-            value,
-            format!("must lie in [{lo}, {hi}]"),
-        ))
-    }
-}
-
-/// A named parameter set used by the statistical tests of every model.
-#[derive(Clone, Debug)]
-pub struct TestInstance<P> {
-    /// Short name of the instance, used in test messages.
-    pub name: String,
-    /// The model's parameters.
-    pub params: P,
-    /// Non-absorbing and energy conserving: the white-furnace oracle applies.
-    pub white_furnace: bool,
-}
+pub use params::{check_range, ParamError, TestInstance};
+pub(crate) use parallel::parallel_map;
 
 macro_rules! hair_models {
     ($($variant:ident => $module:ident :: $ty:ident),* $(,)?) => {
