@@ -10,7 +10,8 @@ use tress_accel::{
     EmbreeAccel, HairAttribute, HairOptions, HairSource, SceneBuilder, Transform, TriangleMesh,
 };
 use tress_core::Material;
-use tress_materials::pigment::{quantise_variants, Pigment, StrandVariation};
+use tress_materials::pigment::Pigment;
+use tress_materials::strand_variation::{quantise_variants, StrandVariation};
 
 /// An object of the scene, referring to a material by name.
 #[derive(Clone, Debug, Serialize, Deserialize, schemars::JsonSchema)]
@@ -281,7 +282,7 @@ mod tests {
         assert_eq!(block.len(), 4);
         for line in block {
             crate::ron_options()
-                .from_str::<tress_materials::pigment::StrandVariation>(line)
+                .from_str::<tress_materials::strand_variation::StrandVariation>(line)
                 .unwrap_or_else(|e| panic!("{line}: {e}"));
         }
     }

@@ -228,7 +228,7 @@ fn random_roughness_and_darker_roots_reach_each_segments_material() {
         tint: tress_materials::pigment::NO_TINT,
     };
     let base = brown.sigma_a(0.35).unwrap();
-    let desc: tress_materials::pigment::StrandVariation = tress_cli::ron_options()
+    let desc: tress_materials::strand_variation::StrandVariation = tress_cli::ron_options()
         .from_str("(random_roughness: 0.5, seed: 4)")
         .unwrap();
     let varied = desc.for_model(&HairModel::Chiang(chiang(brown))).unwrap();
