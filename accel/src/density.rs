@@ -99,13 +99,13 @@
 //!
 //! ```no_run
 //! use tress_accel::{DensitySettings, HairFile, HairOptions, SceneBuilder};
-//! use tress_core::{FiberDensity, math::{Ray, Vec3}};
+//! use tress_core::{FiberDensity, limits::Limits, math::{Ray, Vec3}};
 //!
 //! # fn main() -> Result<(), tress_accel::Error> {
 //! let hair = HairFile::new("straight.hair").read()?;
 //! let accel = SceneBuilder::new()?.add_hair(&hair, &HairOptions::default(), 0)?.build()?;
 //! // Built from the accelerator's own fibers; build it before boxing the accelerator.
-//! let grid = accel.density_grid(&DensitySettings::default())?;
+//! let grid = accel.density_grid(&DensitySettings::default(), &Limits::default())?;
 //! println!("{}", grid.info());
 //! let n = grid.fibers_crossed(&Ray::new(Vec3::new(0.0, 40.0, 0.0), Vec3::Y));
 //! # Ok(()) }
@@ -127,6 +127,7 @@ use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use tress_core::accel::FiberDensity;
+use tress_core::limits::Limits;
 use tress_core::math::{Aabb, Ray, Vec3};
 
 /// Straight chords per cubic curve segment.
@@ -438,12 +439,14 @@ impl fmt::Debug for DensityGrid {
 
 impl DensityGrid {
     /// Builds the grid from `curves`, an accelerator's hair objects with their geometry ids
-    /// ([`EmbreeAccel::density_grid`]). No curves give an empty grid (every count 0).
+    /// ([`EmbreeAccel::density_grid`]), refusing a lattice that could exceed the memory limit
+    /// of `limits`. No curves give an empty grid (every count 0).
     ///
     /// [`EmbreeAccel::density_grid`]: crate::EmbreeAccel::density_grid
     pub(crate) fn build(
         curves: Vec<(u32, &Arc<CurveData>)>,
         settings: &DensitySettings,
+        limits: &Limits,
     ) -> Result<DensityGrid> {
         settings.validate()?;
         let mut hair = Vec::new();
@@ -531,7 +534,7 @@ impl DensityGrid {
         let dense_gib = lattice.dims.iter().map(|&n| n as f64).product::<f64>()
             * std::mem::size_of::<VoxelRecord>() as f64
             / (1u64 << 30) as f64;
-        let limit_gib = tress_core::film::memory_limit_gib();
+        let limit_gib = limits.memory_gib;
         if dense_gib > limit_gib {
             let [nx, ny, nz] = lattice.dims;
             return Err(Error::InvalidOption {
@@ -541,7 +544,7 @@ impl DensityGrid {
                     "{resolution} gives {nx}×{ny}×{nz} voxels, up to {dense_gib:.1} GiB where the \
                      hair fills them, over the {limit_gib} GiB limit: lower it (None chooses \
                      one from the hair) or set {} to more GiB",
-                    tress_core::film::MEMORY_LIMIT_VAR
+                    tress_core::limits::MEMORY_LIMIT_VAR
                 ),
             });
         }
@@ -1097,10 +1100,13 @@ mod tests {
 
     fn grid(accel: &EmbreeAccel, resolution: Option<u32>, direction: bool) -> DensityGrid {
         accel
-            .density_grid(&DensitySettings {
-                resolution,
-                direction,
-            })
+            .density_grid(
+                &DensitySettings {
+                    resolution,
+                    direction,
+                },
+                &Limits::default(),
+            )
             .unwrap()
     }
 
@@ -1438,7 +1444,7 @@ mod tests {
             center: Vec3::ZERO,
             sphere_radius: 1.0,
         }
-        .generate()
+        .generate(&Limits::default())
         .unwrap()
     }
 
@@ -1629,7 +1635,9 @@ mod tests {
             .unwrap()
             .build()
             .unwrap();
-        let grid = accel.density_grid(&DensitySettings::default()).unwrap();
+        let grid = accel
+            .density_grid(&DensitySettings::default(), &Limits::default())
+            .unwrap();
         assert_eq!(grid.info().occupied_voxels, 0);
         assert_eq!(grid.fibers_crossed(&Ray::new(Vec3::Z * 5.0, -Vec3::Z)), 0.0);
     }
@@ -1645,10 +1653,13 @@ mod tests {
         let accel = accel(&slab());
         for bad in [0, MAX_RESOLUTION + 1] {
             let e = accel
-                .density_grid(&DensitySettings {
-                    resolution: Some(bad),
-                    direction: true,
-                })
+                .density_grid(
+                    &DensitySettings {
+                        resolution: Some(bad),
+                        direction: true,
+                    },
+                    &Limits::default(),
+                )
                 .unwrap_err()
                 .to_string();
             assert!(
@@ -1923,7 +1934,7 @@ mod tests {
             strands: 100_000,
             ..Default::default()
         }
-        .generate()
+        .generate(&Limits::default())
         .unwrap();
         let accel = accel(&g);
         eprintln!(
@@ -1959,7 +1970,7 @@ mod tests {
             center: Vec3::ZERO,
             sphere_radius: 1.0,
         }
-        .generate()
+        .generate(&Limits::default())
         .unwrap();
         let accel = accel(&head);
         let linear = grid(&accel, None, true);

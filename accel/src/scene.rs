@@ -22,6 +22,7 @@ use std::ops::Range;
 use std::sync::atomic::{AtomicIsize, Ordering};
 use std::sync::Arc;
 use tress_core::accel::{Accel, BuildError, FiberDensity, Hit, HitKind, PrimId};
+use tress_core::limits::Limits;
 use tress_core::math::{Aabb, Ray, Vec3};
 
 const NO_ID: u32 = u32::MAX;
@@ -237,10 +238,12 @@ pub struct SceneBuilder {
     spheres: Vec<(Vec4, u32)>,
     embree_bytes: Arc<AtomicIsize>,
     filters: bool,
+    /// What the hair added may take (children grown are checked against it).
+    limits: Limits,
 }
 
 impl SceneBuilder {
-    /// A new Embree device and empty scene.
+    /// A new Embree device and empty scene, held to the default [`Limits`].
     pub fn new() -> Result<Self> {
         let device = fp_mode::preserving_fp_mode(Device::new)
             .map_err(|e| Error::Embree(format!("cannot create device: {e}")))?;
@@ -276,7 +279,15 @@ impl SceneBuilder {
             spheres: Vec::new(),
             embree_bytes,
             filters: true,
+            limits: Limits::default(),
         })
+    }
+
+    /// The same builder, with the hair it adds held to `limits` (children grown are checked
+    /// against their memory limit).
+    pub fn with_limits(mut self, limits: Limits) -> Self {
+        self.limits = limits;
+        self
     }
 
     /// A scene without filter support, for measuring Embree's own speed (`tress bench`): its
@@ -335,7 +346,7 @@ impl SceneBuilder {
     ) -> Result<Self> {
         hair.validate()?;
         options.validate(&hair.name)?;
-        let grown = options.with_children(hair)?;
+        let grown = options.with_children(hair, &self.limits)?;
         let hair: &HairGeometry = &grown;
         let (hair, ids): (Cow<HairGeometry>, Vec<u32>) = if options.strand_fraction < 1.0 {
             let (sub, ids) = hair.subsample(options.strand_fraction, options.strand_seed);
@@ -815,10 +826,11 @@ impl EmbreeAccel {
 // What the density grid (`density.rs`) needs: the world-space fibers Embree intersects, and a
 // brute-force crossing count to calibrate and test it against.
 impl EmbreeAccel {
-    /// The density grid of this geometry's hair (meshes and spheres are ignored). Geometry
-    /// without hair gives an empty grid (every count 0).
-    pub fn density_grid(&self, settings: &DensitySettings) -> Result<DensityGrid> {
-        DensityGrid::build(self.hair_curves().collect(), settings)
+    /// The density grid of this geometry's hair (meshes and spheres are ignored), refusing a
+    /// lattice that could exceed the memory limit of `limits`. Geometry without hair gives an
+    /// empty grid (every count 0).
+    pub fn density_grid(&self, settings: &DensitySettings, limits: &Limits) -> Result<DensityGrid> {
+        DensityGrid::build(self.hair_curves().collect(), settings, limits)
     }
 
     /// The hair geometries with their Embree geometry ids.
@@ -974,6 +986,7 @@ impl Accel for EmbreeAccel {
     fn fiber_density(
         &self,
         resolution: Option<u32>,
+        limits: &Limits,
     ) -> std::result::Result<Option<Arc<dyn FiberDensity>>, BuildError> {
         if self.info.strands == 0 {
             return Ok(None);
@@ -982,7 +995,7 @@ impl Accel for EmbreeAccel {
             resolution,
             ..Default::default()
         };
-        Ok(Some(Arc::new(self.density_grid(&settings)?)))
+        Ok(Some(Arc::new(self.density_grid(&settings, limits)?)))
     }
 }
 

@@ -1,6 +1,7 @@
 //! Film settings, what a render records per pixel (radiance, alpha, AOVs) and the image buffer
 //! the render loop fills.
 
+use crate::limits::{Limits, MEMORY_LIMIT_VAR};
 use crate::math::Rgb;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeSet;
@@ -29,12 +30,6 @@ pub struct FilmSettings {
 fn default_spp() -> u32 {
     16
 }
-
-/// Environment variable overriding [`DEFAULT_MEMORY_LIMIT_GIB`].
-pub const MEMORY_LIMIT_VAR: &str = "TRESS_MEMORY_LIMIT_GIB";
-/// Films whose render would need more memory than this are refused (override with
-/// [`MEMORY_LIMIT_VAR`]).
-pub const DEFAULT_MEMORY_LIMIT_GIB: f64 = 16.0;
 
 /// Largest film side, in pixels.
 pub const MAX_FILM_SIDE: u32 = 1 << 16;
@@ -94,17 +89,6 @@ pub enum FilmError {
     },
 }
 
-/// The memory a render may plan for, in GiB: [`MEMORY_LIMIT_VAR`] when set to a positive
-/// number, else [`DEFAULT_MEMORY_LIMIT_GIB`]. Films, density grids and tables are checked
-/// against it before they are allocated.
-pub fn memory_limit_gib() -> f64 {
-    std::env::var(MEMORY_LIMIT_VAR)
-        .ok()
-        .and_then(|v| v.parse::<f64>().ok())
-        .filter(|g| *g > 0.0)
-        .unwrap_or(DEFAULT_MEMORY_LIMIT_GIB)
-}
-
 impl FilmSettings {
     /// The pixel window actually rendered, `[x0, y0, x1, y1)`.
     pub fn window(&self) -> [u32; 4] {
@@ -135,17 +119,21 @@ impl FilmSettings {
         Ok(())
     }
 
-    /// [`Self::validate`], and that a render of radiance alone fits the memory limit
-    /// ([`MEMORY_LIMIT_VAR`]).
-    pub fn validate_for_render(&self) -> Result<(), FilmError> {
-        self.validate_for_outputs(&Outputs::default())
+    /// [`Self::validate`], and that a render of radiance alone fits the memory limit of
+    /// `limits`.
+    pub fn validate_for_render(&self, limits: &Limits) -> Result<(), FilmError> {
+        self.validate_for_outputs(&Outputs::default(), limits)
     }
 
-    /// [`Self::validate`], and that a render recording `outputs` fits the memory limit
-    /// ([`MEMORY_LIMIT_VAR`]).
-    pub fn validate_for_outputs(&self, outputs: &Outputs) -> Result<(), FilmError> {
+    /// [`Self::validate`], and that a render recording `outputs` fits the memory limit of
+    /// `limits`.
+    pub fn validate_for_outputs(
+        &self,
+        outputs: &Outputs,
+        limits: &Limits,
+    ) -> Result<(), FilmError> {
         self.validate()?;
-        let limit_gib = memory_limit_gib();
+        let limit_gib = limits.memory_gib;
         let need_gib = self.memory_bytes_for(outputs) as f64 / (1u64 << 30) as f64;
         if need_gib > limit_gib {
             let [x0, y0, x1, y1] = self.window();
@@ -344,6 +332,18 @@ impl Image {
         s / (3 * self.pixels.len()).max(1) as f64
     }
 
+    /// Per-channel mean.
+    pub fn mean_rgb(&self) -> [f64; 3] {
+        let mut s = [0.0f64; 3];
+        for p in &self.pixels {
+            s[0] += p.x as f64;
+            s[1] += p.y as f64;
+            s[2] += p.z as f64;
+        }
+        let n = self.pixels.len().max(1) as f64;
+        s.map(|v| v / n)
+    }
+}
 
 /// A per-sample quantity the render loop sums exactly. Every camera sample adds one value of
 /// each quantity its render records ([`quantities`]); the output channels are computed from
@@ -461,16 +461,4 @@ pub fn quantity_count(outputs: &Outputs) -> usize {
         + on(outputs.has(Aov::Tangent), 4)
         + on(outputs.has(Aov::Albedo), 3)
         + on(outputs.has(Aov::Variance), 3)
-}
-    /// Per-channel mean.
-    pub fn mean_rgb(&self) -> [f64; 3] {
-        let mut s = [0.0f64; 3];
-        for p in &self.pixels {
-            s[0] += p.x as f64;
-            s[1] += p.y as f64;
-            s[2] += p.z as f64;
-        }
-        let n = self.pixels.len().max(1) as f64;
-        s.map(|v| v / n)
-    }
 }

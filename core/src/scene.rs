@@ -164,8 +164,8 @@ impl Scene {
     }
 
     /// The density grid of the scene's hair at `resolution` voxels along the longest side
-    /// (`None`: chosen from the fibers), built on the first request of the run `prep` and
-    /// shared after; `Ok(None)` when the scene has no hair. The build is noted in `prep`.
+    /// (`None`: chosen from the fibers), built within `prep`'s limits on the run's first request
+    /// and shared after; `Ok(None)` when the scene has no hair. The build is noted in `prep`.
     pub fn fiber_density(
         &self,
         prep: &Preparation,
@@ -177,7 +177,7 @@ impl Scene {
         };
         let grid = prep.get_or_build(key, || {
             let start = Instant::now();
-            let grid = self.accel.fiber_density(resolution)?;
+            let grid = self.accel.fiber_density(resolution, prep.limits())?;
             if let Some(grid) = &grid {
                 prep.note(format!(
                     "{} built in {:.2} s",
