@@ -43,7 +43,7 @@ pub use crate::film::{quantities, quantity_count, Quantity};
 use crate::integrator::Integrator;
 use crate::math::{Ray, Rgb, Vec3};
 use crate::rng::{hash_words, pixel_position, Sampler};
-use crate::scene::{rays_traced_on_this_thread, Scene};
+use crate::scene::Scene;
 use crate::shading::ShadingPoint;
 use rayon::prelude::*;
 use std::ops::Range;
@@ -684,7 +684,7 @@ pub fn render_outputs(
     let results: Vec<TileResult> = tiles
         .par_iter()
         .map(|&tile| {
-            let rays_before = rays_traced_on_this_thread();
+            let rays_before = scene.rays_traced_on_this_thread();
             let job = TileJob {
                 scene,
                 integrator,
@@ -699,7 +699,7 @@ pub fn render_outputs(
             progress(((tx1 - tx0) * (ty1 - ty0)) as u64 * per_pixel);
             Some(TileResult {
                 sums,
-                rays: rays_traced_on_this_thread() - rays_before,
+                rays: scene.rays_traced_on_this_thread() - rays_before,
                 nonfinite,
             })
         })
