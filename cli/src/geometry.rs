@@ -275,7 +275,7 @@ mod tests {
 
     #[test]
     fn the_documented_variation_forms_parse() {
-        let source = include_str!("../../materials/src/pigment.rs");
+        let source = include_str!("../../materials/src/strand_variation.rs");
         let start = source.find("/// ```ron\n/// (random").expect("the example");
         let block: Vec<&str> = source[start..]
             .lines()
