@@ -13,6 +13,7 @@
 //! Procedural scalp hair is shown on its scalp sphere.
 
 use tress_accel::{HairOptions, HairSource, HairStyle, SceneBuilder};
+use tress_core::limits::Limits;
 use tress_core::math::{Vec2, Vec3};
 use tress_core::rng::Pcg32;
 use tress_core::{Accel, Camera, HitKind, Image, Ray};
@@ -31,7 +32,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(s) => ron::from_str(s)?,
         None => Vec3::new(0.35, 0.15, 1.0),
     };
-    let hair = source.load()?;
+    let hair = source.load(&Limits::default())?;
     let mut builder = SceneBuilder::new()?.add_hair(&hair, &options, 0)?;
     if let HairSource::Procedural(p) = &source {
         if p.style != HairStyle::Ball {

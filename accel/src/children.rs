@@ -30,6 +30,7 @@ use rstar::primitives::GeomWithData;
 use rstar::RTree;
 use serde::{Deserialize, Serialize};
 use std::f32::consts::TAU;
+use tress_core::limits::Limits;
 use tress_core::math::Vec3;
 use tress_core::rng::{hash_words, Pcg32};
 
@@ -120,7 +121,7 @@ impl ChildStrands {
     /// `G + g·per_guide ..` (G guides), in order. `scale` is the object transform's scale, by
     /// which `radius` (scene units) is divided to work in the guides' own units. Guides of
     /// zero length get no children.
-    pub fn grow(&self, guides: &HairGeometry, scale: f32) -> Result<HairGeometry> {
+    pub fn grow(&self, guides: &HairGeometry, scale: f32, limits: &Limits) -> Result<HairGeometry> {
         let frames: Vec<Option<GuideFrames>> = (0..guides.strand_count())
             .into_par_iter()
             .map(|g| GuideFrames::new(&guides.points[guides.strand(g)]))
@@ -144,6 +145,7 @@ impl ChildStrands {
                 guides.strand_count()
             ),
             total as f64,
+            limits,
         )?;
         let roots = (self.blend > 1).then(|| {
             RTree::bulk_load(
@@ -504,7 +506,7 @@ mod tests {
             clump: 0.5,
             ..options()
         };
-        let grown = o.grow(&g, 1.0).unwrap();
+        let grown = o.grow(&g, 1.0, &Limits::default()).unwrap();
         assert_eq!(grown.strand_count(), 3 + 3 * 8);
         // The guides come first, untouched.
         assert_eq!(grown.points[..g.point_count()], g.points[..]);
@@ -528,7 +530,7 @@ mod tests {
             assert_eq!(grown.radii[grown.strand(3 + c)], g.radii[g.strand(guide)]);
         }
         // The radius is in scene units: a transform scale of 10 shrinks it in file units.
-        let scaled = o.grow(&g, 10.0).unwrap();
+        let scaled = o.grow(&g, 10.0, &Limits::default()).unwrap();
         let far = (0..24)
             .map(|c| {
                 (scaled.points[scaled.strand(3 + c).start] - g.points[g.strand(c / 8).start])
@@ -547,13 +549,13 @@ mod tests {
             radius_jitter: 0.2,
             ..options()
         };
-        let a = o.grow(&g, 1.0).unwrap();
-        assert_eq!(a, o.grow(&g, 1.0).unwrap());
+        let a = o.grow(&g, 1.0, &Limits::default()).unwrap();
+        assert_eq!(a, o.grow(&g, 1.0, &Limits::default()).unwrap());
         let b = ChildStrands {
             seed: 2,
             ..o.clone()
         }
-        .grow(&g, 1.0)
+        .grow(&g, 1.0, &Limits::default())
         .unwrap();
         assert_ne!(a.points, b.points);
         // A child depends on (seed, guide, child) only: more children per guide leave the
@@ -562,7 +564,7 @@ mod tests {
             per_guide: 9,
             ..o.clone()
         }
-        .grow(&g, 1.0)
+        .grow(&g, 1.0, &Limits::default())
         .unwrap();
         assert_eq!(a.points[a.strand(3)], more.points[more.strand(3)]);
     }
@@ -576,7 +578,7 @@ mod tests {
             radius_jitter: 0.25,
             ..options()
         };
-        let grown = o.grow(&g, 1.0).unwrap();
+        let grown = o.grow(&g, 1.0, &Limits::default()).unwrap();
         let (mut shortest, mut longest) = (f32::MAX, 0.0f32);
         let (mut thinnest, mut thickest) = (f32::MAX, 0.0f32);
         for c in 1..=200 {
@@ -617,7 +619,7 @@ mod tests {
             blend: 2,
             ..options()
         };
-        let grown = o.grow(&g, 1.0).unwrap();
+        let grown = o.grow(&g, 1.0, &Limits::default()).unwrap();
         for c in 0..100 {
             let pts = &grown.points[grown.strand(3 + c)];
             for p in pts {
@@ -659,7 +661,7 @@ mod tests {
             tress_core::math::Rgb::Z,
         ]));
         g.transparency = Some(HairAttribute::PerPoint((0..72).map(|i| i as f32).collect()));
-        let grown = options().grow(&g, 1.0).unwrap();
+        let grown = options().grow(&g, 1.0, &Limits::default()).unwrap();
         let colors = grown.colors.as_ref().unwrap();
         let alpha = grown.transparency.as_ref().unwrap();
         for c in 0..24 {
@@ -729,7 +731,7 @@ mod tests {
             &[vec![Vec3::ONE, Vec3::ONE], line(Vec3::ZERO, Vec3::Y, 3)],
             0.1,
         );
-        let grown = options().grow(&g, 1.0).unwrap();
+        let grown = options().grow(&g, 1.0, &Limits::default()).unwrap();
         assert_eq!(grown.strand_count(), 2 + 8);
     }
 }

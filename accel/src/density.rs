@@ -99,22 +99,25 @@
 //! # Use
 //!
 //! ```no_run
-//! use tress_accel::{DensityGrid, DensitySettings, HairFile, HairOptions, SceneBuilder};
-//! use tress_core::{FiberDensity, math::{Ray, Vec3}};
+//! use tress_accel::{DensitySettings, HairFile, HairOptions, SceneBuilder};
+//! use tress_core::{FiberDensity, limits::Limits, math::{Ray, Vec3}};
 //!
 //! # fn main() -> Result<(), tress_accel::Error> {
 //! let hair = HairFile::new("straight.hair").read()?;
 //! let accel = SceneBuilder::new()?.add_hair(&hair, &HairOptions::default(), 0)?.build()?;
 //! // Built from the accelerator's own fibers; build it before boxing the accelerator.
-//! let grid = DensityGrid::build(&accel, &DensitySettings::default())?;
+//! let grid = accel.density_grid(&DensitySettings::default(), &Limits::default())?;
 //! println!("{}", grid.info());
 //! let n = grid.fibers_crossed(&Ray::new(Vec3::new(0.0, 40.0, 0.0), Vec3::Y));
 //! # Ok(()) }
 //! ```
+//!
+//! [`EmbreeAccel`]: crate::EmbreeAccel
+//! [`EmbreeAccel::count_fibers_crossed`]: crate::EmbreeAccel::count_fibers_crossed
 
+use crate::curve_data::CurveData;
 use crate::curves::CurveBasis;
 use crate::error::{Error, Result};
-use crate::scene::{CurveData, EmbreeAccel};
 use glam::{UVec3, Vec4};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -125,6 +128,7 @@ use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use tress_core::accel::FiberDensity;
+use tress_core::limits::Limits;
 use tress_core::math::{Aabb, Ray, Vec3};
 
 /// Straight chords per cubic curve segment.
@@ -435,11 +439,17 @@ impl fmt::Debug for DensityGrid {
 }
 
 impl DensityGrid {
-    /// Builds the grid from the hair of `accel` (meshes and spheres are ignored). A scene
-    /// without hair gives an empty grid (every count 0).
-    pub fn build(accel: &EmbreeAccel, settings: &DensitySettings) -> Result<DensityGrid> {
+    /// Builds the grid from `curves`, an accelerator's hair objects with their geometry ids
+    /// ([`EmbreeAccel::density_grid`]), refusing a lattice that could exceed the memory limit
+    /// of `limits`. No curves give an empty grid (every count 0).
+    ///
+    /// [`EmbreeAccel::density_grid`]: crate::EmbreeAccel::density_grid
+    pub(crate) fn build(
+        curves: Vec<(u32, &Arc<CurveData>)>,
+        settings: &DensitySettings,
+        limits: &Limits,
+    ) -> Result<DensityGrid> {
         settings.validate()?;
-        let curves: Vec<(u32, &Arc<CurveData>)> = accel.hair_curves().collect();
         let mut hair = Vec::new();
         for &(id, c) in &curves {
             hair.resize(hair.len().max(id as usize + 1), None);
@@ -525,7 +535,7 @@ impl DensityGrid {
         let dense_gib = lattice.dims.iter().map(|&n| n as f64).product::<f64>()
             * std::mem::size_of::<VoxelRecord>() as f64
             / (1u64 << 30) as f64;
-        let limit_gib = tress_core::film::memory_limit_gib();
+        let limit_gib = limits.memory_gib;
         if dense_gib > limit_gib {
             let [nx, ny, nz] = lattice.dims;
             return Err(Error::InvalidOption {
@@ -535,7 +545,7 @@ impl DensityGrid {
                     "{resolution} gives {nx}×{ny}×{nz} voxels, up to {dense_gib:.1} GiB where the \
                      hair fills them, over the {limit_gib} GiB limit: lower it (None chooses \
                      one from the hair) or set {} to more GiB",
-                    tress_core::film::MEMORY_LIMIT_VAR
+                    tress_core::limits::MEMORY_LIMIT_VAR
                 ),
             });
         }
@@ -1073,7 +1083,7 @@ fn sym_eigenvalues(a: [[f64; 3]; 3]) -> [f64; 3] {
 mod tests {
     use super::*;
     use crate::test_util::{hair, line, rng_dir, shared_data};
-    use crate::{HairGeometry, HairOptions, HairStyle, ProceduralHair, SceneBuilder};
+    use crate::{EmbreeAccel, HairGeometry, HairOptions, HairStyle, ProceduralHair, SceneBuilder};
     use glam::Quat;
     use std::f32::consts::PI;
     use std::time::Instant;
@@ -1090,14 +1100,15 @@ mod tests {
     }
 
     fn grid(accel: &EmbreeAccel, resolution: Option<u32>, direction: bool) -> DensityGrid {
-        DensityGrid::build(
-            accel,
-            &DensitySettings {
-                resolution,
-                direction,
-            },
-        )
-        .unwrap()
+        accel
+            .density_grid(
+                &DensitySettings {
+                    resolution,
+                    direction,
+                },
+                &Limits::default(),
+            )
+            .unwrap()
     }
 
     fn mean(v: &[f32]) -> f64 {
@@ -1434,7 +1445,7 @@ mod tests {
             center: Vec3::ZERO,
             sphere_radius: 1.0,
         }
-        .generate()
+        .generate(&Limits::default())
         .unwrap()
     }
 
@@ -1625,7 +1636,9 @@ mod tests {
             .unwrap()
             .build()
             .unwrap();
-        let grid = DensityGrid::build(&accel, &DensitySettings::default()).unwrap();
+        let grid = accel
+            .density_grid(&DensitySettings::default(), &Limits::default())
+            .unwrap();
         assert_eq!(grid.info().occupied_voxels, 0);
         assert_eq!(grid.fibers_crossed(&Ray::new(Vec3::Z * 5.0, -Vec3::Z)), 0.0);
     }
@@ -1640,15 +1653,16 @@ mod tests {
         assert!(ron::from_str::<DensitySettings>("(resolutoin: Some(64))").is_err());
         let accel = accel(&slab());
         for bad in [0, MAX_RESOLUTION + 1] {
-            let e = DensityGrid::build(
-                &accel,
-                &DensitySettings {
-                    resolution: Some(bad),
-                    direction: true,
-                },
-            )
-            .unwrap_err()
-            .to_string();
+            let e = accel
+                .density_grid(
+                    &DensitySettings {
+                        resolution: Some(bad),
+                        direction: true,
+                    },
+                    &Limits::default(),
+                )
+                .unwrap_err()
+                .to_string();
             assert!(
                 e.contains("resolution") && e.contains(&bad.to_string()),
                 "{e}"
@@ -1921,7 +1935,7 @@ mod tests {
             strands: 100_000,
             ..Default::default()
         }
-        .generate()
+        .generate(&Limits::default())
         .unwrap();
         let accel = accel(&g);
         eprintln!(
@@ -1957,7 +1971,7 @@ mod tests {
             center: Vec3::ZERO,
             sphere_radius: 1.0,
         }
-        .generate()
+        .generate(&Limits::default())
         .unwrap();
         let accel = accel(&head);
         let linear = grid(&accel, None, true);

@@ -3,6 +3,7 @@
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
+use tress_core::limits::Limits;
 use tress_core::math::{Aabb, Rgb, Vec3};
 use tress_core::rng::Pcg32;
 
@@ -10,12 +11,18 @@ use tress_core::rng::Pcg32;
 /// Embree's curve segment and BVH share (a pbrt groom of 20.5 M segments took 2.5 GB).
 pub const BYTES_PER_POINT: f64 = 128.0;
 
-/// Refuses hair that `points` points would make too large for the memory limit
-/// ([`tress_core::film::memory_limit_gib`], the films' limit), before any is allocated. `how`
-/// says what makes that many (`strands × points_per_strand`) for the message.
-pub fn check_point_memory(object: &str, field: &'static str, how: &str, points: f64) -> Result<()> {
+/// Refuses hair that `points` points would make too large for the memory limit of `limits`
+/// (the films' limit), before any is allocated. `how` says what makes that many
+/// (`strands × points_per_strand`) for the message.
+pub fn check_point_memory(
+    object: &str,
+    field: &'static str,
+    how: &str,
+    points: f64,
+    limits: &Limits,
+) -> Result<()> {
     let need_gib = points * BYTES_PER_POINT / (1u64 << 30) as f64;
-    let limit_gib = tress_core::film::memory_limit_gib();
+    let limit_gib = limits.memory_gib;
     if need_gib > limit_gib {
         return Err(Error::InvalidOption {
             object: object.to_owned(),
@@ -23,7 +30,7 @@ pub fn check_point_memory(object: &str, field: &'static str, how: &str, points: 
             reason: format!(
                 "{how} makes {points:.3e} hair points, about {need_gib:.1} GiB, over the \
                  {limit_gib} GiB limit: use fewer, or set {} to more GiB",
-                tress_core::film::MEMORY_LIMIT_VAR
+                tress_core::limits::MEMORY_LIMIT_VAR
             ),
         });
     }

@@ -21,7 +21,7 @@
 //!
 //! `examples/preview.rs` renders a quick shaded preview of any hair source.
 //!
-//! For dual scattering, [`DensityGrid::build`] turns the hair of a built [`EmbreeAccel`] into a
+//! For dual scattering, [`EmbreeAccel::density_grid`] turns the hair of a built accelerator into a
 //! sparse voxel grid answering [`tress_core::FiberDensity`] (the expected number of fibers a
 //! ray crosses); [`EmbreeAccel::count_fibers_crossed`] is its brute-force reference.
 //!
@@ -89,6 +89,7 @@
 #![warn(missing_docs)]
 
 mod children;
+mod curve_data;
 mod curves;
 pub mod cyhair;
 pub mod density;
@@ -109,6 +110,7 @@ pub mod usc;
 pub mod usd;
 
 pub use children::ChildStrands;
+pub use curve_data::HairSegment;
 pub use curves::{CurveBasis, CurveShape, Overlaps};
 pub use cyhair::HairFile;
 pub use density::{DensityGrid, DensityInfo, DensitySettings};
@@ -119,7 +121,7 @@ pub use pbrt::PbrtFile;
 pub use ply::PlyFile;
 pub use procedural::{HairStyle, ProceduralHair};
 pub use scene::raw;
-pub use scene::{AccelInfo, EmbreeAccel, HairSegment, ObjectInfo, ObjectKind, SceneBuilder};
+pub use scene::{AccelInfo, EmbreeAccel, ObjectInfo, ObjectKind, SceneBuilder};
 pub use source::{HairOptions, HairSource};
 pub use tfx::TfxFile;
 pub use usc::UscFile;

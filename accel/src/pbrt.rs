@@ -51,6 +51,7 @@ use glam::{DMat3, DMat4, DVec3};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use tress_core::limits::Limits;
 use tress_core::math::Vec3;
 
 /// How deeply `Include`/`Import` may nest: deeper is taken for a cycle.
@@ -119,8 +120,9 @@ impl PbrtFile {
         Ok(files)
     }
 
-    /// Reads the file's curves (and those of the files it includes) and validates them.
-    pub fn read(&self) -> Result<HairGeometry> {
+    /// Reads the file's curves (and those of the files it includes) and validates them, within
+    /// the memory limit of `limits` (on the text read in all and the points made).
+    pub fn read(&self, limits: &Limits) -> Result<HairGeometry> {
         let mut reader = CurveReader {
             base: self.path.parent().unwrap_or(Path::new("")).to_path_buf(),
             state: GraphicsState::default(),
@@ -131,6 +133,7 @@ impl PbrtFile {
             instances: Vec::new(),
             includes: 0,
             bytes_read: 0,
+            limits: *limits,
             other_shapes: 0,
             hair: HairGeometry::empty(self.path.display().to_string()),
             strand_open: false,
@@ -385,6 +388,8 @@ struct CurveReader {
     includes: usize,
     /// Bytes of every file read so far, counted each time it is read.
     bytes_read: u64,
+    /// What reading may spend: the text read in all, and the points refined from curves.
+    limits: Limits,
     other_shapes: usize,
     /// The strands read so far (of the object being defined, while there is one).
     hair: HairGeometry,
@@ -409,14 +414,14 @@ impl CurveReader {
         })?;
         // Few includes of a large file fan out too: the text read in all is bounded like memory.
         self.bytes_read += bytes.len() as u64;
-        let limit_gib = tress_core::film::memory_limit_gib();
+        let limit_gib = self.limits.memory_gib;
         if self.bytes_read as f64 > limit_gib * (1u64 << 30) as f64 {
             return Err(format_error(
                 path,
                 format!(
                     "the files included read more than {limit_gib} GiB of text in all (files \
                      included many times over); set {} to more GiB to read them",
-                    tress_core::film::MEMORY_LIMIT_VAR
+                    tress_core::limits::MEMORY_LIMIT_VAR
                 ),
             ));
         }
@@ -848,6 +853,7 @@ impl CurveReader {
             "Shape \"curve\"",
             "refining the curves into straight segments",
             points,
+            &self.limits,
         )?;
         for (s, &(cps, w0, w1, pieces)) in refined.iter().enumerate() {
             let first = to_f32(cps[0]);
@@ -1123,7 +1129,7 @@ mod tests {
         }
         let path = dir.path().join("scene.pbrt");
         std::fs::write(&path, main).unwrap();
-        PbrtFile::new(&path).read()
+        PbrtFile::new(&path).read(&Limits::default())
     }
 
     fn read(main: &str) -> Result<HairGeometry> {
@@ -1476,7 +1482,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let gz = dir.path().join("hair.pbrt.gz");
         std::fs::write(&gz, [0x1f, 0x8b, 8, 0]).unwrap();
-        let e = PbrtFile::new(&gz).read().unwrap_err().to_string();
+        let e = PbrtFile::new(&gz)
+            .read(&Limits::default())
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("hair.pbrt.gz") && e.contains("gzip"), "{e}");
     }
 }

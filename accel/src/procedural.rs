@@ -20,6 +20,7 @@ use crate::error::{Error, Result};
 use crate::geometry::HairGeometry;
 use serde::{Deserialize, Serialize};
 use std::f32::consts::PI;
+use tress_core::limits::Limits;
 use tress_core::math::{Frame, Vec2, Vec3};
 use tress_core::rng::{mix64, Pcg32};
 use tress_core::sampling::sample_uniform_sphere;
@@ -103,7 +104,7 @@ impl ProceduralHair {
         )
     }
 
-    fn validate(&self) -> Result<()> {
+    fn validate(&self, limits: &Limits) -> Result<()> {
         let bad = |field: &'static str, reason: String| Error::InvalidOption {
             object: self.name(),
             field,
@@ -137,6 +138,7 @@ impl ProceduralHair {
             "strands",
             "strands × points_per_strand",
             self.strands as f64 * self.points_per_strand as f64,
+            limits,
         )?;
         positive("radius", self.radius)?;
         positive("length", self.length)?;
@@ -165,9 +167,9 @@ impl ProceduralHair {
         Ok(())
     }
 
-    /// Generates the hair.
-    pub fn generate(&self) -> Result<HairGeometry> {
-        self.validate()?;
+    /// Generates the hair, refusing more points than the memory limit of `limits` allows.
+    pub fn generate(&self, limits: &Limits) -> Result<HairGeometry> {
+        self.validate(limits)?;
         let m = self.points_per_strand as usize;
         let n = self.strands as usize;
         let mut points = Vec::with_capacity(n * m);
@@ -334,19 +336,21 @@ mod tests {
                 points_per_strand: 20,
                 ..Default::default()
             };
-            let a = p.generate().unwrap();
-            assert_eq!(a, p.generate().unwrap(), "{style:?}");
+            let a = p.generate(&Limits::default()).unwrap();
+            assert_eq!(a, p.generate(&Limits::default()).unwrap(), "{style:?}");
             assert_eq!(a.strand_count(), 300);
             assert_eq!(a.point_count(), 6000);
             let other = ProceduralHair {
                 seed: 12,
                 ..p.clone()
             }
-            .generate()
+            .generate(&Limits::default())
             .unwrap();
             assert_ne!(a.points, other.points);
             // Strand i depends only on (seed, i).
-            let fewer = ProceduralHair { strands: 100, ..p }.generate().unwrap();
+            let fewer = ProceduralHair { strands: 100, ..p }
+                .generate(&Limits::default())
+                .unwrap();
             assert_eq!(fewer.points[..], a.points[..2000]);
         }
     }
@@ -363,7 +367,7 @@ mod tests {
                 length: 3.0,
                 ..Default::default()
             };
-            let g = p.generate().unwrap();
+            let g = p.generate(&Limits::default()).unwrap();
             for i in 0..g.strand_count() {
                 let pts = &g.points[g.strand(i)];
                 assert!(
@@ -397,7 +401,7 @@ mod tests {
             length: 1.0,
             ..Default::default()
         };
-        let g = p.generate().unwrap();
+        let g = p.generate(&Limits::default()).unwrap();
         assert!(g.points.iter().all(|q| q.length() <= 1.0 + 1e-5));
         // Uniform volume density over shells from 1/π (the smallest allowed for length 1) to 1.
         let outer = g.points.iter().filter(|q| q.length() > 0.5).count() as f32;
@@ -440,7 +444,7 @@ mod tests {
             "length",
             "amplitude",
         ]) {
-            let e = p.generate().unwrap_err().to_string();
+            let e = p.generate(&Limits::default()).unwrap_err().to_string();
             assert!(e.contains(field) && e.contains("procedural"), "{e}");
         }
     }

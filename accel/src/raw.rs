@@ -141,7 +141,7 @@ mod tests {
             radius: 0.01,
             ..Default::default()
         }
-        .generate()
+        .generate(&tress_core::limits::Limits::default())
         .unwrap();
         SceneBuilder::new()
             .unwrap()

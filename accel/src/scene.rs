@@ -2,7 +2,9 @@
 //! ray queries with [`tress_core::Hit`]s. See the crate docs for the fiber frame, the sign of
 //! `h` and the self-intersection rule.
 
-use crate::curves::{Capsule, CurveBasis, CurveShape, Overlaps};
+use crate::curve_data::{CurveData, HairSegment, SegmentMaterials, SegmentRecord, StrandRecord};
+use crate::curves::{CurveBasis, CurveShape, Overlaps};
+use crate::density::{DensityGrid, DensitySettings};
 use crate::error::{Error, Result};
 use crate::fp_mode;
 use crate::geometry::{HairGeometry, Transform};
@@ -20,8 +22,8 @@ use std::ops::Range;
 use std::sync::atomic::{AtomicIsize, Ordering};
 use std::sync::Arc;
 use tress_core::accel::{Accel, BuildError, FiberDensity, Hit, HitKind, PrimId};
-use tress_core::bcsdf::FiberFrame;
-use tress_core::math::{Aabb, Ray, Rgb, Vec3};
+use tress_core::limits::Limits;
+use tress_core::math::{Aabb, Ray, Vec3};
 
 const NO_ID: u32 = u32::MAX;
 
@@ -40,245 +42,6 @@ struct Exclude {
     geoms: *const [GeomData],
     /// [`EmbreeAccel::origin_shift`]: how far behind its origin Embree sees the ray start.
     origin_shift: f32,
-}
-
-/// Everything needed to turn a curve hit into a fiber hit and to filter self-intersections.
-#[derive(Debug)]
-pub(crate) struct CurveData {
-    basis: CurveBasis,
-    /// Ribbons or tubes: a ribbon hit is moved to the depth of the tube's wall.
-    shape: CurveShape,
-    /// Whether rays that start inside one of these fibers may hit it ([`Overlaps`]).
-    overlaps: Overlaps,
-    materials: SegmentMaterials,
-    /// Per primitive (segment): its `basis.order()` control points (position and radius),
-    /// copied out of the strand's so that a hit finds them from the primitive id alone: one
-    /// cache miss instead of two in a row through an index.
-    seg_cps: Vec<Vec4>,
-    /// Per primitive: its strand and place in it, one record so that a hit reads one cache
-    /// line for them.
-    segs: Vec<SegmentRecord>,
-    /// Per primitive: a capsule containing the fiber swept by the segment.
-    capsules: Vec<Capsule>,
-    /// Per strand slot: what hits and the filter need of a strand, in one record.
-    strands: Vec<StrandRecord>,
-}
-
-/// Which material each primitive of a hair object has.
-#[derive(Debug)]
-enum SegmentMaterials {
-    /// One material for the whole object.
-    Uniform(u32),
-    /// One per primitive (per-strand variation): a separate array, so hair without variation
-    /// pays nothing for it.
-    PerSegment(Vec<u32>),
-}
-
-/// A curve segment of a hair object, as [`SceneBuilder::add_hair_varied`] shows it to the
-/// caller choosing the segment's material.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct HairSegment {
-    /// The strand's index in the hair object, as hits report it (`HitKind::Fiber::strand`):
-    /// its index in the file, children following the file's strands, also when strands are
-    /// subsampled.
-    pub strand: u32,
-    /// Where the middle of the segment lies along the strand: 0 at the root, 1 at the tip.
-    pub v: f32,
-    /// The colour the file stores there (the mean of the segment's two end points' colours
-    /// when it stores them per point), or `None` when it stores none.
-    pub color: Option<Rgb>,
-}
-
-/// The interval `[t_in ≤ 0, t_out ≥ 0]` of the line `p + t·dir` inside the tube of `radius`
-/// around the line through `axis` along `tangent` (`p` lies inside it), cut to the segment's
-/// capsule `cap` so that it ends where the segment does; `None` where rounding puts `p` outside.
-fn tube_chord(
-    p: Vec3,
-    dir: Vec3,
-    axis: Vec3,
-    tangent: Vec3,
-    radius: f32,
-    cap: &Capsule,
-) -> Option<(f32, f32)> {
-    let o = p - axis;
-    let (o_perp, d_perp) = (
-        o - tangent * o.dot(tangent),
-        dir - tangent * dir.dot(tangent),
-    );
-    let (qa, qb, qc) = (
-        d_perp.length_squared(),
-        o_perp.dot(d_perp),
-        o_perp.length_squared() - radius * radius,
-    );
-    if qc > 0.0 {
-        return None;
-    }
-    let (mut t_in, mut t_out) = if qa > 0.0 {
-        let s = (qb * qb - qa * qc).sqrt();
-        ((-qb - s) / qa, (-qb + s) / qa)
-    } else {
-        (f32::NEG_INFINITY, f32::INFINITY)
-    };
-    if let Some((c_in, c_out)) = cap.line_interval(p, dir, 0.0) {
-        (t_in, t_out) = (t_in.max(c_in), t_out.min(c_out));
-    }
-    (t_in.is_finite() && t_out.is_finite() && t_in <= 0.0 && t_out >= 0.0).then_some((t_in, t_out))
-}
-
-/// A primitive's strand slot and the index of the segment in the strand's polyline (for `v`).
-#[derive(Clone, Copy, Debug)]
-struct SegmentRecord {
-    strand: u32,
-    index: u32,
-}
-
-#[derive(Clone, Copy, Debug)]
-struct StrandRecord {
-    /// The strand's primitives, `first_prim..end_prim` (consecutive), so the filter tells a
-    /// hit on the strand a ray leaves from any other without reading the hit primitive's data
-    /// (a cache miss per candidate hit).
-    first_prim: u32,
-    end_prim: u32,
-    /// Polyline segment count.
-    segments: u32,
-    /// The strand's index in the hair object.
-    id: u32,
-}
-
-impl CurveData {
-    /// Whether a hit on primitive `hit` should be kept for a ray leaving primitive `from` of
-    /// this geometry (see "Self-intersection" in the crate docs).
-    fn keep(&self, from: u32, hit: u32, org: Vec3, dir: Vec3) -> bool {
-        if hit == from {
-            return false;
-        }
-        let (s, k) = (from as usize, hit as usize);
-        let Some(seg) = self.segs.get(s) else {
-            return true;
-        };
-        let strand = &self.strands[seg.strand as usize];
-        if !(strand.first_prim..strand.end_prim).contains(&hit) {
-            return true;
-        }
-        !self.inside_fiber_until(s, k, org, dir)
-    }
-
-    /// Whether the ray stays inside the union of the capsules of segments `s..=k` (walking
-    /// along the strand) from its origin until it enters capsule `k`: then a hit on `k` is the
-    /// ray-facing ribbon seen from inside the fiber, not a fiber reached through free space.
-    fn inside_fiber_until(&self, s: usize, k: usize, org: Vec3, dir: Vec3) -> bool {
-        // Slack for rounding: the origin came from `o + t·d` and may sit slightly outside the
-        // capsule it left; radii are padded by this much.
-        let round = 8.0 * f32::EPSILON * org.abs().max_element();
-        let pad = |c: &Capsule| 1e-3 * c.r + round;
-        let cap = &self.capsules[s];
-        let mut reach = cap
-            .line_interval(org, dir, pad(cap))
-            .map_or(0.0, |(_, out)| out.max(0.0));
-        let mut j = s;
-        while j != k {
-            j = if k > s { j + 1 } else { j - 1 };
-            let cap = &self.capsules[j];
-            match cap.line_interval(org, dir, pad(cap)) {
-                Some((t_in, t_out)) if t_in <= reach + pad(cap) => reach = reach.max(t_out),
-                _ => return false,
-            }
-        }
-        true
-    }
-
-    /// The fiber hit on primitive `prim` at curve parameter `u`, where Embree reports it at
-    /// distance `t` along `ray`: the hit kind and the hit's distance. A ribbon is met at the
-    /// depth of the curve axis; the hit is moved to where the ray enters the segment's tube
-    /// (its capsule; where the ray starts inside it, where it leaves), at the same offset `h`.
-    /// Rays then leave a fiber from its surface, as from a real fiber: from the axis plane, a
-    /// ray leaving sideways meets the neighbours beside the fiber that a ray from its surface
-    /// passes over (measured in a block of fibers that do not touch: ribbon hair 14 % darker
-    /// than tube hair from the axis, equal to 0.1 % from the wall).
-    fn fiber_hit(&self, prim: u32, u: f32, ray: &Ray, t: f32) -> (HitKind, f32) {
-        let p = ray.at(t);
-        let prim = prim as usize;
-        let (axis, tangent) = self.axis_at(prim, u);
-        let cap = &self.capsules[prim];
-        let radius = axis.w.max(f32::MIN_POSITIVE);
-        let frame = FiberFrame::new(tangent, -ray.dir);
-        let h = ((p - axis.truncate()).dot(frame.width_axis()) / radius).clamp(-1.0, 1.0);
-        let t = match self.shape {
-            CurveShape::Flat => {
-                t + tube_chord(p, ray.dir, axis.truncate(), tangent, radius, cap).map_or(
-                    0.0,
-                    |(t_in, t_out)| if t + t_in >= 0.0 { t_in } else { t_out },
-                )
-            }
-            CurveShape::Round => t,
-        };
-        let seg = self.segs[prim];
-        let strand = &self.strands[seg.strand as usize];
-        let v = ((seg.index as f32 + u) / strand.segments as f32).clamp(0.0, 1.0);
-        (
-            HitKind::Fiber {
-                tangent,
-                h,
-                radius,
-                strand: strand.id,
-                v,
-            },
-            t,
-        )
-    }
-
-    /// The curve point (position and radius) of primitive `prim` at parameter `u`, and the
-    /// unit tangent there (the segment's chord where the derivative vanishes).
-    fn axis_at(&self, prim: usize, u: f32) -> (Vec4, Vec3) {
-        let (axis, deriv) = self.basis.eval(self.control_points(prim), u);
-        let cap = &self.capsules[prim];
-        let tangent = deriv
-            .truncate()
-            .try_normalize()
-            .or_else(|| (cap.b - cap.a).try_normalize())
-            .unwrap_or(Vec3::Y);
-        (axis, tangent)
-    }
-
-    /// Whether the ray from `org` along `dir` that meets primitive `prim` at curve parameter
-    /// `u` and distance `t` started inside the fiber there, so that the hit is where it leaves
-    /// the fiber: on a tube, a wall facing away from the ray (a back face); on a ribbon, whose
-    /// hit lies at the depth of the axis, a chord through the tube that begins behind `org`.
-    fn leaves_from_inside(&self, prim: u32, u: f32, org: Vec3, dir: Vec3, t: f32) -> bool {
-        let prim = prim as usize;
-        let (axis, tangent) = self.axis_at(prim, u);
-        let p = org + t * dir;
-        match self.shape {
-            // The outward normal of a swept sphere at `p` is `p − axis`.
-            CurveShape::Round => (p - axis.truncate()).dot(dir) > 0.0,
-            CurveShape::Flat => {
-                let radius = axis.w.max(f32::MIN_POSITIVE);
-                let cap = &self.capsules[prim];
-                tube_chord(p, dir, axis.truncate(), tangent, radius, cap)
-                    .is_some_and(|(t_in, _)| t + t_in < 0.0)
-            }
-        }
-    }
-
-    /// The material of primitive `prim`.
-    fn material(&self, prim: u32) -> u32 {
-        match &self.materials {
-            SegmentMaterials::Uniform(m) => *m,
-            SegmentMaterials::PerSegment(m) => m[prim as usize],
-        }
-    }
-
-    fn memory_bytes(&self) -> usize {
-        let materials = match &self.materials {
-            SegmentMaterials::Uniform(_) => 0,
-            SegmentMaterials::PerSegment(m) => m.len() * 4,
-        };
-        materials
-            + self.seg_cps.len() * 16
-            + self.segs.len() * std::mem::size_of::<SegmentRecord>()
-            + self.capsules.len() * std::mem::size_of::<Capsule>()
-            + self.strands.len() * std::mem::size_of::<StrandRecord>()
-    }
 }
 
 /// How far from the origin, in world units, geometry (its points, padded by fiber and sphere
@@ -490,10 +253,12 @@ pub struct SceneBuilder {
     spheres: Vec<(Vec4, u32)>,
     embree_bytes: Arc<AtomicIsize>,
     filters: bool,
+    /// What the hair added may take (children grown are checked against it).
+    limits: Limits,
 }
 
 impl SceneBuilder {
-    /// A new Embree device and empty scene.
+    /// A new Embree device and empty scene, held to the default [`Limits`].
     pub fn new() -> Result<Self> {
         let device = fp_mode::preserving_fp_mode(Device::new)
             .map_err(|e| Error::Embree(format!("cannot create device: {e}")))?;
@@ -529,7 +294,15 @@ impl SceneBuilder {
             spheres: Vec::new(),
             embree_bytes,
             filters: true,
+            limits: Limits::default(),
         })
+    }
+
+    /// The same builder, with the hair it adds held to `limits` (children grown are checked
+    /// against their memory limit).
+    pub fn with_limits(mut self, limits: Limits) -> Self {
+        self.limits = limits;
+        self
     }
 
     /// A scene without filter support, for measuring Embree's own speed (`tress bench`): its
@@ -588,7 +361,7 @@ impl SceneBuilder {
     ) -> Result<Self> {
         hair.validate()?;
         options.validate(&hair.name)?;
-        let grown = options.with_children(hair)?;
+        let grown = options.with_children(hair, &self.limits)?;
         let hair: &HairGeometry = &grown;
         let (hair, ids): (Cow<HairGeometry>, Vec<u32>) = if options.strand_fraction < 1.0 {
             let (sub, ids) = hair.subsample(options.strand_fraction, options.strand_seed);
@@ -1076,29 +849,14 @@ impl EmbreeAccel {
 
 // What the density grid (`density.rs`) needs: the world-space fibers Embree intersects, and a
 // brute-force crossing count to calibrate and test it against.
-impl CurveData {
-    pub(crate) fn basis(&self) -> CurveBasis {
-        self.basis
-    }
-
-    /// Curve segments (Embree primitives).
-    pub(crate) fn segments(&self) -> usize {
-        self.segs.len()
-    }
-
-    /// The control points (position, radius) of segment `prim`, `basis().order()` of them.
-    pub(crate) fn control_points(&self, prim: usize) -> &[Vec4] {
-        let order = self.basis.order();
-        &self.seg_cps[prim * order..(prim + 1) * order]
-    }
-
-    /// Whether two segments belong to the same strand.
-    pub(crate) fn same_strand(&self, a: usize, b: usize) -> bool {
-        self.segs[a].strand == self.segs[b].strand
-    }
-}
-
 impl EmbreeAccel {
+    /// The density grid of this geometry's hair (meshes and spheres are ignored), refusing a
+    /// lattice that could exceed the memory limit of `limits`. Geometry without hair gives an
+    /// empty grid (every count 0).
+    pub fn density_grid(&self, settings: &DensitySettings, limits: &Limits) -> Result<DensityGrid> {
+        DensityGrid::build(self.hair_curves().collect(), settings, limits)
+    }
+
     /// The hair geometries with their Embree geometry ids.
     pub(crate) fn hair_curves(&self) -> impl Iterator<Item = (u32, &Arc<CurveData>)> {
         self.geoms.iter().enumerate().filter_map(|(id, g)| match g {
@@ -1252,15 +1010,16 @@ impl Accel for EmbreeAccel {
     fn fiber_density(
         &self,
         resolution: Option<u32>,
+        limits: &Limits,
     ) -> std::result::Result<Option<Arc<dyn FiberDensity>>, BuildError> {
         if self.info.strands == 0 {
             return Ok(None);
         }
-        let settings = crate::DensitySettings {
+        let settings = DensitySettings {
             resolution,
             ..Default::default()
         };
-        Ok(Some(Arc::new(crate::DensityGrid::build(self, &settings)?)))
+        Ok(Some(Arc::new(self.density_grid(&settings, limits)?)))
     }
 }
 

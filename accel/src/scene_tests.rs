@@ -583,7 +583,7 @@ fn concurrent_queries_match_serial_ones() {
         strands: 500,
         ..Default::default()
     }
-    .generate()
+    .generate(&Limits::default())
     .unwrap();
     let accel = SceneBuilder::new()
         .unwrap()

@@ -3,6 +3,7 @@
 use super::*;
 use crate::geometry::HairAttribute;
 use crate::test_util::{hair, line};
+use tress_core::math::Rgb;
 
 /// Two strands along x at y = 0 and y = 1 (z = 0), of 4 segments each, with per-point colours.
 fn two_strands() -> HairGeometry {

@@ -14,6 +14,7 @@ use crate::usc::UscFile;
 use crate::usd::UsdFile;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+use tress_core::limits::Limits;
 
 /// The source of a hair object, as scene files write it:
 ///
@@ -97,8 +98,8 @@ impl HairSource {
         pbrt.files()
     }
 
-    /// Reads or generates the hair (validated).
-    pub fn load(&self) -> Result<HairGeometry> {
+    /// Reads or generates the hair (validated), within the memory limit of `limits`.
+    pub fn load(&self, limits: &Limits) -> Result<HairGeometry> {
         match self {
             HairSource::File(path) => {
                 let ext = path
@@ -110,7 +111,7 @@ impl HairSource {
                     Some("tfx") => TfxFile::new(path).read(),
                     Some("data") => UscFile::new(path).read(),
                     Some("ply") => PlyFile::new(path).read(),
-                    Some("pbrt") => PbrtFile::new(path).read(),
+                    Some("pbrt") => PbrtFile::new(path).read(limits),
                     Some("usda" | "usdc" | "usd") => UsdFile::new(path).read(),
                     _ => Err(format_error(
                         path,
@@ -123,8 +124,8 @@ impl HairSource {
             HairSource::Tfx(f) => f.read(),
             HairSource::Usc(f) => f.read(),
             HairSource::Ply(f) => f.read(),
-            HairSource::Pbrt(f) => f.read(),
-            HairSource::Procedural(p) => p.generate(),
+            HairSource::Pbrt(f) => f.read(limits),
+            HairSource::Procedural(p) => p.generate(limits),
         }
     }
 }
@@ -212,13 +213,17 @@ impl HairOptions {
     }
 
     /// `hair` with the child strands of [`HairOptions::children`] added (unchanged without
-    /// them). Children are grown in the hair's own units, before the object transform.
+    /// them), within the memory limit of `limits`. Children are grown in the hair's own units,
+    /// before the object transform.
     pub(crate) fn with_children<'a>(
         &self,
         hair: &'a HairGeometry,
+        limits: &Limits,
     ) -> Result<std::borrow::Cow<'a, HairGeometry>> {
         Ok(match &self.children {
-            Some(children) => std::borrow::Cow::Owned(children.grow(hair, self.transform.scale)?),
+            Some(children) => {
+                std::borrow::Cow::Owned(children.grow(hair, self.transform.scale, limits)?)
+            }
             None => std::borrow::Cow::Borrowed(hair),
         })
     }
@@ -231,19 +236,19 @@ mod tests {
     #[test]
     fn file_source_dispatches_on_the_extension() {
         let e = HairSource::File("x.obj".into())
-            .load()
+            .load(&Limits::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("x.obj") && e.contains("extension"), "{e}");
         for missing in ["missing.PLY", "missing.pbrt"] {
             let e = HairSource::File(missing.into())
-                .load()
+                .load(&Limits::default())
                 .unwrap_err()
                 .to_string();
             assert!(e.contains(missing) && !e.contains("extension"), "{e}");
         }
         let e = HairSource::File("missing.HAIR".into())
-            .load()
+            .load(&Limits::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("missing.HAIR"), "{e}");

@@ -519,7 +519,7 @@ mod tests {
             .join("tests/data")
             .join(name);
         HairSource::File(path)
-            .load()
+            .load(&tress_core::limits::Limits::default())
             .unwrap_or_else(|e| panic!("{e}"))
     }
 
@@ -751,7 +751,7 @@ def BasisCurves "Hair"
         let e = error("groom.usdc", "not a USD file");
         assert!(e.contains("groom.usdc") && e.contains("USD"), "{e}");
         let e = HairSource::File(PathBuf::from("/nowhere/groom.usd"))
-            .load()
+            .load(&tress_core::limits::Limits::default())
             .unwrap_err();
         assert!(e.to_string().contains("/nowhere/groom.usd"), "{e}");
     }

@@ -186,7 +186,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         desc.film.crop = Some(crop);
     }
     desc.film
-        .validate_for_render()
+        .validate_for_render(&crate::limits_from_env())
         .map_err(|e| anyhow::anyhow!("{}: film: {e}", args.scene.display()))?;
     for (what, spp) in [("--reference-spp", args.reference_spp), ("--spp", args.spp)] {
         if spp == 0 {
@@ -224,7 +224,8 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         .num_threads(args.threads.unwrap_or(0))
         .build()
         .context("creating the thread pool")?;
-    let built = pool.install(|| scene_desc::build(&desc, &args.scene))?;
+    let built =
+        pool.install(|| scene_desc::build(&desc, &args.scene, &crate::limits_from_env()))?;
     let scene = &built.scene;
     let cancel = AtomicBool::new(false);
     let render = |integrator: &dyn Integrator, spp: u32, label: &str| -> Result<Image> {
@@ -260,7 +261,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         );
     }
     // One preparation context: the corner and check renders share their tables.
-    let prep = tress_core::prepare::Preparation::new();
+    let prep = tress_core::prepare::Preparation::with_limits(crate::limits_from_env());
     let path = reference_integrator.build(scene, &prep)?;
     let reference = render(path.as_ref(), args.reference_spp, "path reference")?;
     let reference_mean = masked_mean(&reference, &mask);

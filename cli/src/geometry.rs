@@ -9,8 +9,10 @@ use std::path::{Path, PathBuf};
 use tress_accel::{
     EmbreeAccel, HairAttribute, HairOptions, HairSource, SceneBuilder, Transform, TriangleMesh,
 };
+use tress_core::limits::Limits;
 use tress_core::Material;
-use tress_materials::pigment::{quantise_variants, Pigment, StrandVariation};
+use tress_materials::pigment::Pigment;
+use tress_materials::strand_variation::{quantise_variants, StrandVariation};
 
 /// An object of the scene, referring to a material by name.
 #[derive(Clone, Debug, Serialize, Deserialize, schemars::JsonSchema)]
@@ -73,7 +75,8 @@ pub fn resolve(scene_path: &Path, p: &Path) -> PathBuf {
     }
 }
 
-/// Builds the accelerator for the scene's objects; returns it with a summary (`tress info`).
+/// Builds the accelerator for the scene's objects, their hair within `limits`; returns it with a
+/// summary (`tress info`).
 /// `materials` holds the built materials of `descriptions` (in `material_index` order); hair
 /// objects with a `variation` append their variants to it.
 pub fn build_accel(
@@ -82,9 +85,10 @@ pub fn build_accel(
     descriptions: &BTreeMap<String, MaterialDesc>,
     material_index: &BTreeMap<String, u32>,
     materials: &mut Vec<Material>,
+    limits: &Limits,
 ) -> Result<(EmbreeAccel, String)> {
     let here = |i: usize, what: String| anyhow!("{}: objects[{i}]: {what}", scene_path.display());
-    let mut builder = SceneBuilder::new()?;
+    let mut builder = SceneBuilder::new()?.with_limits(*limits);
     let mut notes = Vec::new();
     for (i, object) in objects.iter().enumerate() {
         let name = object.material();
@@ -116,7 +120,7 @@ pub fn build_accel(
                 if let Some(p) = source.path_mut() {
                     *p = resolve(scene_path, p);
                 }
-                let hair = source.load().map_err(|e| here(i, e.to_string()))?;
+                let hair = source.load(limits).map_err(|e| here(i, e.to_string()))?;
                 match variation {
                     None => builder
                         .add_hair(&hair, options, material)
@@ -265,12 +269,13 @@ mod tests {
         build(
             &parse(text).map_err(|e| anyhow::anyhow!("{e}"))?,
             Path::new("v.ron"),
+            &Default::default(),
         )
     }
 
     #[test]
     fn the_documented_variation_forms_parse() {
-        let source = include_str!("../../materials/src/pigment.rs");
+        let source = include_str!("../../materials/src/strand_variation.rs");
         let start = source.find("/// ```ron\n/// (random").expect("the example");
         let block: Vec<&str> = source[start..]
             .lines()
@@ -281,7 +286,7 @@ mod tests {
         assert_eq!(block.len(), 4);
         for line in block {
             crate::ron_options()
-                .from_str::<tress_materials::pigment::StrandVariation>(line)
+                .from_str::<tress_materials::strand_variation::StrandVariation>(line)
                 .unwrap_or_else(|e| panic!("{line}: {e}"));
         }
     }

@@ -44,6 +44,16 @@ pub fn ron_options() -> ron::Options {
         .with_default_extension(ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES)
 }
 
+/// The run's limits as the environment sets them (`TRESS_MEMORY_LIMIT_GIB`,
+/// `TRESS_ALLOW_SLOW_TABLES`): the front ends read them here and hand them to the libraries.
+pub fn limits_from_env() -> tress_core::limits::Limits {
+    use tress_core::limits::{Limits, ALLOW_SLOW_TABLES_VAR, MEMORY_LIMIT_VAR};
+    Limits::from_environment_values(
+        std::env::var(MEMORY_LIMIT_VAR).ok().as_deref(),
+        std::env::var_os(ALLOW_SLOW_TABLES_VAR).is_some(),
+    )
+}
+
 /// `threads` if this machine can use that many worker threads (0: one per core). More than
 /// eight per core (or 64) only add overhead: `--threads 10000` on a 16² image crawled,
 /// starting and switching threads.

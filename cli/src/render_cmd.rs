@@ -134,7 +134,7 @@ fn load_with_overrides(args: &RenderArgs) -> Result<SceneDesc> {
         desc.film.crop = args.crop;
     }
     desc.film
-        .validate_for_outputs(&args.outputs())
+        .validate_for_outputs(&args.outputs(), &crate::limits_from_env())
         .map_err(|e| anyhow::anyhow!("{}: film: {e}", args.scene.display()))?;
     if args.spp_offset.checked_add(desc.film.spp as u64).is_none() {
         bail!(
@@ -280,12 +280,13 @@ pub fn render(args: RenderArgs) -> Result<()> {
         .context("creating the thread pool")?;
     let verbose = !args.quiet;
 
-    let built = pool.install(|| scene_desc::build(&desc, &args.scene))?;
+    let built =
+        pool.install(|| scene_desc::build(&desc, &args.scene, &crate::limits_from_env()))?;
     if verbose {
         eprintln!("{}", built.summary);
     }
     let t_integrator = Instant::now();
-    let prep = tress_core::prepare::Preparation::new();
+    let prep = tress_core::prepare::Preparation::with_limits(crate::limits_from_env());
     let integrator = pool
         .install(|| desc.integrator.build(&built.scene, &prep))
         .map_err(|e| {
@@ -484,7 +485,7 @@ pub fn info(scene: &Path, defines: &[(String, String)]) -> Result<()> {
     desc.film
         .validate()
         .map_err(|e| anyhow::anyhow!("{}: film: {e}", scene.display()))?;
-    let built = scene_desc::build(&desc, scene)?;
+    let built = scene_desc::build(&desc, scene, &crate::limits_from_env())?;
     println!("{}", built.summary);
     println!(
         "film: {}x{} at {} spp, seed {}",

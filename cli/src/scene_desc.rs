@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use tress_core::film::FilmSettings;
 use tress_core::light::{EnvironmentMap, Light};
+use tress_core::limits::Limits;
 use tress_core::{Camera, Material, Scene};
 use tress_materials::HairModel;
 
@@ -396,8 +397,8 @@ fn excerpt(line: &str, col: usize) -> (String, usize) {
 /// Longest excerpt of a scene line shown under a parse error.
 const EXCERPT_CHARS: usize = 120;
 
-/// Builds the renderable scene.
-pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
+/// Builds the renderable scene, its hair within `limits`.
+pub fn build(desc: &SceneDesc, scene_path: &Path, limits: &Limits) -> Result<BuiltScene> {
     let here = |what: &str| format!("{}: {what}", scene_path.display());
     let c = &desc.camera;
     let camera = Camera::new(
@@ -455,6 +456,7 @@ pub fn build(desc: &SceneDesc, scene_path: &Path) -> Result<BuiltScene> {
         &desc.materials,
         &material_index,
         &mut materials,
+        limits,
     )?;
     let geometry_time = t1.elapsed();
     let summary = format!(

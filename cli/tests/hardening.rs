@@ -649,7 +649,7 @@ fn waves_and_partial_images_do_not_change_the_image() {
     // one pass. Same bits.
     let mut desc = tress_cli::scene_desc::load(&scene).unwrap();
     desc.film.spp = 13;
-    let built = tress_cli::scene_desc::build(&desc, &scene).unwrap();
+    let built = tress_cli::scene_desc::build(&desc, &scene, &Default::default()).unwrap();
     let integrator = desc
         .integrator
         .build(&built.scene, &Default::default())

@@ -1,17 +1,9 @@
 //! The ray-intersection interface implemented by `tress-accel` (Embree).
 
+use crate::limits::Limits;
+pub use crate::math::PrimId;
 use crate::math::{Aabb, Ray, Vec3};
 use std::sync::Arc;
-
-/// Identifies one primitive: an Embree geometry and a primitive (curve segment, triangle, sphere)
-/// inside it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct PrimId {
-    /// Embree geometry id: one per hair object or mesh, one shared by all spheres.
-    pub geom: u32,
-    /// Primitive index within that geometry.
-    pub prim: u32,
-}
 
 /// What was hit.
 #[derive(Clone, Copy, Debug)]
@@ -69,14 +61,16 @@ pub trait Accel: Send + Sync {
     /// Bounds of all geometry.
     fn bounds(&self) -> Aabb;
     /// Builds the density grid of the hair fibers in this geometry with `resolution` voxels
-    /// along the longest side of their bounds (`None`: chosen from the fibers); `Ok(None)` when
-    /// there is no hair. Integrators reach it through [`crate::Scene::fiber_density`], which
-    /// builds it once per run and resolution.
+    /// along the longest side of their bounds (`None`: chosen from the fibers), refusing one
+    /// that could exceed the memory limit of `limits`; `Ok(None)` when there is no hair.
+    /// Integrators reach it through [`crate::Scene::fiber_density`], which builds it once per
+    /// run and resolution.
     fn fiber_density(
         &self,
         resolution: Option<u32>,
+        limits: &Limits,
     ) -> Result<Option<Arc<dyn FiberDensity>>, BuildError> {
-        let _ = resolution;
+        let _ = (resolution, limits);
         Ok(None)
     }
 }

@@ -14,7 +14,7 @@
 //! BVH these are cache misses, and they were the largest item of the path tracer's profile.
 
 use crate::image_io::{read_rgb, ImageError};
-use crate::light::LightSample;
+use crate::light_sample::{LightSample, MAX_LIGHT};
 use crate::math::{luminance, Rgb, Vec2, Vec3};
 use crate::sampling::Distribution1D;
 use std::f32::consts::{FRAC_1_PI, PI, TAU};
@@ -184,13 +184,13 @@ impl EnvironmentMap {
             let scaled = *p * scale;
             // Finite texels can overflow once scaled (3e38 × 10): refuse, or the image is black;
             // beyond the lights' limit, paths multiplying them overflow.
-            if !(scaled.is_finite() && scaled.max_element() <= crate::light::MAX_LIGHT) {
+            if !(scaled.is_finite() && scaled.max_element() <= MAX_LIGHT) {
                 return Err(invalid(format!(
                     "pixel ({}, {}) = {p} times scale {scale} is beyond {:e} (a path's \
                      throughput times it overflows f32)",
                     k % w,
                     k / w,
-                    crate::light::MAX_LIGHT
+                    MAX_LIGHT
                 )));
             }
             *p = scaled;

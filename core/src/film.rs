@@ -1,6 +1,7 @@
 //! Film settings, what a render records per pixel (radiance, alpha, AOVs) and the image buffer
 //! the render loop fills.
 
+use crate::limits::{Limits, MEMORY_LIMIT_VAR};
 use crate::math::Rgb;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeSet;
@@ -29,12 +30,6 @@ pub struct FilmSettings {
 fn default_spp() -> u32 {
     16
 }
-
-/// Environment variable overriding [`DEFAULT_MEMORY_LIMIT_GIB`].
-pub const MEMORY_LIMIT_VAR: &str = "TRESS_MEMORY_LIMIT_GIB";
-/// Films whose render would need more memory than this are refused (override with
-/// [`MEMORY_LIMIT_VAR`]).
-pub const DEFAULT_MEMORY_LIMIT_GIB: f64 = 16.0;
 
 /// Largest film side, in pixels.
 pub const MAX_FILM_SIDE: u32 = 1 << 16;
@@ -94,17 +89,6 @@ pub enum FilmError {
     },
 }
 
-/// The memory a render may plan for, in GiB: [`MEMORY_LIMIT_VAR`] when set to a positive
-/// number, else [`DEFAULT_MEMORY_LIMIT_GIB`]. Films, density grids and tables are checked
-/// against it before they are allocated.
-pub fn memory_limit_gib() -> f64 {
-    std::env::var(MEMORY_LIMIT_VAR)
-        .ok()
-        .and_then(|v| v.parse::<f64>().ok())
-        .filter(|g| *g > 0.0)
-        .unwrap_or(DEFAULT_MEMORY_LIMIT_GIB)
-}
-
 impl FilmSettings {
     /// The pixel window actually rendered, `[x0, y0, x1, y1)`.
     pub fn window(&self) -> [u32; 4] {
@@ -135,17 +119,21 @@ impl FilmSettings {
         Ok(())
     }
 
-    /// [`Self::validate`], and that a render of radiance alone fits the memory limit
-    /// ([`MEMORY_LIMIT_VAR`]).
-    pub fn validate_for_render(&self) -> Result<(), FilmError> {
-        self.validate_for_outputs(&Outputs::default())
+    /// [`Self::validate`], and that a render of radiance alone fits the memory limit of
+    /// `limits`.
+    pub fn validate_for_render(&self, limits: &Limits) -> Result<(), FilmError> {
+        self.validate_for_outputs(&Outputs::default(), limits)
     }
 
-    /// [`Self::validate`], and that a render recording `outputs` fits the memory limit
-    /// ([`MEMORY_LIMIT_VAR`]).
-    pub fn validate_for_outputs(&self, outputs: &Outputs) -> Result<(), FilmError> {
+    /// [`Self::validate`], and that a render recording `outputs` fits the memory limit of
+    /// `limits`.
+    pub fn validate_for_outputs(
+        &self,
+        outputs: &Outputs,
+        limits: &Limits,
+    ) -> Result<(), FilmError> {
         self.validate()?;
-        let limit_gib = memory_limit_gib();
+        let limit_gib = limits.memory_gib;
         let need_gib = self.memory_bytes_for(outputs) as f64 / (1u64 << 30) as f64;
         if need_gib > limit_gib {
             let [x0, y0, x1, y1] = self.window();
@@ -166,14 +154,14 @@ impl FilmSettings {
     }
 
     /// Memory the render of the window recording `outputs` needs at the least: per pixel an
-    /// f64 sum of every recorded quantity (`render::quantities`: RGB, and what alpha and the
+    /// f64 sum of every recorded quantity ([`quantities`]: RGB, and what alpha and the
     /// AOVs need) for each aligned block of its samples (at most ⌊log2 spp⌋ + 1 of them;
     /// `render::dyadic_cover`) and the f32 output channels, twice over while waves are merged.
     pub fn memory_bytes_for(&self, outputs: &Outputs) -> u64 {
         let [x0, y0, x1, y1] = self.window();
         let pixels = (x1 - x0) as u64 * (y1 - y0) as u64;
         let blocks = 64 - (self.spp.max(1) as u64).leading_zeros() as u64;
-        let quantities = crate::render::quantity_count(outputs) as u64;
+        let quantities = quantity_count(outputs) as u64;
         let channels = outputs.channel_names().len() as u64;
         2 * pixels * (8 * quantities * blocks + 4 * channels)
     }
@@ -355,4 +343,122 @@ impl Image {
         let n = self.pixels.len().max(1) as f64;
         s.map(|v| v / n)
     }
+}
+
+/// A per-sample quantity the render loop sums exactly. Every camera sample adds one value of
+/// each quantity its render records ([`quantities`]); the output channels are computed from
+/// the pixel's totals ([`crate::render::SampleSums::channels`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Quantity {
+    /// Radiance, red: 0 for a NaN or infinite sample.
+    R,
+    /// Radiance, green.
+    G,
+    /// Radiance, blue.
+    B,
+    /// 1 when the camera ray hit geometry (hair or surface), else 0.
+    Hits,
+    /// Distance along the camera ray to its first hit; 0 on a miss.
+    Distance,
+    /// 1 when the camera ray's first hit is a fiber, else 0.
+    FiberHits,
+    /// Fiber tangent at the first hit, x (0 unless a fiber was hit).
+    TangentX,
+    /// Fiber tangent, y.
+    TangentY,
+    /// Fiber tangent, z.
+    TangentZ,
+    /// Albedo estimate of the first hit's material, red (0 on a miss).
+    AlbedoR,
+    /// Albedo estimate, green.
+    AlbedoG,
+    /// Albedo estimate, blue.
+    AlbedoB,
+    /// Squared radiance, red (0 for a NaN or infinite sample).
+    R2,
+    /// Squared radiance, green.
+    G2,
+    /// Squared radiance, blue.
+    B2,
+}
+
+impl Quantity {
+    /// Every quantity, in the order a render lists those it records.
+    pub const ALL: [Quantity; 15] = [
+        Quantity::R,
+        Quantity::G,
+        Quantity::B,
+        Quantity::Hits,
+        Quantity::Distance,
+        Quantity::FiberHits,
+        Quantity::TangentX,
+        Quantity::TangentY,
+        Quantity::TangentZ,
+        Quantity::AlbedoR,
+        Quantity::AlbedoG,
+        Quantity::AlbedoB,
+        Quantity::R2,
+        Quantity::G2,
+        Quantity::B2,
+    ];
+
+    /// Short name, as the sum channels of a render EXR spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Quantity::R => "R",
+            Quantity::G => "G",
+            Quantity::B => "B",
+            Quantity::Hits => "hits",
+            Quantity::Distance => "distance",
+            Quantity::FiberHits => "fiberHits",
+            Quantity::TangentX => "tangentX",
+            Quantity::TangentY => "tangentY",
+            Quantity::TangentZ => "tangentZ",
+            Quantity::AlbedoR => "albedoR",
+            Quantity::AlbedoG => "albedoG",
+            Quantity::AlbedoB => "albedoB",
+            Quantity::R2 => "R2",
+            Quantity::G2 => "G2",
+            Quantity::B2 => "B2",
+        }
+    }
+}
+
+/// Whether `outputs` need the count of camera rays that hit something (alpha, and the
+/// averages over hits).
+pub(crate) fn counts_hits(outputs: &Outputs) -> bool {
+    outputs.alpha || outputs.has(Aov::Depth) || outputs.has(Aov::Albedo)
+}
+
+/// The quantities a render recording `outputs` sums, in the order each sample adds them
+/// (the render loop's per-sample record follows the same order).
+pub fn quantities(outputs: &Outputs) -> Vec<Quantity> {
+    use Quantity::*;
+    let mut q = vec![R, G, B];
+    if counts_hits(outputs) {
+        q.push(Hits);
+    }
+    if outputs.has(Aov::Depth) {
+        q.push(Distance);
+    }
+    if outputs.has(Aov::Tangent) {
+        q.extend([FiberHits, TangentX, TangentY, TangentZ]);
+    }
+    if outputs.has(Aov::Albedo) {
+        q.extend([AlbedoR, AlbedoG, AlbedoB]);
+    }
+    if outputs.has(Aov::Variance) {
+        q.extend([R2, G2, B2]);
+    }
+    q
+}
+
+/// `quantities(outputs).len()`, without building the list.
+pub fn quantity_count(outputs: &Outputs) -> usize {
+    let on = |b: bool, n: usize| if b { n } else { 0 };
+    3 + on(counts_hits(outputs), 1)
+        + on(outputs.has(Aov::Depth), 1)
+        + on(outputs.has(Aov::Tangent), 4)
+        + on(outputs.has(Aov::Albedo), 3)
+        + on(outputs.has(Aov::Variance), 3)
 }

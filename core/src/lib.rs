@@ -15,6 +15,8 @@ pub mod film;
 pub mod image_io;
 pub mod integrator;
 pub mod light;
+pub mod light_sample;
+pub mod limits;
 pub mod math;
 pub mod prepare;
 pub mod render;

@@ -12,21 +12,7 @@ use crate::math::{Rgb, Vec2, Vec3};
 use crate::sampling::{sample_uniform_cone, sample_uniform_sphere, uniform_cone_pdf, INV_4PI};
 
 pub use crate::envmap::EnvironmentMap;
-
-/// A light sample as seen from a shading point.
-#[derive(Clone, Copy, Debug)]
-pub struct LightSample {
-    /// Unit direction from the shading point toward the light.
-    pub wi: Vec3,
-    /// Radiance arriving along `wi` (for a point light: intensity / distance²).
-    pub radiance: Rgb,
-    /// Solid-angle pdf; for delta lights the probability (1) of the chosen direction.
-    pub pdf: f32,
-    /// Distance to the light (infinite for lights at infinity).
-    pub distance: f32,
-    /// Whether the light is a delta distribution (no MIS possible).
-    pub is_delta: bool,
-}
+pub use crate::light_sample::{LightSample, MAX_LIGHT};
 
 /// A light source.
 #[derive(Clone, Debug)]
@@ -106,10 +92,6 @@ pub enum LightError {
     #[error("position {0} must be finite")]
     Position(Vec3),
 }
-
-/// The brightest radiance, irradiance or intensity a light may have: paths multiply it by
-/// throughputs well above 1 (BSDF over pdf), and a product beyond f32 is a dropped sample.
-pub const MAX_LIGHT: f32 = 1e30;
 
 fn non_negative(name: &'static str, value: Rgb) -> Result<Rgb, LightError> {
     if !(value.is_finite() && value.min_element() >= 0.0) {

@@ -22,6 +22,16 @@ pub fn luminance(c: Rgb) -> f32 {
     0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
 }
 
+/// Identifies one primitive: an Embree geometry and a primitive (curve segment, triangle, sphere)
+/// inside it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct PrimId {
+    /// Embree geometry id: one per hair object or mesh, one shared by all spheres.
+    pub geom: u32,
+    /// Primitive index within that geometry.
+    pub prim: u32,
+}
+
 /// A ray with a parametric extent `(0, t_max)` and an optional primitive to ignore.
 ///
 /// `exclude` names the primitive the ray leaves from: a ray leaving a convex primitive (a fiber
@@ -36,7 +46,7 @@ pub struct Ray {
     /// End of the parametric extent: infinite unless limited (shadow rays).
     pub t_max: f32,
     /// Primitive the ray leaves from, never reported as hit; `None` for camera rays.
-    pub exclude: Option<crate::PrimId>,
+    pub exclude: Option<PrimId>,
 }
 
 impl Ray {
@@ -51,7 +61,7 @@ impl Ray {
     }
 
     /// A ray leaving primitive `from`.
-    pub fn leaving(origin: Vec3, dir: Vec3, from: crate::PrimId) -> Self {
+    pub fn leaving(origin: Vec3, dir: Vec3, from: PrimId) -> Self {
         Ray {
             origin,
             dir,

@@ -3,8 +3,10 @@
 //! integrator the run builds, and dropped with the run (Tungsten's `prepareForRender`). Scenes
 //! know nothing of integrators: an integrator asks for what it needs while it is built. It replaces process-wide caches: two runs in one process (a study's
 //! jobs share one; separate renders or tests do not) never see each other's data, and a cache
-//! entry is found by the value of its key, never by a description of it.
+//! entry is found by the value of its key, never by a description of it. It also carries the
+//! run's [`Limits`], which what is built is checked against.
 
+use crate::limits::Limits;
 use std::any::{Any, TypeId};
 use std::collections::HashMap;
 use std::hash::Hash;
@@ -17,20 +19,36 @@ pub struct Preparation {
     caches: Mutex<HashMap<TypeId, Box<dyn Any + Send + Sync>>>,
     /// What was built, one line each, for the caller to log.
     notes: Mutex<Vec<String>>,
+    /// What building may spend.
+    limits: Limits,
 }
 
 impl std::fmt::Debug for Preparation {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Preparation")
             .field("kinds", &self.lock().len())
+            .field("limits", &self.limits)
             .finish()
     }
 }
 
 impl Preparation {
-    /// An empty context.
+    /// An empty context with the default [`Limits`].
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// An empty context whose builds are held to `limits`.
+    pub fn with_limits(limits: Limits) -> Self {
+        Preparation {
+            limits,
+            ..Self::default()
+        }
+    }
+
+    /// The limits builds are held to.
+    pub fn limits(&self) -> &Limits {
+        &self.limits
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<TypeId, Box<dyn Any + Send + Sync>>> {

@@ -38,11 +38,12 @@
 
 use crate::accel::{Hit, HitKind};
 use crate::camera::Camera;
-use crate::film::{Aov, FilmSettings, Image, Outputs};
+use crate::film::{counts_hits, Aov, FilmSettings, Image, Outputs};
+pub use crate::film::{quantities, quantity_count, Quantity};
 use crate::integrator::Integrator;
 use crate::math::{Ray, Rgb, Vec3};
 use crate::rng::{hash_words, pixel_position, Sampler};
-use crate::scene::{rays_traced_on_this_thread, Scene};
+use crate::scene::Scene;
 use crate::shading::ShadingPoint;
 use rayon::prelude::*;
 use std::ops::Range;
@@ -173,124 +174,6 @@ pub fn dyadic_cover(samples: Range<u64>) -> Vec<Range<u64>> {
 fn is_aligned_block(b: &Range<u64>) -> bool {
     let len = b.end.wrapping_sub(b.start);
     b.start < b.end && len.is_power_of_two() && b.start.is_multiple_of(len)
-}
-
-/// A per-sample quantity the render loop sums exactly. Every camera sample adds one value of
-/// each quantity its render records ([`quantities`]); the output channels are computed from
-/// the pixel's totals ([`SampleSums::channels`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Quantity {
-    /// Radiance, red: 0 for a NaN or infinite sample.
-    R,
-    /// Radiance, green.
-    G,
-    /// Radiance, blue.
-    B,
-    /// 1 when the camera ray hit geometry (hair or surface), else 0.
-    Hits,
-    /// Distance along the camera ray to its first hit; 0 on a miss.
-    Distance,
-    /// 1 when the camera ray's first hit is a fiber, else 0.
-    FiberHits,
-    /// Fiber tangent at the first hit, x (0 unless a fiber was hit).
-    TangentX,
-    /// Fiber tangent, y.
-    TangentY,
-    /// Fiber tangent, z.
-    TangentZ,
-    /// Albedo estimate of the first hit's material, red (0 on a miss).
-    AlbedoR,
-    /// Albedo estimate, green.
-    AlbedoG,
-    /// Albedo estimate, blue.
-    AlbedoB,
-    /// Squared radiance, red (0 for a NaN or infinite sample).
-    R2,
-    /// Squared radiance, green.
-    G2,
-    /// Squared radiance, blue.
-    B2,
-}
-
-impl Quantity {
-    /// Every quantity, in the order a render lists those it records.
-    pub const ALL: [Quantity; 15] = [
-        Quantity::R,
-        Quantity::G,
-        Quantity::B,
-        Quantity::Hits,
-        Quantity::Distance,
-        Quantity::FiberHits,
-        Quantity::TangentX,
-        Quantity::TangentY,
-        Quantity::TangentZ,
-        Quantity::AlbedoR,
-        Quantity::AlbedoG,
-        Quantity::AlbedoB,
-        Quantity::R2,
-        Quantity::G2,
-        Quantity::B2,
-    ];
-
-    /// Short name, as the sum channels of a render EXR spell it.
-    pub fn name(self) -> &'static str {
-        match self {
-            Quantity::R => "R",
-            Quantity::G => "G",
-            Quantity::B => "B",
-            Quantity::Hits => "hits",
-            Quantity::Distance => "distance",
-            Quantity::FiberHits => "fiberHits",
-            Quantity::TangentX => "tangentX",
-            Quantity::TangentY => "tangentY",
-            Quantity::TangentZ => "tangentZ",
-            Quantity::AlbedoR => "albedoR",
-            Quantity::AlbedoG => "albedoG",
-            Quantity::AlbedoB => "albedoB",
-            Quantity::R2 => "R2",
-            Quantity::G2 => "G2",
-            Quantity::B2 => "B2",
-        }
-    }
-}
-
-/// Whether `outputs` need the count of camera rays that hit something (alpha, and the
-/// averages over hits).
-fn counts_hits(outputs: &Outputs) -> bool {
-    outputs.alpha || outputs.has(Aov::Depth) || outputs.has(Aov::Albedo)
-}
-
-/// The quantities a render recording `outputs` sums, in the order each sample adds them
-/// (`SampleRecord::write` follows the same order).
-pub fn quantities(outputs: &Outputs) -> Vec<Quantity> {
-    use Quantity::*;
-    let mut q = vec![R, G, B];
-    if counts_hits(outputs) {
-        q.push(Hits);
-    }
-    if outputs.has(Aov::Depth) {
-        q.push(Distance);
-    }
-    if outputs.has(Aov::Tangent) {
-        q.extend([FiberHits, TangentX, TangentY, TangentZ]);
-    }
-    if outputs.has(Aov::Albedo) {
-        q.extend([AlbedoR, AlbedoG, AlbedoB]);
-    }
-    if outputs.has(Aov::Variance) {
-        q.extend([R2, G2, B2]);
-    }
-    q
-}
-
-/// `quantities(outputs).len()`, without building the list.
-pub fn quantity_count(outputs: &Outputs) -> usize {
-    let on = |b: bool, n: usize| if b { n } else { 0 };
-    3 + on(counts_hits(outputs), 1)
-        + on(outputs.has(Aov::Depth), 1)
-        + on(outputs.has(Aov::Tangent), 4)
-        + on(outputs.has(Aov::Albedo), 3)
-        + on(outputs.has(Aov::Variance), 3)
 }
 
 /// What one camera sample contributes.
@@ -801,7 +684,7 @@ pub fn render_outputs(
     let results: Vec<TileResult> = tiles
         .par_iter()
         .map(|&tile| {
-            let rays_before = rays_traced_on_this_thread();
+            let rays_before = scene.rays_traced_on_this_thread();
             let job = TileJob {
                 scene,
                 integrator,
@@ -816,7 +699,7 @@ pub fn render_outputs(
             progress(((tx1 - tx0) * (ty1 - ty0)) as u64 * per_pixel);
             Some(TileResult {
                 sums,
-                rays: rays_traced_on_this_thread() - rays_before,
+                rays: scene.rays_traced_on_this_thread() - rays_before,
                 nonfinite,
             })
         })

@@ -7,9 +7,10 @@ use crate::light::Light;
 use crate::math::{Aabb, Ray, Rgb};
 use crate::prepare::Preparation;
 use std::cell::Cell;
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
+use std::hash::{Hash, Hasher};
+use std::sync::{Arc, Weak};
 use std::time::Instant;
+use thread_local::ThreadLocal;
 
 /// How a hit scatters light.
 #[derive(Clone, Debug)]
@@ -28,22 +29,45 @@ pub enum Material {
 pub struct Scene {
     /// The camera primary rays start from.
     pub camera: Camera,
-    /// Ray queries against all geometry (private: data derived from it is cached under the
-    /// scene's identity, so it must not change; queries go through the counting wrappers).
-    accel: Box<dyn Accel>,
+    /// Ray queries against all geometry (private: data derived from it is cached under its
+    /// identity, so it must not change; queries go through the counting wrappers).
+    accel: Arc<dyn Accel>,
     /// Materials, indexed by [`Hit::material`].
     pub materials: Vec<Material>,
     /// All lights, with the subsets the integrators sample from (found once).
     pub lights: Lights,
-    /// Distinguishes this scene's geometry from any other's in a shared [`Preparation`].
-    geometry_id: u64,
+    /// Rays traced through this scene, per thread (the render loop takes differences around
+    /// each tile).
+    rays: ThreadLocal<Cell<u64>>,
 }
 
 /// The key of a density grid in a [`Preparation`]: whose geometry, at what resolution.
-#[derive(Clone, Copy, PartialEq, Eq, Hash)]
 struct DensityKey {
-    geometry_id: u64,
+    /// The geometry, by address. A weak reference keeps the allocation (not the geometry)
+    /// alive, so no other scene's geometry can take the address while the entry exists.
+    geometry: Weak<dyn Accel>,
     resolution: Option<u32>,
+}
+
+impl DensityKey {
+    fn address(&self) -> *const () {
+        self.geometry.as_ptr() as *const ()
+    }
+}
+
+impl PartialEq for DensityKey {
+    fn eq(&self, other: &Self) -> bool {
+        self.address() == other.address() && self.resolution == other.resolution
+    }
+}
+
+impl Eq for DensityKey {}
+
+impl Hash for DensityKey {
+    fn hash<H: Hasher>(&self, state: &mut H) {
+        self.address().hash(state);
+        self.resolution.hash(state);
+    }
 }
 
 /// The scene's lights and the subsets integrators choose from, found once when the scene is
@@ -148,15 +172,6 @@ fn choose(n: usize, u: f32) -> Option<usize> {
     (n > 0).then(|| ((u * n as f32) as usize).min(n - 1))
 }
 
-thread_local! {
-    static RAYS_TRACED: Cell<u64> = const { Cell::new(0) };
-}
-
-/// Rays traced by the calling thread so far (the render loop takes differences around each tile).
-pub fn rays_traced_on_this_thread() -> u64 {
-    RAYS_TRACED.with(|c| c.get())
-}
-
 impl Scene {
     /// A scene of `accel`'s geometry.
     pub fn new(
@@ -165,14 +180,25 @@ impl Scene {
         materials: Vec<Material>,
         lights: Lights,
     ) -> Self {
-        static NEXT_GEOMETRY_ID: AtomicU64 = AtomicU64::new(0);
         Scene {
             camera,
-            accel,
+            accel: Arc::from(accel),
             materials,
             lights,
-            geometry_id: NEXT_GEOMETRY_ID.fetch_add(1, Ordering::Relaxed),
+            rays: ThreadLocal::new(),
         }
+    }
+
+    /// Rays the calling thread has traced through this scene so far (the render loop takes
+    /// differences around each tile).
+    pub fn rays_traced_on_this_thread(&self) -> u64 {
+        self.rays.get().map_or(0, Cell::get)
+    }
+
+    #[inline]
+    fn count_ray(&self) {
+        let rays = self.rays.get_or_default();
+        rays.set(rays.get() + 1);
     }
 
     /// The geometry, for queries that bypass the ray statistics (tests, benchmarks).
@@ -181,20 +207,20 @@ impl Scene {
     }
 
     /// The density grid of the scene's hair at `resolution` voxels along the longest side
-    /// (`None`: chosen from the fibers), built on the first request of the run `prep` and
-    /// shared after; `Ok(None)` when the scene has no hair. The build is noted in `prep`.
+    /// (`None`: chosen from the fibers), built within `prep`'s limits on the run's first request
+    /// and shared after; `Ok(None)` when the scene has no hair. The build is noted in `prep`.
     pub fn fiber_density(
         &self,
         prep: &Preparation,
         resolution: Option<u32>,
     ) -> Result<Option<Arc<dyn FiberDensity>>, BuildError> {
         let key = DensityKey {
-            geometry_id: self.geometry_id,
+            geometry: Arc::downgrade(&self.accel),
             resolution,
         };
         let grid = prep.get_or_build(key, || {
             let start = Instant::now();
-            let grid = self.accel.fiber_density(resolution)?;
+            let grid = self.accel.fiber_density(resolution, prep.limits())?;
             if let Some(grid) = &grid {
                 prep.note(format!(
                     "{} built in {:.2} s",
@@ -210,14 +236,14 @@ impl Scene {
     /// Closest hit, counted in the ray statistics.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        RAYS_TRACED.with(|c| c.set(c.get() + 1));
+        self.count_ray();
         self.accel.intersect(ray)
     }
 
     /// Visibility test, counted in the ray statistics.
     #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
-        RAYS_TRACED.with(|c| c.set(c.get() + 1));
+        self.count_ray();
         self.accel.occluded(ray)
     }
 
@@ -227,7 +253,7 @@ impl Scene {
         if !self.accel.has_surfaces() {
             return false;
         }
-        RAYS_TRACED.with(|c| c.set(c.get() + 1));
+        self.count_ray();
         self.accel.occluded_by_surfaces(ray)
     }
 

@@ -74,7 +74,7 @@
 //! RON: `Chiang(beta_m: 0.3, beta_n: 0.3, alpha: 2.0, pigment: Melanin(eumelanin: 1.3, pheomelanin: 0.2))`
 
 use crate::pigment::Pigment;
-use crate::{check_range, ParamError, TestInstance};
+use crate::{check_range, ModelParams, ParamError, TestInstance};
 use serde::{Deserialize, Serialize};
 use std::f32::consts::{PI, TAU};
 use tress_core::math::{fiber_direction, luminance, safe_asin, safe_sqrt, Rgb, Vec3};
@@ -121,6 +121,22 @@ impl Default for Params {
             eta: 1.55,
             pigment: Pigment::default(),
         }
+    }
+}
+
+impl ModelParams for Params {
+    fn pigment(&self) -> Option<(&Pigment, f32)> {
+        Some((&self.pigment, self.beta_n))
+    }
+
+    fn pigment_mut(&mut self) -> Option<&mut Pigment> {
+        Some(&mut self.pigment)
+    }
+
+    /// Scales β_m and β_n, within `BETA_MIN..=1`.
+    fn scale_roughness(&mut self, scale: f32) {
+        self.beta_m = (self.beta_m * scale).clamp(BETA_MIN, 1.0);
+        self.beta_n = (self.beta_n * scale).clamp(BETA_MIN, 1.0);
     }
 }
 

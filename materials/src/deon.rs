@@ -55,7 +55,7 @@
 //! pigment: Melanin(eumelanin: 1.3, pheomelanin: 0.2))`
 
 use crate::pigment::Pigment;
-use crate::{check_range, ParamError, TestInstance};
+use crate::{check_range, ModelParams, ParamError, TestInstance};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use tress_core::math::{erfc, luminance, Rgb, Vec3};
@@ -104,6 +104,23 @@ impl Default for Params {
             eta: 1.55,
             pigment: Pigment::default(),
         }
+    }
+}
+
+impl ModelParams for Params {
+    /// The pigment, converted at the azimuthal roughness.
+    fn pigment(&self) -> Option<(&Pigment, f32)> {
+        Some((&self.pigment, self.azimuthal_roughness))
+    }
+
+    fn pigment_mut(&mut self) -> Option<&mut Pigment> {
+        Some(&mut self.pigment)
+    }
+
+    /// Scales the longitudinal and azimuthal roughness, within [0, 1].
+    fn scale_roughness(&mut self, scale: f32) {
+        self.longitudinal_roughness = (self.longitudinal_roughness * scale).clamp(0.0, 1.0);
+        self.azimuthal_roughness = (self.azimuthal_roughness * scale).clamp(0.0, 1.0);
     }
 }
 

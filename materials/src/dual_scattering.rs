@@ -97,6 +97,7 @@ use std::f32::consts::PI;
 use std::f64::consts::PI as PI64;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+use tress_core::limits::{Limits, ALLOW_SLOW_TABLES_VAR};
 use tress_core::math::{erf, safe_asin, Rgb, Vec2, Vec3};
 use tress_core::sampling::sample_uniform_sphere;
 use tress_core::Bcsdf;
@@ -150,7 +151,7 @@ impl Default for DualScatteringSettings {
 }
 
 impl DualScatteringSettings {
-    fn validate(&self) -> Result<(), ParamError> {
+    fn validate(&self, limits: &Limits) -> Result<(), ParamError> {
         let check = |field: &'static str, v: usize, lo: usize| {
             if (lo..=4096).contains(&v) {
                 Ok(())
@@ -181,7 +182,7 @@ impl DualScatteringSettings {
             ));
         }
         let work = self.work_over_default();
-        if work > MAX_TABLE_WORK && std::env::var_os(ALLOW_SLOW_TABLES_VAR).is_none() {
+        if work > MAX_TABLE_WORK && !limits.slow_tables {
             return Err(ParamError::new(
                 "tables",
                 format!(
@@ -211,10 +212,9 @@ impl DualScatteringSettings {
 }
 
 /// Table settings beyond this many times the default tables' work are refused (a build of
-/// `theta_nodes: 4096` ran for minutes without a word) unless [`ALLOW_SLOW_TABLES_VAR`] is set.
+/// `theta_nodes: 4096` ran for minutes without a word) unless the run's [`Limits`] allow slow
+/// tables (the front ends' [`ALLOW_SLOW_TABLES_VAR`]).
 pub const MAX_TABLE_WORK: f64 = 16.0;
-/// Set (to anything) to build tables beyond [`MAX_TABLE_WORK`].
-pub const ALLOW_SLOW_TABLES_VAR: &str = "TRESS_ALLOW_SLOW_TABLES";
 /// Build time of the default tables on the 2-core development machine (for the estimate).
 const DEFAULT_BUILD_SECONDS: f64 = 1.3;
 
@@ -396,11 +396,14 @@ pub const SETTLED_BACK_SCATTERING: f32 = 1e-5;
 
 impl DualScatteringTables {
     /// Integrates `bcsdf` numerically (module docs); runs on all cores, deterministically.
+    /// Settings whose work exceeds [`MAX_TABLE_WORK`] are refused unless `limits` allow slow
+    /// tables.
     pub fn new(
         bcsdf: &dyn Bcsdf,
         settings: &DualScatteringSettings,
+        limits: &Limits,
     ) -> Result<Self, DualScatteringError> {
-        settings.validate()?;
+        settings.validate(limits)?;
         Self::build(bcsdf, settings, h_domain(bcsdf))
     }
 
@@ -424,7 +427,8 @@ impl DualScatteringTables {
             half_circle_energy.extend(w);
         }
         let medium = (settings.multiple_scattering == MultipleScattering::FiberMedium).then(|| {
-            FiberMedium::build(bcsdf, &globals, |k| node_theta(k, n) as f32, settings.walks)
+            let albedo: Vec<Rgb> = globals.iter().map(|g| g.a_f + g.a_b).collect();
+            FiberMedium::build(bcsdf, &albedo, |k| node_theta(k, n) as f32, settings.walks)
         });
         let settled = match &medium {
             Some(m) => SettledCounts {
@@ -1377,6 +1381,25 @@ mod tests {
     }
 
     #[test]
+    fn slow_tables_are_refused_unless_the_limits_allow_them() {
+        let slow = DualScatteringSettings {
+            theta_nodes: 4096,
+            ..Default::default()
+        };
+        let e = slow.validate(&Limits::default()).unwrap_err();
+        assert_eq!(e.field, "tables");
+        assert!(e.reason.contains(ALLOW_SLOW_TABLES_VAR), "{e}");
+        let allowed = Limits {
+            slow_tables: true,
+            ..Limits::default()
+        };
+        slow.validate(&allowed).unwrap();
+        DualScatteringSettings::default()
+            .validate(&Limits::default())
+            .unwrap();
+    }
+
+    #[test]
     fn invalid_settings_are_rejected_with_the_field_name() {
         let b = lambertian((1.0, 1.0, 1.0));
         for (s, field) in [
@@ -1409,7 +1432,7 @@ mod tests {
                 "theta_quad",
             ),
         ] {
-            match DualScatteringTables::new(b.as_ref(), &s) {
+            match DualScatteringTables::new(b.as_ref(), &s, &Limits::default()) {
                 Err(DualScatteringError::Param(e)) => assert_eq!(e.field, field),
                 other => panic!("{field}: expected a parameter error, got {other:?}"),
             }
@@ -1912,7 +1935,7 @@ mod tests {
         let prep = Preparation::new();
         let get = |b: &dyn Bcsdf, s: &DualScatteringSettings| {
             prep.get_or_build((fingerprint(b), s.clone()), || {
-                DualScatteringTables::new(b, s)
+                DualScatteringTables::new(b, s, &Limits::default())
             })
             .unwrap()
         };
@@ -2039,7 +2062,7 @@ mod tests {
                 ..Default::default()
             };
             for (name, b, white) in all_models() {
-                let t = DualScatteringTables::new(b.as_ref(), &s).unwrap();
+                let t = DualScatteringTables::new(b.as_ref(), &s, &Limits::default()).unwrap();
                 println!(
                     "{name:30} {theta_nodes:4} nodes: {:6.2} s",
                     t.build_time().as_secs_f64()

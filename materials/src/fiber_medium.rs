@@ -54,7 +54,6 @@
 //!
 //! Every θ node walks its own seeded stream, so the tables do not depend on the thread count.
 
-use crate::dual_scattering::DsGlobals;
 use std::f32::consts::PI;
 use tress_core::math::{Rgb, Vec3};
 use tress_core::rng::{hash_words, Sampler};
@@ -104,20 +103,20 @@ pub struct FiberMedium {
 }
 
 impl FiberMedium {
-    /// Walks `walks` light paths per θ node for each quantity. `globals[k]` are the quadrature
-    /// tables at node k (for the energy normalisation); `theta_of(k)` is node k's inclination.
+    /// Walks `walks` light paths per θ node for each quantity. `albedo[k]` is the fiber's
+    /// albedo ā_f + ā_b at node k, as the quadrature tables measure it (for the energy
+    /// normalisation); `theta_of(k)` is node k's inclination.
     pub fn build(
         bcsdf: &dyn Bcsdf,
-        globals: &[DsGlobals],
+        albedo: &[Rgb],
         theta_of: impl Fn(usize) -> f32 + Sync,
         walks: u32,
     ) -> Self {
-        let n = globals.len();
+        let n = albedo.len();
         let normalisation = |theta: f32| {
             // Nearest node: the scale only guards models that exceed 1, where it varies slowly.
             let k = (((theta + 0.5 * PI) / PI * n as f32) as usize).min(n - 1);
-            let g = &globals[k];
-            Rgb::ONE / (g.a_f + g.a_b).max(Rgb::ONE)
+            Rgb::ONE / albedo[k].max(Rgb::ONE)
         };
         type Node = ((BackScattering, [Rgb; DEPTHS.len()]), [Rgb; DEPTHS.len()]);
         let per_node: Vec<Node> = crate::parallel_map(n, |k| {

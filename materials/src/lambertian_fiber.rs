@@ -10,7 +10,8 @@
 //!
 //! RON: `LambertianFiber(albedo: (0.9, 0.7, 0.5))`
 
-use crate::{check_range, ParamError, TestInstance};
+use crate::pigment::Pigment;
+use crate::{check_range, ModelParams, ParamError, TestInstance};
 use serde::{Deserialize, Serialize};
 use std::f32::consts::PI;
 use tress_core::math::{fiber_direction, safe_sqrt, Rgb, Vec3};
@@ -33,6 +34,19 @@ impl Default for Params {
             albedo: (0.8, 0.8, 0.8),
         }
     }
+}
+
+/// The albedo is the fiber's colour and it has no roughness: strands cannot vary it.
+impl ModelParams for Params {
+    fn pigment(&self) -> Option<(&Pigment, f32)> {
+        None
+    }
+
+    fn pigment_mut(&mut self) -> Option<&mut Pigment> {
+        None
+    }
+
+    fn scale_roughness(&mut self, _scale: f32) {}
 }
 
 /// The energy-normalised diffuse fiber (module docs).

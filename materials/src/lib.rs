@@ -1,12 +1,15 @@
 //! tress-materials: hair fiber scattering models behind [`tress_core::Bcsdf`].
 //!
 //! [`HairModel`] is THE registry of models. Adding a model is one new file (a `Params` struct
-//! with serde defaults, a type implementing `Bcsdf` with `new(&Params) -> Result<_, ParamError>`,
-//! and `test_instances()`) plus one line in the `hair_models!` invocation below; the statistical
-//! test suite (`tests/bcsdf_statistics.rs`) then covers the new model automatically.
+//! with serde defaults implementing [`ModelParams`], a type implementing `Bcsdf` with
+//! `new(&Params) -> Result<_, ParamError>`, and `test_instances()`) plus one line in the
+//! `hair_models!` invocation below; nothing else names the models one by one. The statistical
+//! test suite (`tests/bcsdf_statistics.rs`: white furnace, sampling, χ², …), the registry's own
+//! tests below and the dual-scattering tables' tests then cover the new model automatically.
 
 #![warn(missing_docs)]
 
+use pigment::Pigment;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use tress_core::Bcsdf;
@@ -18,89 +21,17 @@ pub mod dual_scattering_sampling;
 pub mod fiber_medium;
 pub mod lambertian_fiber;
 pub mod marschner;
+pub mod model_params;
+mod parallel;
+mod params;
 pub mod pigment;
+pub mod strand_variation;
 #[cfg(test)]
 mod test_util;
 
-/// An invalid model parameter.
-#[derive(Debug, Clone, thiserror::Error, PartialEq)]
-#[error("{field} = {value}: {reason}")]
-pub struct ParamError {
-    /// Name of the parameter, as written in scene files.
-    pub field: &'static str,
-    /// The rejected value, as text.
-    pub value: String,
-    /// What the value must be, e.g. `must lie in [0, 1]`.
-    pub reason: String,
-}
-
-impl ParamError {
-    /// An error saying that `field` = `value` breaks `reason`.
-    pub fn new(
-        field: &'static str,
-        value: impl std::fmt::Display,
-        reason: impl Into<String>,
-    ) -> Self {
-        ParamError {
-            field,
-            value: value.to_string(),
-            reason: reason.into(),
-        }
-    }
-}
-
-/// `f(0), …, f(n − 1)` on all cores: thread j computes j, j + threads, … (interleaving balances
-/// cheap and expensive items), so the result does not depend on the thread count.
-pub(crate) fn parallel_map<T: Send>(n: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |c| c.get())
-        .min(n)
-        .max(1);
-    let mut out: Vec<Option<T>> = (0..n).map(|_| None).collect();
-    std::thread::scope(|s| {
-        let f = &f;
-        let handles: Vec<_> = (0..threads)
-            .map(|j| {
-                s.spawn(move || {
-                    (j..n)
-                        .step_by(threads)
-                        .map(|k| (k, f(k)))
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        for h in handles {
-            for (k, v) in h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)) {
-                out[k] = Some(v);
-            }
-        }
-    });
-    out.into_iter().flatten().collect()
-}
-
-/// Checks that `value` lies in `[lo, hi]` (and is finite).
-pub fn check_range(field: &'static str, value: f32, lo: f32, hi: f32) -> Result<(), ParamError> {
-    if value.is_finite() && value >= lo && value <= hi {
-        Ok(())
-    } else {
-        Err(ParamError::new(
-            field,
-            value,
-            format!("must lie in [{lo}, {hi}]"),
-        ))
-    }
-}
-
-/// A named parameter set used by the statistical tests of every model.
-#[derive(Clone, Debug)]
-pub struct TestInstance<P> {
-    /// Short name of the instance, used in test messages.
-    pub name: String,
-    /// The model's parameters.
-    pub params: P,
-    /// Non-absorbing and energy conserving: the white-furnace oracle applies.
-    pub white_furnace: bool,
-}
+pub use model_params::ModelParams;
+pub(crate) use parallel::parallel_map;
+pub use params::{check_range, ParamError, TestInstance};
 
 macro_rules! hair_models {
     ($($variant:ident => $module:ident :: $ty:ident),* $(,)?) => {
@@ -142,6 +73,46 @@ macro_rules! hair_models {
                 )*
                 all
             }
+
+            /// The model's pigment, with the azimuthal roughness β_n at which it converts a
+            /// [`Pigment::Color`] (Chiang's fit); `None` for a model without one.
+            pub fn pigment(&self) -> Option<(&Pigment, f32)> {
+                match self {
+                    $(HairModel::$variant(p) => p.pigment(),)*
+                }
+            }
+
+            /// The same model with `pigment` in place of its own; `None` for a model without
+            /// one.
+            pub fn with_pigment(&self, pigment: Pigment) -> Option<HairModel> {
+                let mut model = self.clone();
+                let own = match &mut model {
+                    $(HairModel::$variant(p) => p.pigment_mut(),)*
+                };
+                *own? = pigment;
+                Some(model)
+            }
+
+            /// The same model with its roughness multiplied by `scale`, clamped to the model's
+            /// range ([`ModelParams::scale_roughness`]).
+            pub fn with_roughness_scale(&self, scale: f32) -> HairModel {
+                let mut model = self.clone();
+                match &mut model {
+                    $(HairModel::$variant(p) => p.scale_roughness(scale),)*
+                }
+                model
+            }
+
+            /// The registered models that have a pigment, in registration order.
+            pub fn names_with_pigment() -> Vec<&'static str> {
+                let mut names = Vec::new();
+                $(
+                    if <$module::Params as Default>::default().pigment().is_some() {
+                        names.push(stringify!($variant));
+                    }
+                )*
+                names
+            }
         }
     };
 }
@@ -152,4 +123,99 @@ hair_models! {
     Marschner => marschner::Marschner,
     DEon => deon::DEon,
     Chiang => chiang::Chiang,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chiang(pigment: Pigment) -> HairModel {
+        HairModel::Chiang(crate::chiang::Params {
+            beta_n: 0.4,
+            pigment,
+            ..Default::default()
+        })
+    }
+
+    fn brown() -> Pigment {
+        Pigment::Melanin {
+            eumelanin: 1.3,
+            pheomelanin: 0.2,
+            tint: pigment::NO_TINT,
+        }
+    }
+
+    #[test]
+    fn models_expose_and_replace_their_pigment() {
+        let m = chiang(brown());
+        assert_eq!(m.pigment(), Some((&brown(), 0.4)));
+        let blond = Pigment::Color((0.8, 0.6, 0.4));
+        let swapped = m.with_pigment(blond.clone()).unwrap();
+        assert_eq!(swapped.pigment(), Some((&blond, 0.4)));
+        let HairModel::Chiang(p) = &swapped else {
+            panic!("{swapped:?}")
+        };
+        assert_eq!((p.beta_m, p.alpha), (0.3, 2.0));
+        let marschner = HairModel::Marschner(Default::default());
+        assert_eq!(marschner.pigment().unwrap().1, 0.3);
+        let deon = HairModel::DEon(Default::default());
+        assert!(deon.with_pigment(brown()).is_some());
+        let lambert = HairModel::LambertianFiber(Default::default());
+        assert!(lambert.pigment().is_none() && lambert.with_pigment(brown()).is_none());
+    }
+
+    #[test]
+    fn a_roughness_scale_scales_each_models_roughness_within_its_range() {
+        let HairModel::Chiang(p) = chiang(brown()).with_roughness_scale(1.5) else {
+            panic!()
+        };
+        assert_eq!((p.beta_m, p.beta_n), (0.3 * 1.5, 0.4 * 1.5));
+        let rough = HairModel::Chiang(crate::chiang::Params {
+            beta_m: 0.9,
+            ..Default::default()
+        });
+        let HairModel::Chiang(p) = rough.with_roughness_scale(1.5) else {
+            panic!()
+        };
+        assert_eq!(p.beta_m, 1.0, "clamped to the model's range");
+        let deon = HairModel::DEon(Default::default()).with_roughness_scale(0.5);
+        let HairModel::DEon(p) = deon else { panic!() };
+        assert_eq!(
+            (p.longitudinal_roughness, p.azimuthal_roughness),
+            (0.05, 0.15)
+        );
+        let marschner = HairModel::Marschner(Default::default()).with_roughness_scale(2.0);
+        let HairModel::Marschner(p) = marschner else {
+            panic!()
+        };
+        assert_eq!(p.beta_r, 15.0);
+        // A scale of 1 changes nothing.
+        let m = chiang(brown());
+        assert_eq!(m.with_roughness_scale(1.0), m);
+    }
+
+    #[test]
+    fn every_model_keeps_its_pigment_and_roughness_consistent() {
+        let blond = Pigment::Color((0.8, 0.6, 0.4));
+        for inst in HairModel::test_instances() {
+            let m = &inst.params;
+            let name = &inst.name;
+            match m.pigment() {
+                Some((_, beta_n)) => {
+                    assert!((0.0..=1.0).contains(&beta_n), "{name}: β_n = {beta_n}");
+                    let swapped = m.with_pigment(blond.clone()).expect(name);
+                    assert_eq!(swapped.pigment(), Some((&blond, beta_n)), "{name}");
+                }
+                None => assert!(m.with_pigment(blond.clone()).is_none(), "{name}"),
+            }
+            assert_eq!(
+                &m.with_roughness_scale(1.0),
+                m,
+                "{name}: a scale of 1 changes nothing"
+            );
+        }
+        let names = HairModel::names_with_pigment();
+        assert!(names.iter().all(|n| HairModel::names().contains(n)));
+        assert!(names.contains(&"Chiang") && !names.contains(&"LambertianFiber"));
+    }
 }

@@ -59,7 +59,7 @@ mod azimuthal;
 mod sampling;
 
 use crate::pigment::Pigment;
-use crate::{check_range, ParamError, TestInstance};
+use crate::{check_range, ModelParams, ParamError, TestInstance};
 use azimuthal::{wrap_pi, FresnelMode, Glint, Slice};
 use sampling::{AzimuthPdf, WindowedNormal};
 use serde::{Deserialize, Serialize};
@@ -126,6 +126,22 @@ impl Default for Params {
             caustic_fade: 0.3,
             caustic_limit: 0.5,
         }
+    }
+}
+
+impl ModelParams for Params {
+    /// The pigment, converted at [`COLOR_BETA_N`] (the model has no azimuthal roughness).
+    fn pigment(&self) -> Option<(&Pigment, f32)> {
+        Some((&self.pigment, COLOR_BETA_N))
+    }
+
+    fn pigment_mut(&mut self) -> Option<&mut Pigment> {
+        Some(&mut self.pigment)
+    }
+
+    /// Scales β_R, within [1°, 30°]: the only lobe width a strand's roughness sets.
+    fn scale_roughness(&mut self, scale: f32) {
+        self.beta_r = (self.beta_r * scale).clamp(1.0, 30.0);
     }
 }
 

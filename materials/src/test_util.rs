@@ -30,7 +30,7 @@ pub(crate) fn shared_tables(
     static PREP: std::sync::OnceLock<Preparation> = std::sync::OnceLock::new();
     PREP.get_or_init(Preparation::new)
         .get_or_build((fingerprint(b), s.clone()), || {
-            DualScatteringTables::new(b, s)
+            DualScatteringTables::new(b, s, &tress_core::limits::Limits::default())
         })
         .unwrap()
 }

@@ -45,14 +45,15 @@ pub fn load_scene(py: Python<'_>, path: PathBuf) -> PyResult<Scene> {
 
 impl Scene {
     fn build(py: Python<'_>, desc: SceneDesc, path: PathBuf) -> PyResult<Scene> {
+        let limits = tress_cli::limits_from_env();
         let built = py
-            .detach(|| scene_desc::build(&desc, &path))
+            .detach(|| scene_desc::build(&desc, &path, &limits))
             .map_err(to_py_err)?;
         Ok(Scene {
             desc,
             path,
             built,
-            prep: Preparation::new(),
+            prep: Preparation::with_limits(limits),
         })
     }
 
@@ -201,7 +202,7 @@ impl Scene {
         if crop.is_some() {
             film.crop = crop;
         }
-        film.validate_for_render()
+        film.validate_for_render(&tress_cli::limits_from_env())
             .map_err(|e| PyValueError::new_err(format!("{here}: film: {e}")))?;
         let integrator_desc = match integrator {
             Some(arg) => IntegratorDesc::parse_arg(arg).map_err(PyValueError::new_err)?,

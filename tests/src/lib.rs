@@ -94,7 +94,7 @@ pub fn hair_ball(strands: u32) -> tress_accel::HairGeometry {
         center: Vec3::ZERO,
         sphere_radius: 1.0,
     }
-    .generate()
+    .generate(&tress_core::limits::Limits::default())
     .expect("procedural hair")
 }
 

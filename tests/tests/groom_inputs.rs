@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use tress_accel::{
     ChildStrands, HairGeometry, HairOptions, HairSource, PbrtFile, PlyFile, SceneBuilder,
 };
+use tress_core::limits::Limits;
 use tress_core::math::Vec3;
 
 /// A fresh scratch folder for one test.
@@ -92,7 +93,9 @@ fn ply_round_trips_exactly_in_every_encoding() {
     ] {
         let path = dir.join(name);
         std::fs::write(&path, ply_bytes(encoding)).unwrap();
-        let g = HairSource::File(path.clone()).load().unwrap();
+        let g = HairSource::File(path.clone())
+            .load(&Limits::default())
+            .unwrap();
         assert_eq!(g.strand_count(), 3, "{name}");
         let mut at = 0;
         for (s, strand) in expect.iter().enumerate() {
@@ -109,7 +112,7 @@ fn ply_round_trips_exactly_in_every_encoding() {
             z_up: true,
             ..PlyFile::new(&path)
         })
-        .load()
+        .load(&Limits::default())
         .unwrap();
         assert!(o.radii.iter().all(|&r| r == 0.5));
         let [x, y, z] = expect[0][1].0;
@@ -131,7 +134,7 @@ fn truncated_and_corrupt_ply_files_are_errors_naming_the_file() {
         let header_end = good.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
         for len in (0..header_end).step_by(7).chain(header_end..good.len()) {
             std::fs::write(&path, &good[..len]).unwrap();
-            match HairSource::File(path.clone()).load() {
+            match HairSource::File(path.clone()).load(&Limits::default()) {
                 Err(e) => assert!(e.to_string().contains(name), "{len}: {e}"),
                 // An ascii file cut after a number's first digits can still read (a shorter
                 // number): what reads must be valid.
@@ -151,7 +154,10 @@ fn truncated_and_corrupt_ply_files_are_errors_naming_the_file() {
     let last = text.trim_end().rfind('\n').unwrap();
     text.replace_range(last + 1.., "9\n");
     std::fs::write(&path, &text).unwrap();
-    let e = HairSource::File(path).load().unwrap_err().to_string();
+    let e = HairSource::File(path)
+        .load(&Limits::default())
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("counts.ply") && e.contains("strand 2 needs vertices"),
         "{e}"
@@ -164,7 +170,10 @@ fn truncated_and_corrupt_ply_files_are_errors_naming_the_file() {
          0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
     )
     .unwrap();
-    let e = HairSource::File(path).load().unwrap_err().to_string();
+    let e = HairSource::File(path)
+        .load(&Limits::default())
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("mesh.ply") && e.contains("no strand structure") && e.contains("surface"),
         "{e}"
@@ -187,7 +196,9 @@ fn assert_near(got: Vec3, want: Vec3, what: &str) {
 
 #[test]
 fn the_pbrt_fixture_reads_into_the_expected_strands() {
-    let g = HairSource::File(fixture()).load().unwrap();
+    let g = HairSource::File(fixture())
+        .load(&Limits::default())
+        .unwrap();
     // Four strands: the sphere and the camera-side Translate play no part.
     assert_eq!(g.strand_count(), 4);
     let sizes: Vec<usize> = (0..4).map(|s| g.strand(s).len()).collect();
@@ -270,7 +281,7 @@ fn the_pbrt_fixture_reads_into_the_expected_strands() {
         z_up: true,
         ..PbrtFile::new(fixture())
     })
-    .load()
+    .load(&Limits::default())
     .unwrap();
     assert_near(z_up.points[2], Vec3::new(0.0, 0.0, -6.0), "z-up");
 }
@@ -283,7 +294,10 @@ fn bad_pbrt_files_name_the_file_and_place() {
     let bad = fixture.replacen("0 5 0  0 6 0 ]", "0 5 0 ]", 1);
     let path = dir.join("bad.pbrt");
     std::fs::write(&path, bad).unwrap();
-    let e = HairSource::File(path).load().unwrap_err().to_string();
+    let e = HairSource::File(path)
+        .load(&Limits::default())
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("bad.pbrt") && e.contains("line 18, column 1") && e.contains("6 control points"),
         "{e}"
@@ -291,7 +305,10 @@ fn bad_pbrt_files_name_the_file_and_place() {
     // The include is resolved beside the main file: missing here.
     let path = dir.join("alone.pbrt");
     std::fs::write(&path, &fixture).unwrap();
-    let e = HairSource::File(path).load().unwrap_err().to_string();
+    let e = HairSource::File(path)
+        .load(&Limits::default())
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("curves_include.pbrt"), "{e}");
     // Cut anywhere, the fixture gives an error or fewer curves, never a panic.
     std::fs::write(dir.join("curves_include.pbrt"), "").unwrap();
@@ -301,7 +318,7 @@ fn bad_pbrt_files_name_the_file_and_place() {
             continue;
         }
         std::fs::write(&path, &fixture[..len]).unwrap();
-        if let Err(e) = HairSource::File(path.clone()).load() {
+        if let Err(e) = HairSource::File(path.clone()).load(&Limits::default()) {
             assert!(e.to_string().contains("cut.pbrt"), "{len}: {e}");
         }
     }
@@ -335,10 +352,10 @@ fn child_strands_are_added_deterministically_around_kept_guides() {
         thinning: 0.0,
         radius_jitter: 0.0,
     };
-    let grown = children.grow(&g, 1.0).unwrap();
+    let grown = children.grow(&g, 1.0, &Limits::default()).unwrap();
     assert_eq!(grown.strand_count(), 16 * 7);
     assert_eq!(grown.points[..g.point_count()], g.points[..]);
-    assert_eq!(grown, children.grow(&g, 1.0).unwrap());
+    assert_eq!(grown, children.grow(&g, 1.0, &Limits::default()).unwrap());
     // Without clumping a child keeps its root's distance to the guide all along.
     for c in 0..16 * 6 {
         let guide = &g.points[g.strand(c / 6)];
@@ -425,7 +442,7 @@ fn sintel_guides_with_children_cover_far_more_of_the_image() {
         let path = dir.join("scene.ron");
         std::fs::write(&path, scene(children)).unwrap();
         let desc = tress_cli::scene_desc::load(&path).unwrap();
-        let built = tress_cli::scene_desc::build(&desc, &path).unwrap();
+        let built = tress_cli::scene_desc::build(&desc, &path, &Limits::default()).unwrap();
         (coverage(&built.scene, 48), built.summary)
     };
     let (guides_only, summary) = measure("");

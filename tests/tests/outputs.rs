@@ -164,7 +164,7 @@ fn measure_the_cost_of_the_alpha_query() {
     let scene_file =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/straight_venice.ron");
     let desc = tress_cli::scene_desc::load(&scene_file).unwrap();
-    let built = tress_cli::scene_desc::build(&desc, &scene_file).unwrap();
+    let built = tress_cli::scene_desc::build(&desc, &scene_file, &Default::default()).unwrap();
     let scene = &built.scene;
     let (width, height) = (desc.film.width, desc.film.height);
     for name in ["path", "dual-mis"] {

@@ -33,7 +33,7 @@ fn ball_scene(variation: &str) -> String {
 /// Builds scene `text` as if read from `dir/scene.ron`.
 fn build_in(text: &str, dir: &Path) -> BuiltScene {
     let desc = parse(text).unwrap_or_else(|e| panic!("{e}"));
-    build(&desc, &dir.join("scene.ron")).unwrap_or_else(|e| panic!("{e:#}"))
+    build(&desc, &dir.join("scene.ron"), &Default::default()).unwrap_or_else(|e| panic!("{e:#}"))
 }
 
 /// Builds a scene that reads no files.
@@ -167,7 +167,7 @@ fn hair_file_colours_reach_the_shaded_material() {
     // The scene's error with its HAIR file replaced by `file`.
     let error_with = |file: &str| {
         let desc = parse(&text.replace("coloured.hair", file)).unwrap();
-        match build(&desc, &dir.join("scene.ron")) {
+        match build(&desc, &dir.join("scene.ron"), &Default::default()) {
             Ok(_) => panic!("{file}: the scene built"),
             Err(e) => e.to_string(),
         }
@@ -228,7 +228,7 @@ fn random_roughness_and_darker_roots_reach_each_segments_material() {
         tint: tress_materials::pigment::NO_TINT,
     };
     let base = brown.sigma_a(0.35).unwrap();
-    let desc: tress_materials::pigment::StrandVariation = tress_cli::ron_options()
+    let desc: tress_materials::strand_variation::StrandVariation = tress_cli::ron_options()
         .from_str("(random_roughness: 0.5, seed: 4)")
         .unwrap();
     let varied = desc.for_model(&HairModel::Chiang(chiang(brown))).unwrap();
@@ -400,7 +400,7 @@ fn the_example_scenes_build_with_their_variants() {
             .join("../scenes")
             .join(scene);
         let desc = tress_cli::scene_desc::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
-        let built = build(&desc, &path).unwrap_or_else(|e| panic!("{e:#}"));
+        let built = build(&desc, &path, &Default::default()).unwrap_or_else(|e| panic!("{e:#}"));
         assert_eq!(built.scene.materials.len(), 18, "{scene}");
         assert!(
             built.summary.contains(&format!(

@@ -8,7 +8,7 @@ use tress_accel::PbrtFile;
 
 fuzz_target!(|data: &[u8]| {
     let path = tress_fuzz::scratch_file("pbrt", data);
-    if let Ok(hair) = PbrtFile::new(&path).read() {
+    if let Ok(hair) = PbrtFile::new(&path).read(&Default::default()) {
         assert!(hair.validate().is_ok());
         assert!(hair.points.iter().all(|p| p.is_finite()));
         assert!(hair.radii.iter().all(|r| r.is_finite() && *r > 0.0));

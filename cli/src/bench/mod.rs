@@ -47,6 +47,7 @@ use tress_accel::{
 use tress_core::accel::BuildError;
 use tress_core::film::FilmSettings;
 use tress_core::light::{EnvironmentMap, Light};
+use tress_core::limits::Limits;
 use tress_core::math::{Aabb, Ray, Vec2, Vec3};
 use tress_core::prepare::Preparation;
 use tress_core::rng::Pcg32;
@@ -222,10 +223,10 @@ pub fn run(args: BenchArgs) -> Result<()> {
     // One preparation context for the whole run. The tables are built here, through it, to
     // time the build apart from any render; the integrators of every model then find them in
     // it (the same model and settings) instead of building them again per model.
-    let prep = Preparation::new();
+    let prep = Preparation::with_limits(crate::limits_from_env());
     let tables = prep
         .get_or_build((fingerprint(bcsdf.as_ref()), plan.tables.clone()), || {
-            DualScatteringTables::new(bcsdf.as_ref(), &plan.tables)
+            DualScatteringTables::new(bcsdf.as_ref(), &plan.tables, prep.limits())
         })
         .map_err(|e| anyhow!("dual-scattering tables: {e}"))?;
     table.push(
@@ -440,7 +441,7 @@ fn load(spec: &ModelSpec) -> Result<HairGeometry> {
             points_per_strand: SEGMENTS + 1,
             ..Default::default()
         }
-        .generate()?,
+        .generate(&crate::limits_from_env())?,
         Source::File(path) => HairFile::new(path).read()?,
     })
 }
@@ -474,7 +475,8 @@ fn bench_model(
     // The grid the dual-scattering integrators read at their default resolution (its cost is
     // part of the build); the scene below hands it to them.
     let t2 = Instant::now();
-    let grid = big_pool.install(|| DensityGrid::build(&accel, &DensitySettings::default()))?;
+    let grid = big_pool
+        .install(|| accel.density_grid(&DensitySettings::default(), &crate::limits_from_env()))?;
     let grid_time = t2.elapsed();
     let build_peak = peak_rss();
     // The baseline: the same curves, basis and build quality with no filter support, built

@@ -71,10 +71,11 @@ impl Accel for CountingAccel {
     fn fiber_density(
         &self,
         resolution: Option<u32>,
+        limits: &Limits,
     ) -> Result<Option<Arc<dyn FiberDensity>>, BuildError> {
         match resolution {
             None => Ok(Some(Arc::clone(&self.grid) as Arc<dyn FiberDensity>)),
-            Some(_) => self.inner.fiber_density(resolution),
+            Some(_) => self.inner.fiber_density(resolution, limits),
         }
     }
 }

@@ -158,7 +158,7 @@ pub(super) fn execute(
     };
     // One preparation context for the whole study: every scene and integrator that needs the
     // same tables shares them.
-    let prep = tress_core::prepare::Preparation::new();
+    let prep = tress_core::prepare::Preparation::with_limits(crate::limits_from_env());
     for (si, scene) in plan.scenes.iter().enumerate() {
         let mut runner = SceneRunner {
             scene,

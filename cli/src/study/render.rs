@@ -145,7 +145,9 @@ impl SceneRunner<'_> {
         let pool = self.pool;
         let built = match &mut self.built {
             Some(built) => built,
-            slot => slot.insert(pool.install(|| scene_desc::build(&scene.desc, &scene.base))?),
+            slot => slot.insert(pool.install(|| {
+                scene_desc::build(&scene.desc, &scene.base, &crate::limits_from_env())
+            })?),
         };
         let integrator = match self.integrators.entry(job.integrator.ron.clone()) {
             Entry::Occupied(e) => e.into_mut(),

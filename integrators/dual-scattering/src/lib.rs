@@ -241,7 +241,7 @@ impl<D: DirectionSampling> DualScattering<D> {
                 Material::Hair(b) => {
                     let tables = prep
                         .get_or_build((fingerprint(b.as_ref()), settings.tables.clone()), || {
-                            DualScatteringTables::new(b.as_ref(), &settings.tables)
+                            DualScatteringTables::new(b.as_ref(), &settings.tables, prep.limits())
                         })?;
                     Ok(Some(DualScatteringShading::new(
                         Arc::clone(b),
