@@ -3,6 +3,18 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 .ci/install-deps
+target_dir="${CARGO_TARGET_DIR:-$PWD/target}"
+
+# mdBook, to build the book below, has no Debian package: cargo installs it into the target folder,
+# in the background while clippy runs, so its build overlaps the workspace's.
+mdbook_root="$target_dir/tools"
+export PATH="$mdbook_root/bin:$PATH"
+mdbook_install=""
+if ! command -v mdbook >/dev/null 2>&1; then
+    cargo install --quiet --locked --no-default-features --version 0.5.4 --root "$mdbook_root" \
+        --target-dir "$target_dir/tools-build" mdbook &
+    mdbook_install=$!
+fi
 if cargo clippy --version >/dev/null 2>&1; then
     cargo clippy --workspace --all-targets --release -- -D warnings
 else
@@ -10,23 +22,19 @@ else
 fi
 cargo test --workspace --release "$@"
 
-# The book (docs/): cargo test has checked its links (tests/tests/docs_links.rs). Where mdBook is
-# installed it is also built, outside the source tree; mdBook exits 0 on a broken include or
-# unclosed HTML, so any warning or error it prints fails the run.
-if command -v mdbook >/dev/null 2>&1; then
-    book_dir="${CARGO_TARGET_DIR:-$PWD/target}/book"
-    mdbook build docs --dest-dir "$book_dir" 2>&1 | tee "$book_dir.log"
-    if grep -qE 'WARN|ERROR' "$book_dir.log"; then
-        echo "test.sh: mdbook build docs printed warnings or errors (above)" >&2
-        exit 1
-    fi
-else
-    echo "test.sh: mdbook is not installed: the book's links were checked, the book not built" >&2
+# The book (docs/): cargo test has checked its links (tests/tests/docs_links.rs); mdBook builds
+# it outside the source tree. mdBook exits 0 on a broken include or unclosed HTML, so any warning
+# or error it prints fails the run.
+if [ -n "$mdbook_install" ]; then wait "$mdbook_install"; fi
+book_dir="$target_dir/book"
+mdbook build docs --dest-dir "$book_dir" 2>&1 | tee "$book_dir.log"
+if grep -qE 'WARN|ERROR' "$book_dir.log"; then
+    echo "test.sh: mdbook build docs printed warnings or errors (above)" >&2
+    exit 1
 fi
 
 # The Python package (python/): maturin builds the extension module into a virtualenv kept in
 # the target folder, reusing the crates built above, and pytest runs its suite.
-target_dir="${CARGO_TARGET_DIR:-$PWD/target}"
 venv="$target_dir/python-venv"
 if [ ! -x "$venv/bin/pip" ]; then
     rm -rf "$venv"
