@@ -15,7 +15,6 @@
 use crate::diff::REL_EPSILON;
 use crate::render_cmd::progress_bar;
 use crate::render_file::parse_crop;
-use crate::{atomic_write, integrators::IntegratorDesc, scene_desc};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -25,6 +24,9 @@ use tress_core::render::render_samples;
 use tress_core::{Hit, HitKind, Image, Integrator, Ray, Rgb, Sampler, Scene};
 use tress_dual_uniform::DualSettings;
 use tress_materials::dual_scattering::{DensityFactors, MultipleScattering};
+use tress_scene::integrators::IntegratorDesc;
+use tress_scene::output::atomic_write;
+use tress_scene::scene_desc;
 
 #[derive(Args, Debug)]
 pub struct CalibrateArgs {
@@ -380,7 +382,8 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
             "// tress calibrate {}: hair mean ÷ path {} (R/G/B)\n{}\n",
             args.scene.display(),
             ratios(fitted_mean, reference_mean),
-            crate::ron_options().to_string_pretty(&fitted, ron::ser::PrettyConfig::default())?
+            tress_scene::ron_options()
+                .to_string_pretty(&fitted, ron::ser::PrettyConfig::default())?
         );
         atomic_write(out, text.as_bytes())?;
         println!("wrote {}", out.display());

@@ -4,13 +4,13 @@
 //! `tress merge` command that assembles their outputs into the image of the single full render.
 //! Every job writes its exact sample sums (`--sums`), which the merge needs.
 
-use crate::integrators::IntegratorDesc;
-use crate::scene_desc;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use tress_core::film::Aov;
+use tress_scene::integrators::IntegratorDesc;
+use tress_scene::scene_desc;
 
 fn parse_aov(s: &str) -> Result<Aov, String> {
     s.parse()

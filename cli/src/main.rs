@@ -3,8 +3,7 @@
 // The commands live in the library target (so that fuzz targets and the Python bindings reach
 // exactly what the binary runs); the binary parses the command line and dispatches.
 use tress_cli::{
-    atomic_write, bcsdf_cmd, bench, calibrate, diff, farm, interrupt, logging, merge, render_cmd,
-    study,
+    bcsdf_cmd, bench, calibrate, diff, farm, interrupt, logging, merge, render_cmd, study,
 };
 
 use anyhow::Result;
@@ -33,7 +32,7 @@ enum Command {
         /// Scene file (RON).
         scene: PathBuf,
         /// Values for the scene's `${name}` placeholders: `-D spp=64`.
-        #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = tress_cli::scene_desc::parse_define)]
+        #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = tress_scene::scene_desc::parse_define)]
         defines: Vec<(String, String)>,
     },
     /// Tools for adding and tuning hair models: furnace, eval.
@@ -141,7 +140,7 @@ fn init(path: &std::path::Path) -> Result<()> {
     if path.exists() {
         anyhow::bail!("{} exists: not overwritten", path.display());
     }
-    atomic_write(path, STARTER_SCENE.as_bytes())?;
+    tress_scene::output::atomic_write(path, STARTER_SCENE.as_bytes())?;
     eprintln!(
         "wrote {}; render it with: tress render {}",
         path.display(),

@@ -5,10 +5,8 @@
 //! Between waves the render can stop at a time limit, write a partial image, or, after Ctrl-C,
 //! stop and write the samples finished so far.
 
-use crate::integrators::IntegratorDesc;
 use crate::interrupt::Interrupt;
 use crate::render_file::{self, parse_crop, Identity, PreviewArgs};
-use crate::scene_desc::{self, SceneDesc};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -19,6 +17,8 @@ use tress_core::film::{Aov, Outputs};
 use tress_core::image_io::Attribute;
 use tress_core::render::{self, RenderStats, SampleSums};
 use tress_core::Integrator;
+use tress_scene::integrators::IntegratorDesc;
+use tress_scene::scene_desc::{self, SceneDesc};
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {

@@ -25,7 +25,7 @@ pub fn run_study<'py>(
         quick,
         out,
         threads: threads
-            .map(tress_cli::check_threads)
+            .map(tress_scene::check_threads)
             .transpose()
             .map_err(PyValueError::new_err)?,
         quiet: !verbose,

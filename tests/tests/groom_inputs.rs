@@ -424,8 +424,8 @@ fn sintel_guides_with_children_cover_far_more_of_the_image() {
     let measure = |children: &str| {
         let path = dir.join("scene.ron");
         std::fs::write(&path, scene(children)).unwrap();
-        let desc = tress_cli::scene_desc::load(&path).unwrap();
-        let built = tress_cli::scene_desc::build(&desc, &path).unwrap();
+        let desc = tress_scene::scene_desc::load(&path).unwrap();
+        let built = tress_scene::scene_desc::build(&desc, &path).unwrap();
         (coverage(&built.scene, 48), built.summary)
     };
     let (guides_only, summary) = measure("");

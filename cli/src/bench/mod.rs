@@ -27,7 +27,6 @@
 //! carrying a target of the performance issue say whether it is met.
 
 use crate::cost::{timed, Cost};
-use crate::integrators::IntegratorDesc;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
@@ -54,6 +53,7 @@ use tress_core::sampling::sample_uniform_sphere;
 use tress_core::{Accel, Bcsdf, Camera, FiberDensity, Hit, Integrator, Material, Scene};
 use tress_materials::dual_scattering::{fingerprint, DualScatteringSettings, DualScatteringTables};
 use tress_materials::HairModel;
+use tress_scene::integrators::IntegratorDesc;
 
 mod raw;
 mod renders;
@@ -324,7 +324,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let text = table.text();
     print!("{text}");
     if let Some(path) = &args.csv {
-        crate::atomic_write(path, table.csv().as_bytes())?;
+        tress_scene::output::atomic_write(path, table.csv().as_bytes())?;
         eprintln!("wrote {}", path.display());
     }
     Ok(())

@@ -51,7 +51,7 @@ pub fn write_charts(stem: &Path, charts: &[Chart], panel_width: u32, height: u32
             .map_err(|e| anyhow!("drawing {}: {e}", svg.display()))?;
     }
     // Both or neither: a PNG left without its SVG looked like a finished plot.
-    crate::write_together(vec![
+    tress_scene::output::write_together(vec![
         (
             &png,
             Box::new(|p: &Path| write_bitmap(p, size, |root| draw(root, charts))),

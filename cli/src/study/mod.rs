@@ -33,9 +33,7 @@
 
 use crate::cost::timed;
 use crate::diff::{self, Rect, REL_EPSILON};
-use crate::integrators::IntegratorDesc;
 use crate::plot::{self, Chart, HeatPanel, Picture, Series};
-use crate::scene_desc::{self, BuiltScene, SceneDesc};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use indicatif::ProgressBar;
@@ -48,6 +46,8 @@ use tress_core::film::FilmSettings;
 use tress_core::image_io;
 use tress_core::rng::hash_words;
 use tress_core::{Image, Integrator};
+use tress_scene::integrators::IntegratorDesc;
+use tress_scene::scene_desc::{self, BuiltScene, SceneDesc};
 
 mod measure;
 mod plan;
@@ -191,7 +191,7 @@ pub struct Quick {
 pub fn load(path: &Path) -> Result<Study> {
     let text = tress_core::files::read_regular_text(path)
         .with_context(|| format!("cannot read study file {}", path.display()))?;
-    crate::ron_options()
+    tress_scene::ron_options()
         .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
         .from_str::<Study>(&text)
         .map_err(|e| {

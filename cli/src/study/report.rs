@@ -37,7 +37,7 @@ pub(super) fn write_csv(plan: &Plan, res: &Results) -> Result<PathBuf> {
         s.push('\n');
     }
     let path = plan.out.join("results.csv");
-    crate::atomic_write(&path, s.as_bytes())?;
+    tress_scene::output::atomic_write(&path, s.as_bytes())?;
     Ok(path)
 }
 
@@ -200,7 +200,7 @@ pub(super) fn write_summary(plan: &Plan, res: &Results) -> Result<PathBuf> {
         }
     }
     let path = plan.out.join("summary.csv");
-    crate::atomic_write(&path, s.as_bytes())?;
+    tress_scene::output::atomic_write(&path, s.as_bytes())?;
     Ok(path)
 }
 
@@ -540,7 +540,7 @@ pub(super) fn write_report(
         }
     }
     let path = plan.out.join("report.md");
-    crate::atomic_write(&path, s.as_bytes())?;
+    tress_scene::output::atomic_write(&path, s.as_bytes())?;
     Ok(path)
 }
 

@@ -357,7 +357,7 @@ fn line_col(text: &str, offset: usize) -> (usize, usize) {
 /// Parses scene text; the error is `line:column: message`, followed by the offending line with a
 /// caret under the column.
 pub fn parse(text: &str) -> std::result::Result<SceneDesc, String> {
-    crate::ron_options()
+    crate::ron_format::options()
         .from_str::<SceneDesc>(text)
         .map_err(|e| {
             let p = e.span.start;

@@ -280,7 +280,7 @@ mod tests {
             .collect();
         assert_eq!(block.len(), 4);
         for line in block {
-            crate::ron_options()
+            crate::ron_format::options()
                 .from_str::<tress_materials::pigment::StrandVariation>(line)
                 .unwrap_or_else(|e| panic!("{line}: {e}"));
         }
