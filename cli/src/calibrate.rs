@@ -12,7 +12,6 @@
 //! its own four corners and fit, and the one whose fitted means come closest is kept (dark hair
 //! gains from a traced bounce, light hair loses: README). A last render checks the choice.
 
-use crate::diff::REL_EPSILON;
 use crate::render_cmd::progress_bar;
 use crate::render_file::parse_crop;
 use anyhow::{bail, Context, Result};
@@ -25,6 +24,7 @@ use tress_core::{Hit, HitKind, Image, Integrator, Ray, Rgb, Sampler, Scene};
 use tress_dual_uniform::DualSettings;
 use tress_materials::dual_scattering::{DensityFactors, MultipleScattering};
 use tress_scene::integrators::IntegratorDesc;
+use tress_scene::metrics::REL_EPSILON;
 use tress_scene::output::atomic_write;
 use tress_scene::scene_desc;
 

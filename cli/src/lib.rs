@@ -1,6 +1,6 @@
 //! The `tress` binary's commands, over the scene layer of `tress-scene` (scene files, the
-//! integrator registry, studies), and [`run_study`]. The binary uses them as they are, so tests
-//! reach exactly the commands the binary runs.
+//! integrator registry, studies). The binary uses them as they are, so tests reach exactly the
+//! commands the binary runs.
 
 #![warn(missing_docs)]
 
@@ -12,7 +12,6 @@ pub mod bcsdf_cmd;
 pub mod bench;
 #[doc(hidden)]
 pub mod calibrate;
-mod cost;
 #[doc(hidden)]
 pub mod diff;
 #[doc(hidden)]
@@ -30,16 +29,8 @@ mod render_file;
 #[doc(hidden)]
 pub mod study;
 
-pub use study::{StudyArgs, StudyOutputs};
-
-/// [`check_threads`] as a command-line value parser.
+/// [`tress_scene::check_threads`] as a command-line value parser.
 #[doc(hidden)]
 pub fn parse_threads(s: &str) -> Result<usize, String> {
     tress_scene::check_threads(s.parse().map_err(|e| format!("{e}"))?)
-}
-
-/// Runs a comparative study exactly as `tress study` does (`args` are its command-line
-/// options) and says where it wrote its results.
-pub fn run_study(args: StudyArgs) -> anyhow::Result<StudyOutputs> {
-    study::run(args)
 }

@@ -3,7 +3,7 @@
 //! It reaches the same code paths as the `tress` binary — scene files through
 //! `tress_scene::scene_desc`, integrators through the registry in `tress_scene::integrators`, the
 //! render loop of `tress_core::render`, hair models through `tress_materials::HairModel` and
-//! studies through [`tress_cli::run_study`] — so a scene renders to the same pixels from Python
+//! studies through [`tress_scene::study`] — so a scene renders to the same pixels from Python
 //! as from the command line.
 
 mod convert;

@@ -6,12 +6,16 @@
 
 #![warn(missing_docs)]
 
+pub mod cost;
 pub mod geometry;
 pub mod integrators;
+pub mod metrics;
 pub mod output;
+pub mod picture;
 pub mod reference;
 pub mod ron_format;
 pub mod scene_desc;
+pub mod study;
 pub mod threads;
 
 pub use ron_format::options as ron_options;

@@ -26,7 +26,6 @@
 //! `--quick`) and the fastest run counts, as other processes can only slow a run down. Rows
 //! carrying a target of the performance issue say whether it is met.
 
-use crate::cost::{timed, Cost};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
@@ -53,6 +52,7 @@ use tress_core::sampling::sample_uniform_sphere;
 use tress_core::{Accel, Bcsdf, Camera, FiberDensity, Hit, Integrator, Material, Scene};
 use tress_materials::dual_scattering::{fingerprint, DualScatteringSettings, DualScatteringTables};
 use tress_materials::HairModel;
+use tress_scene::cost::{timed, Cost};
 use tress_scene::integrators::IntegratorDesc;
 
 mod raw;

@@ -8,6 +8,7 @@ use plotters::style::text_anchor;
 use std::path::Path;
 use text::Typeset;
 use tress_core::image_io;
+use tress_scene::picture::Picture;
 
 mod charts;
 mod text;
@@ -94,50 +95,6 @@ pub struct HeatPanel {
     pub width: u32,
     pub height: u32,
     pub values: Vec<f32>,
-}
-
-/// An 8-bit sRGB picture (a crop of a render) for an image sheet.
-#[derive(Clone, Debug)]
-pub struct Picture {
-    pub width: u32,
-    pub height: u32,
-    /// Row-major RGB bytes.
-    pub rgb: Vec<u8>,
-}
-
-impl Picture {
-    /// Nearest-neighbour resampling to `w × h` (pixelated, so single-pixel noise stays visible).
-    fn resized(&self, w: u32, h: u32) -> Picture {
-        let mut rgb = Vec::with_capacity(w as usize * h as usize * 3);
-        for y in 0..h {
-            let sy = (y as u64 * self.height as u64 / h as u64) as usize;
-            for x in 0..w {
-                let sx = (x as u64 * self.width as u64 / w as u64) as usize;
-                let i = (sy * self.width as usize + sx) * 3;
-                rgb.extend_from_slice(&self.rgb[i..i + 3]);
-            }
-        }
-        Picture {
-            width: w,
-            height: h,
-            rgb,
-        }
-    }
-}
-
-/// The sRGB encoding of a display-linear value, clamped to [0, 1] (NaN → 0).
-pub fn srgb(c: f32) -> f32 {
-    let v = if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) };
-    if v <= 0.003_130_8 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    }
-}
-
-/// Linear radiance to an 8-bit sRGB byte: scaled by `gain`, clamped to [0, 1] (NaN → 0).
-pub fn srgb8(c: f32, gain: f32) -> u8 {
-    (srgb(c * gain) * 255.0 + 0.5) as u8
 }
 
 /// Display size of a `w × h` picture: enlarged by an integer factor until its long side reaches
@@ -549,8 +506,5 @@ mod tests {
             LogScale::fit(&[0.0, f32::NAN]),
             LogScale { lo: 1e-3, hi: 1.0 }
         );
-        assert_eq!(srgb8(1.0, 1.0), 255);
-        assert_eq!(srgb8(f32::NAN, 1.0), 0);
-        assert_eq!(srgb8(0.5, 2.0), 255);
     }
 }

@@ -1,50 +1,105 @@
-//! The plan: the study resolved against its file, --quick and the command line; seeds and hashes.
+//! The plan: the study resolved against its file, `--quick` and the caller's settings; seeds
+//! and hashes.
 
-use super::*;
+use super::file::{Reference, References, SceneRef, Study};
+use crate::integrators::IntegratorDesc;
+use crate::metrics::Rect;
+use crate::scene_desc::{self, SceneDesc};
+use anyhow::{anyhow, Context, Result};
+use std::path::PathBuf;
+use tress_core::rng::hash_words;
 
-pub(super) struct PlanScene {
-    pub(super) name: String,
+/// How to run a study: what `tress study` takes on its command line.
+#[derive(Clone, Debug)]
+pub struct StudySettings {
+    /// The study file (RON).
+    pub study: PathBuf,
+    /// Scaled-down run for smoke tests: the study's `quick` section, or by default spp ≤ 16, at
+    /// most 3 repetitions, lighter references and films of at most 64 pixels a side.
+    pub quick: bool,
+    /// Output folder (default: the study's `output`, else ./<study name>_study; `_quick` is
+    /// appended for `quick`).
+    pub out: Option<PathBuf>,
+    /// Worker threads (default: all cores). Images do not depend on it.
+    pub threads: Option<usize>,
+    /// Report what happens (renders redone, tables built) and the closing summary; warnings
+    /// are reported either way.
+    pub verbose: bool,
+}
+
+/// A scene of the study, with the study's film applied.
+pub struct PlanScene {
+    /// Its name in file names and reports: the file stem, or the inline scene's name.
+    pub name: String,
     /// Where it came from, for messages.
-    pub(super) source: String,
-    pub(super) desc: SceneDesc,
+    pub source: String,
+    /// The scene, with the study's film size (spp, seed and crop are each render's own).
+    pub desc: SceneDesc,
     /// Relative paths of the scene resolve against this file's folder.
-    pub(super) base: PathBuf,
+    pub base: PathBuf,
     /// Hash of everything that determines its images, for the render cache.
-    pub(super) content: u64,
-    /// Regions of interest in this scene's film.
-    pub(super) regions: Vec<Rect>,
+    pub content: u64,
+    /// Regions of interest in this scene's film, in the order of [`Plan::region_names`].
+    pub regions: Vec<Rect>,
 }
 
-pub(super) struct PlanIntegrator {
-    pub(super) desc: IntegratorDesc,
-    pub(super) label: String,
-    pub(super) ron: String,
+/// An integrator of the study.
+pub struct PlanIntegrator {
+    /// Its settings.
+    pub desc: IntegratorDesc,
+    /// Its name in tables, plots and file names: the integrator's name, numbered when several
+    /// share it.
+    pub label: String,
+    /// Its settings as RON, as reports and render headers show them.
+    pub ron: String,
 }
 
-pub(super) enum PlanReference {
+/// The common reference every render is compared with.
+pub enum PlanReference {
+    /// Rendered once per scene.
     Render {
+        /// The reference's integrator.
         integrator: PlanIntegrator,
+        /// Its samples per pixel.
         spp: u32,
     },
+    /// An EXR per scene; `{scene}` in the path is replaced by the scene name.
     Exr(String),
 }
 
-pub(super) struct Plan {
-    pub(super) title: String,
-    pub(super) study_path: PathBuf,
-    pub(super) command: String,
-    pub(super) out: PathBuf,
-    pub(super) scenes: Vec<PlanScene>,
-    pub(super) integrators: Vec<PlanIntegrator>,
-    pub(super) spp: Vec<u32>,
-    pub(super) reps: u32,
-    pub(super) seed: u64,
-    pub(super) reference: PlanReference,
-    pub(super) own_spp: Option<u32>,
-    pub(super) region_names: Vec<String>,
-    pub(super) heatmap_spp: u32,
-    pub(super) target_relmse: f64,
-    pub(super) gain: f32,
+/// A study resolved against its file, `quick` and the settings: what it renders, compares and
+/// writes.
+pub struct Plan {
+    /// Report title.
+    pub title: String,
+    /// The study file.
+    pub study_path: PathBuf,
+    /// The command that runs it, for the report.
+    pub command: String,
+    /// The output folder.
+    pub out: PathBuf,
+    /// The scenes, in the study's order.
+    pub scenes: Vec<PlanScene>,
+    /// The integrators compared; the first is the baseline.
+    pub integrators: Vec<PlanIntegrator>,
+    /// Samples per pixel, strictly increasing.
+    pub spp: Vec<u32>,
+    /// Repetitions with independent seeds per scene, integrator and spp.
+    pub reps: u32,
+    /// Base seed of every derived seed.
+    pub seed: u64,
+    /// The common reference.
+    pub reference: PlanReference,
+    /// Samples per pixel of each integrator's own reference, if the study asks for them.
+    pub own_spp: Option<u32>,
+    /// Names of the regions of interest (each scene's rectangles are in [`PlanScene::regions`]).
+    pub region_names: Vec<String>,
+    /// The spp of the error heat maps.
+    pub heatmap_spp: u32,
+    /// The relMSE of the report's "time to reach" tables.
+    pub target_relmse: f64,
+    /// Exposure of the crops, as a factor (2^stops).
+    pub gain: f32,
 }
 
 pub(super) fn valid_name(s: &str) -> bool {
@@ -114,8 +169,8 @@ pub(super) fn middle_spp(spp: &[u32]) -> u32 {
 }
 
 impl Plan {
-    pub(super) fn new(study: Study, args: &StudyArgs) -> Result<Plan> {
-        let path = &args.study;
+    pub(super) fn new(study: Study, settings: &StudySettings) -> Result<Plan> {
+        let path = &settings.study;
         let here = |what: String| anyhow!("{}: {what}", path.display());
         let stem = path
             .file_stem()
@@ -182,7 +237,7 @@ impl Plan {
 
         // --quick: scaled-down settings.
         let q = &study.quick;
-        let quick = args.quick;
+        let quick = settings.quick;
         let spp = match (&q.spp, quick) {
             (Some(s), true) => {
                 check_spp("quick.spp", s)?;
@@ -377,7 +432,7 @@ impl Plan {
             });
         }
 
-        let out = match (&args.out, &study.output) {
+        let out = match (&settings.out, &study.output) {
             (Some(o), _) => o.clone(),
             (None, Some(o)) => suffix(scene_desc::resolve(path, o), quick),
             (None, None) => suffix(PathBuf::from(format!("{stem}_study")), quick),
@@ -429,4 +484,24 @@ pub(super) fn suffix(p: PathBuf, quick: bool) -> PathBuf {
     let mut s = p.into_os_string();
     s.push("_quick");
     PathBuf::from(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn seeds_are_distinct_and_stable() {
+        let a = test_seed(1, "s", "Path(())", 4, 0);
+        assert_eq!(a, test_seed(1, "s", "Path(())", 4, 0));
+        let others = [
+            test_seed(2, "s", "Path(())", 4, 0),
+            test_seed(1, "t", "Path(())", 4, 0),
+            test_seed(1, "s", "Path((max_depth:8))", 4, 0),
+            test_seed(1, "s", "Path(())", 8, 0),
+            test_seed(1, "s", "Path(())", 4, 1),
+            reference_seed(1, "s", "Path(())", 4),
+        ];
+        assert!(others.iter().all(|&o| o != a));
+    }
 }

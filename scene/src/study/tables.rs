@@ -1,6 +1,14 @@
-//! Outputs: the CSV, the summary and the report.
+//! Outputs: `results.csv`, `summary.csv` and `report.md`.
 
-use super::*;
+use super::figures::FigureFiles;
+use super::plan::{Plan, PlanReference};
+use super::results::{RefKind, Results};
+use super::stats::{curve, extrapolated_reach, loglog_at, reach, verdict, Point, Reach, Stat};
+use crate::metrics::REL_EPSILON;
+use crate::output::atomic_write;
+use anyhow::Result;
+use std::fmt::Write as _;
+use std::path::PathBuf;
 
 pub(super) fn write_csv(plan: &Plan, res: &Results) -> Result<PathBuf> {
     let mut s = String::from(
@@ -37,7 +45,7 @@ pub(super) fn write_csv(plan: &Plan, res: &Results) -> Result<PathBuf> {
         s.push('\n');
     }
     let path = plan.out.join("results.csv");
-    tress_scene::output::atomic_write(&path, s.as_bytes())?;
+    atomic_write(&path, s.as_bytes())?;
     Ok(path)
 }
 
@@ -200,7 +208,7 @@ pub(super) fn write_summary(plan: &Plan, res: &Results) -> Result<PathBuf> {
         }
     }
     let path = plan.out.join("summary.csv");
-    tress_scene::output::atomic_write(&path, s.as_bytes())?;
+    atomic_write(&path, s.as_bytes())?;
     Ok(path)
 }
 
@@ -291,10 +299,11 @@ pub(super) fn summary_section(s: &mut String, plan: &Plan, res: &Results) {
     s.push('\n');
 }
 
+/// `report.md`, with the figures of each scene when they were drawn.
 pub(super) fn write_report(
     plan: &Plan,
     res: &Results,
-    figures: &[SceneOutputs],
+    figures: Option<&[FigureFiles]>,
 ) -> Result<PathBuf> {
     let mut s = String::new();
     let _ = writeln!(s, "# Study: {}\n", plan.title);
@@ -376,15 +385,24 @@ pub(super) fn write_report(
          range). Every render's numbers are in `results.csv`, these tables' in `summary.csv`.\n",
         plan.integrators[0].label
     );
+    if figures.is_none() {
+        let _ = writeln!(
+            s,
+            "No figures: this run drew none. `{}` (with `--out {}`) draws the plots, heat maps \
+             and crop sheets, reading these renders back.\n",
+            plan.command,
+            plan.out.display()
+        );
+    }
 
     let n = plan.integrators.len();
     if n > 1 {
         summary_section(&mut s, plan, res);
     }
     for (si, sc) in plan.scenes.iter().enumerate() {
-        let out = &figures[si];
+        let out = figures.map(|f| &f[si]);
         let _ = writeln!(s, "## Scene `{}`\n", sc.name);
-        for p in &out.plots {
+        for p in out.iter().flat_map(|o| &o.plots) {
             let _ = writeln!(s, "![{p}]({p}.png)\n");
         }
         let common: Vec<Vec<Point>> = (0..n)
@@ -519,12 +537,15 @@ pub(super) fn write_report(
             s.push('\n');
         }
 
+        let Some(out) = out else {
+            continue;
+        };
         let _ = writeln!(
             s,
             "### Per-pixel error at {} spp (repetition 0)\n\n![heat map]({})\n\nColour: \
              per-pixel sqrt(mean over RGB of (I − R)² / (R² + {REL_EPSILON})), log scale from \
              {:.2e} (black) to {:.2e} (pale yellow), shared by the panels.\n",
-            plan.heatmap_spp, out.heat, out.scale.lo, out.scale.hi
+            plan.heatmap_spp, out.heat_map, out.heat_scale.0, out.heat_scale.1
         );
         let _ = writeln!(
             s,
@@ -540,14 +561,6 @@ pub(super) fn write_report(
         }
     }
     let path = plan.out.join("report.md");
-    tress_scene::output::atomic_write(&path, s.as_bytes())?;
+    atomic_write(&path, s.as_bytes())?;
     Ok(path)
-}
-
-/// Figure files of one scene, for the report.
-pub(super) struct SceneOutputs {
-    pub(super) plots: Vec<String>,
-    pub(super) heat: String,
-    pub(super) scale: plot::LogScale,
-    pub(super) sheets: Vec<String>,
 }

@@ -1,130 +1,32 @@
-//! Measurements: errors against the references over the regions, for every job.
+//! Running the study: every job rendered (or read back), measured against the references.
 
-use super::*;
-
-/// Errors of one render against one reference over one region.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Errors {
-    pub(super) mse: f64,
-    pub(super) relmse: f64,
-    pub(super) mean: f64,
-    pub(super) ref_mean: f64,
-}
-
-impl From<&diff::Metrics> for Errors {
-    fn from(m: &diff::Metrics) -> Self {
-        Errors {
-            mse: m.mse_all(),
-            relmse: m.relmse_all(),
-            mean: m.mean_a_all(),
-            ref_mean: m.mean_b_all(),
-        }
-    }
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub(super) enum RefKind {
-    Common,
-    Own,
-}
-
-impl RefKind {
-    pub(super) fn name(self) -> &'static str {
-        match self {
-            RefKind::Common => "common",
-            RefKind::Own => "own",
-        }
-    }
-}
-
-/// One line of results.csv.
-pub(super) struct Row {
-    pub(super) scene: usize,
-    pub(super) integrator: usize,
-    pub(super) spp: u32,
-    pub(super) rep: u32,
-    pub(super) seed: u64,
-    pub(super) time_s: f64,
-    pub(super) wall_s: f64,
-    pub(super) precompute_s: f64,
-    pub(super) rays: u64,
-    pub(super) reference: RefKind,
-    pub(super) whole: Errors,
-    pub(super) regions: Vec<Errors>,
-}
+use super::plan::{
+    reference_seed, str_hash, test_seed, Plan, PlanIntegrator, PlanReference, PlanScene,
+};
+use super::progress::Progress;
+use super::render::{Job, SceneRunner};
+use super::results::{sheet_regions, Errors, RefKind, Results, Row, SceneFigures};
+use crate::metrics::{self, Rect};
+use crate::picture::Picture;
+use anyhow::{bail, Context, Result};
+use std::collections::HashMap;
+use std::path::Path;
+use tress_core::image_io;
+use tress_core::Image;
 
 /// Errors of `img` against `reference` over the whole image and each region.
-pub(super) fn measure(img: &Image, reference: &Image, regions: &[Rect]) -> (Errors, Vec<Errors>) {
-    let whole = Errors::from(&diff::metrics(img, reference, Rect::window_of(img)));
+fn measure(img: &Image, reference: &Image, regions: &[Rect]) -> (Errors, Vec<Errors>) {
+    let whole = Errors::from(&metrics::metrics(img, reference, Rect::window_of(img)));
     let regions = regions
         .iter()
-        .map(|r| Errors::from(&diff::metrics(img, reference, *r)))
+        .map(|r| Errors::from(&metrics::metrics(img, reference, *r)))
         .collect();
     (whole, regions)
 }
 
-/// A tone-mapped crop for the sheets.
-pub(super) fn picture(img: &Image, r: Rect, gain: f32) -> Picture {
-    let mut rgb = Vec::with_capacity(r.w as usize * r.h as usize * 3);
-    for y in r.y..r.y + r.h {
-        for x in r.x..r.x + r.w {
-            let p = img.get(x - img.x0, y - img.y0);
-            rgb.extend([p.x, p.y, p.z].map(|c| plot::srgb8(c, gain)));
-        }
-    }
-    Picture {
-        width: r.w,
-        height: r.h,
-        rgb,
-    }
-}
-
-/// What the figures need from one scene.
-pub(super) struct SceneFigures {
-    /// Per integrator: the relative error map at `heatmap_spp`, repetition 0.
-    pub(super) heat: Vec<Option<Vec<f32>>>,
-    /// [sheet region][integrator][spp index]: crops of repetition 0.
-    pub(super) crops: Vec<Vec<Vec<Option<Picture>>>>,
-    /// [sheet region]: the common reference crop; [sheet region][integrator]: own reference crops.
-    pub(super) ref_crops: Vec<Picture>,
-    pub(super) own_crops: Vec<Vec<Option<Picture>>>,
-}
-
-pub(super) struct Results {
-    pub(super) rows: Vec<Row>,
-    /// MSE of the mean image of the repetitions, by (scene, integrator, spp, reference).
-    pub(super) mean_mse: HashMap<(usize, usize, u32, RefKind), f64>,
-    pub(super) figures: Vec<SceneFigures>,
-    pub(super) rendered: usize,
-    pub(super) reused: usize,
-    pub(super) render_seconds: f64,
-}
-
-/// Sheet regions: the study's regions, or the whole film when it names none.
-pub(super) fn sheet_regions(plan: &Plan, scene: &PlanScene) -> Vec<(String, Rect)> {
-    if plan.region_names.is_empty() {
-        let f = &scene.desc.film;
-        vec![(
-            "full".into(),
-            Rect {
-                x: 0,
-                y: 0,
-                w: f.width,
-                h: f.height,
-            },
-        )]
-    } else {
-        plan.region_names
-            .iter()
-            .cloned()
-            .zip(scene.regions.iter().copied())
-            .collect()
-    }
-}
-
 /// The render of a reference: its file name holds the integrator settings' hash, so the common
 /// reference and an integrator's own reference with the same settings are one file.
-pub(super) fn reference_job<'a>(
+fn reference_job<'a>(
     plan: &Plan,
     scene: &PlanScene,
     integrator: &'a PlanIntegrator,
@@ -145,7 +47,7 @@ pub(super) fn reference_job<'a>(
 pub(super) fn execute(
     plan: &Plan,
     pool: &rayon::ThreadPool,
-    bar: &ProgressBar,
+    progress: &dyn Progress,
     verbose: bool,
 ) -> Result<Results> {
     let mut results = Results {
@@ -166,7 +68,7 @@ pub(super) fn execute(
             integrators: HashMap::new(),
             prep: &prep,
             pool,
-            bar,
+            progress,
             verbose,
             rendered: 0,
             reused: 0,
@@ -179,7 +81,7 @@ pub(super) fn execute(
                     .image
             }
             PlanReference::Exr(template) => {
-                let file = scene_desc::resolve(
+                let file = crate::scene_desc::resolve(
                     &plan.study_path,
                     Path::new(&template.replace("{scene}", &scene.name)),
                 );
@@ -206,7 +108,7 @@ pub(super) fn execute(
                         film.height
                     );
                 }
-                crate::diff::check_finite(&img, &file).with_context(|| {
+                metrics::check_finite(&img, &file).with_context(|| {
                     format!(
                         "{}: reference of scene '{}'",
                         plan.study_path.display(),
@@ -234,13 +136,13 @@ pub(super) fn execute(
             crops: vec![vec![vec![None; plan.spp.len()]; plan.integrators.len()]; sheets.len()],
             ref_crops: sheets
                 .iter()
-                .map(|(_, r)| picture(&common, *r, plan.gain))
+                .map(|(_, r)| Picture::crop(&common, *r, plan.gain))
                 .collect(),
             own_crops: sheets
                 .iter()
                 .map(|(_, r)| {
                     own.iter()
-                        .map(|o| o.as_ref().map(|img| picture(img, *r, plan.gain)))
+                        .map(|o| o.as_ref().map(|img| Picture::crop(img, *r, plan.gain)))
                         .collect()
                 })
                 .collect(),
@@ -287,14 +189,14 @@ pub(super) fn execute(
                     }
                     if rep == 0 {
                         for (g, (_, rect)) in sheets.iter().enumerate() {
-                            fig.crops[g][ii][k] = Some(picture(&r.image, *rect, plan.gain));
+                            fig.crops[g][ii][k] = Some(Picture::crop(&r.image, *rect, plan.gain));
                         }
                         if spp == plan.heatmap_spp {
-                            fig.heat[ii] = Some(diff::error_map(
+                            fig.heat[ii] = Some(metrics::error_map(
                                 &r.image,
                                 &common,
                                 Rect::window_of(&common),
-                                diff::MapKind::Rel,
+                                metrics::MapKind::Rel,
                             ));
                         }
                     }
@@ -310,7 +212,7 @@ pub(super) fn execute(
                         );
                     }
                     let window = Rect::window_of(&mean);
-                    let mse = |r: &Image| diff::metrics(&mean, r, window).mse_all();
+                    let mse = |r: &Image| metrics::metrics(&mean, r, window).mse_all();
                     results
                         .mean_mse
                         .insert((si, ii, spp, RefKind::Common), mse(&common));
