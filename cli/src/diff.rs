@@ -17,7 +17,8 @@
 //!   most 1. The region is cropped before the comparison, so its border pixels are filtered
 //!   without their neighbours outside.
 
-use crate::{logging, plot};
+use crate::logging::Log;
+use crate::plot;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde_json::json;
@@ -250,7 +251,7 @@ pub struct DiffArgs {
     pub flip_ppd: f32,
 }
 
-pub fn run(args: DiffArgs) -> Result<()> {
+pub fn run(args: DiffArgs, log: &mut Log) -> Result<()> {
     let (a, _) = image_io::read_exr(&args.a)?;
     let (b, _) = image_io::read_exr(&args.b)?;
     let both = || format!("{} vs {}", args.a.display(), args.b.display());
@@ -271,9 +272,9 @@ pub fn run(args: DiffArgs) -> Result<()> {
         None => None,
     };
     for (key, value) in summary_fields(&args, rect, &m, ssim, flip, map) {
-        logging::record(&key, value);
+        log.record(&key, value);
     }
-    if !logging::json() {
+    if !log.json() {
         print_table(&args, rect, &m, ssim, flip);
         if let (Some(path), Some(scale)) = (&args.map, map) {
             println!(

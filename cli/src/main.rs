@@ -70,7 +70,7 @@ fn main() {
     let matches = Cli::command().get_matches();
     let command = matches.subcommand_name().unwrap_or_default().to_string();
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
-    logging::set_format(cli.log_format);
+    let mut log = logging::Log::new(cli.log_format);
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
@@ -80,8 +80,8 @@ fn main() {
         .with_ansi(std::io::stderr().is_terminal())
         .without_time()
         .init();
-    let result = run(cli);
-    logging::finish(
+    let result = run(cli, &mut log);
+    log.finish(
         &command,
         match &result {
             Ok(()) => logging::Outcome::Ok,
@@ -103,21 +103,21 @@ fn main() {
     }
 }
 
-fn run(cli: Cli) -> Result<()> {
+fn run(cli: Cli, log: &mut logging::Log) -> Result<()> {
     // JSON reports replace the progress bars and the readable summaries.
-    let quiet = logging::json();
+    let quiet = log.json();
     match cli.command {
         Command::Render(mut args) => {
             args.quiet |= quiet;
-            render_cmd::render(args)
+            render_cmd::render(args, log)
         }
         Command::Info { scene, defines } => render_cmd::info(&scene, &defines),
         Command::Bcsdf(cmd) => bcsdf_cmd::run(cmd),
         Command::Study(mut args) => {
             args.quiet |= quiet;
-            study::run(args).map(|_| ())
+            study::run(args, log).map(|_| ())
         }
-        Command::Diff(args) => diff::run(args),
+        Command::Diff(args) => diff::run(args, log),
         Command::Bench(args) => bench::run(args),
         Command::Merge(mut args) => {
             args.quiet |= quiet;

@@ -6,6 +6,7 @@
 //! stop and write the samples finished so far.
 
 use crate::interrupt::Interrupt;
+use crate::logging::Log;
 use crate::render_file::{self, parse_crop, Identity, PreviewArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -251,7 +252,7 @@ impl OutputFiles<'_> {
     }
 }
 
-pub fn render(args: RenderArgs) -> Result<()> {
+pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
     let desc = load_with_overrides(&args)?;
     let out = match &args.out {
         Some(p) => p.clone(),
@@ -447,16 +448,16 @@ pub fn render(args: RenderArgs) -> Result<()> {
     } else {
         vec![out.clone(), png.clone()]
     };
-    crate::logging::record("outputs", outputs);
-    crate::logging::record("integrator", desc.integrator.name());
-    crate::logging::record("spp", reached);
-    crate::logging::record("spp_requested", target);
-    crate::logging::record("render_status", status.label());
-    crate::logging::record("time_s", stats.wall.as_secs_f64());
-    crate::logging::record("precompute_s", stats.precompute.as_secs_f64());
-    crate::logging::record("rays", stats.rays);
-    crate::logging::record("mrays_per_s", stats.rays_per_second() / 1e6);
-    crate::logging::record("nonfinite_samples", stats.nonfinite_samples);
+    log.record("outputs", outputs);
+    log.record("integrator", desc.integrator.name());
+    log.record("spp", reached);
+    log.record("spp_requested", target);
+    log.record("render_status", status.label());
+    log.record("time_s", stats.wall.as_secs_f64());
+    log.record("precompute_s", stats.precompute.as_secs_f64());
+    log.record("rays", stats.rays);
+    log.record("mrays_per_s", stats.rays_per_second() / 1e6);
+    log.record("nonfinite_samples", stats.nonfinite_samples);
     if stats.nonfinite_samples > 0 {
         let share = stats.nonfinite_samples as f64 / stats.samples.max(1) as f64;
         // A few dropped samples are noise; more than one in 10⁴ biases the image visibly.

@@ -3,6 +3,7 @@
 
 mod plots;
 
+use crate::logging::Log;
 use crate::render_cmd::progress_bar;
 use anyhow::Result;
 use clap::Args;
@@ -52,7 +53,7 @@ impl Progress for Bar {
     }
 }
 
-pub fn run(args: StudyArgs) -> Result<StudyOutputs> {
+pub fn run(args: StudyArgs, log: &mut Log) -> Result<StudyOutputs> {
     let settings = StudySettings {
         study: args.study,
         quick: args.quick,
@@ -63,12 +64,12 @@ pub fn run(args: StudyArgs) -> Result<StudyOutputs> {
     let bar = Bar(progress_bar(0, settings.verbose, "study "));
     let outputs = study::run(&settings, &bar, Some(&plots::Plots))?;
     // The summary of `--log-format json`.
-    crate::logging::record("output", &outputs.folder);
-    crate::logging::record("report", &outputs.report);
-    crate::logging::record("results_csv", &outputs.results_csv);
-    crate::logging::record("jobs", outputs.jobs);
-    crate::logging::record("rendered", outputs.rendered);
-    crate::logging::record("reused", outputs.reused);
-    crate::logging::record("render_s", outputs.render_seconds);
+    log.record("output", &outputs.folder);
+    log.record("report", &outputs.report);
+    log.record("results_csv", &outputs.results_csv);
+    log.record("jobs", outputs.jobs);
+    log.record("rendered", outputs.rendered);
+    log.record("reused", outputs.reused);
+    log.record("render_s", outputs.render_seconds);
     Ok(outputs)
 }
