@@ -12,7 +12,7 @@
 //! its own four corners and fit, and the one whose fitted means come closest is kept (dark hair
 //! gains from a traced bounce, light hair loses: README). A last render checks the choice.
 
-use crate::render_cmd::progress_bar;
+use crate::progress::progress_bar;
 use crate::render_file::parse_crop;
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -53,7 +53,7 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Worker threads (default: all cores).
-    #[arg(long, value_parser = crate::parse_threads)]
+    #[arg(long, value_parser = crate::args::parse_threads)]
     pub threads: Option<usize>,
     /// No progress bars.
     #[arg(long)]

@@ -10,6 +10,7 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use tress_core::film::Aov;
 use tress_scene::integrators::IntegratorDesc;
+use tress_scene::placeholders;
 use tress_scene::scene_desc;
 
 fn parse_aov(s: &str) -> Result<Aov, String> {
@@ -49,7 +50,7 @@ pub struct FarmArgs {
     pub aov: Vec<Aov>,
     /// Values for the scene's `${name}` placeholders, passed to every job (see `tress render
     /// -D`).
-    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = scene_desc::parse_define)]
+    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = placeholders::parse_define)]
     pub defines: Vec<(String, String)>,
     /// The tress executable the commands run. Default: this one, by absolute path.
     #[arg(long)]
@@ -81,7 +82,7 @@ fn utf8(p: &Path) -> Result<String> {
 }
 
 pub fn run(args: FarmArgs) -> Result<()> {
-    let defines = scene_desc::defines(&args.defines)?;
+    let defines = placeholders::defines(&args.defines)?;
     let mut desc = scene_desc::load_with(&args.scene, &defines)?;
     if let Some(spp) = args.spp {
         desc.film.spp = spp;

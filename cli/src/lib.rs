@@ -7,6 +7,8 @@
 // The commands. `main.rs` parses the command line and calls into these; they are the binary's
 // internals, not an API, so they stay out of the documentation.
 #[doc(hidden)]
+pub mod args;
+#[doc(hidden)]
 pub mod bcsdf_cmd;
 #[doc(hidden)]
 pub mod bench;
@@ -23,14 +25,9 @@ pub mod logging;
 #[doc(hidden)]
 pub mod merge;
 mod plot;
+mod progress;
 #[doc(hidden)]
 pub mod render_cmd;
 mod render_file;
 #[doc(hidden)]
 pub mod study;
-
-/// [`tress_scene::check_threads`] as a command-line value parser.
-#[doc(hidden)]
-pub fn parse_threads(s: &str) -> Result<usize, String> {
-    tress_scene::check_threads(s.parse().map_err(|e| format!("{e}"))?)
-}

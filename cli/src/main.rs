@@ -32,7 +32,7 @@ enum Command {
         /// Scene file (RON).
         scene: PathBuf,
         /// Values for the scene's `${name}` placeholders: `-D spp=64`.
-        #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = tress_scene::scene_desc::parse_define)]
+        #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = tress_scene::placeholders::parse_define)]
         defines: Vec<(String, String)>,
     },
     /// Tools for adding and tuning hair models: furnace, eval.

@@ -7,11 +7,10 @@
 
 use crate::interrupt::Interrupt;
 use crate::logging::Log;
+use crate::progress::progress_bar;
 use crate::render_file::{self, parse_crop, Identity, PreviewArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use tress_core::film::{Aov, Outputs};
@@ -19,6 +18,7 @@ use tress_core::image_io::Attribute;
 use tress_core::render::{self, RenderStats, SampleSums};
 use tress_core::Integrator;
 use tress_scene::integrators::IntegratorDesc;
+use tress_scene::placeholders;
 use tress_scene::scene_desc::{self, SceneDesc};
 
 #[derive(Args, Debug)]
@@ -46,7 +46,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub seed: Option<u64>,
     /// Worker threads (default: all cores). The image does not depend on it.
-    #[arg(long, value_parser = crate::parse_threads)]
+    #[arg(long, value_parser = crate::args::parse_threads)]
     pub threads: Option<usize>,
     /// Render only the pixel window x0,y0,x1,y1 (x1, y1 exclusive). The image equals the same
     /// window of the full render bit for bit.
@@ -65,7 +65,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub partial: bool,
     /// Values for the scene's `${name}` placeholders: `-D spp=64 -D groom=curly`.
-    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = scene_desc::parse_define)]
+    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = placeholders::parse_define)]
     pub defines: Vec<(String, String)>,
     /// Also write the exact sample sums into the EXR, so that `tress merge` can join it with
     /// other tiles and sample ranges bit for bit (larger files; `tress farm` jobs use it).
@@ -114,7 +114,7 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
 
 /// The scene file with command-line overrides applied.
 fn load_with_overrides(args: &RenderArgs) -> Result<SceneDesc> {
-    let defines = scene_desc::defines(&args.defines)?;
+    let defines = placeholders::defines(&args.defines)?;
     let mut desc = scene_desc::load_with(&args.scene, &defines)?;
     if let Some(name) = &args.integrator {
         desc.integrator = IntegratorDesc::parse_arg(name).map_err(anyhow::Error::msg)?;
@@ -481,7 +481,7 @@ pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
 }
 
 pub fn info(scene: &Path, defines: &[(String, String)]) -> Result<()> {
-    let desc = scene_desc::load_with(scene, &scene_desc::defines(defines)?)?;
+    let desc = scene_desc::load_with(scene, &placeholders::defines(defines)?)?;
     desc.film
         .validate()
         .map_err(|e| anyhow::anyhow!("{}: film: {e}", scene.display()))?;
@@ -502,20 +502,4 @@ fn scene_stem(path: &Path) -> String {
     path.file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| "render".into())
-}
-
-/// A progress bar with ETA on stderr, labelled `label`; hidden when `verbose` is off or stderr is
-/// not a terminal.
-pub(crate) fn progress_bar(total: u64, verbose: bool, label: &str) -> ProgressBar {
-    if !verbose || !std::io::stderr().is_terminal() {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
-    bar.set_style(
-        ProgressStyle::with_template(&format!(
-            "{{spinner}} {label}[{{elapsed_precise}}] {{wide_bar}} {{percent}}% ETA {{eta}}"
-        ))
-        .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    bar
 }

@@ -9,9 +9,13 @@
 pub mod cost;
 pub mod geometry;
 pub mod integrators;
+pub mod lights;
+pub mod materials;
 pub mod metrics;
 pub mod output;
+pub mod paths;
 pub mod picture;
+pub mod placeholders;
 pub mod reference;
 pub mod ron_format;
 pub mod scene_desc;

@@ -75,8 +75,8 @@ fn refuses_typos<T: DeserializeOwned + std::fmt::Debug>(what: &str) {
 
 #[test]
 fn misspelt_fields_are_refused_in_every_variant() {
-    refuses_typos::<tress_scene::scene_desc::MaterialDesc>("material");
-    refuses_typos::<tress_scene::scene_desc::LightDesc>("light");
+    refuses_typos::<tress_scene::materials::MaterialDesc>("material");
+    refuses_typos::<tress_scene::lights::LightDesc>("light");
     refuses_typos::<tress_scene::geometry::ObjectDesc>("object");
     refuses_typos::<tress_scene::integrators::IntegratorDesc>("integrator");
     refuses_typos::<tress_materials::HairModel>("hair model");

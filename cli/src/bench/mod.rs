@@ -28,36 +28,33 @@
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
-use rayon::prelude::*;
 use rayon::ThreadPool;
-use std::cell::{Cell, RefCell};
-use std::fmt::Write as _;
 use std::hint::black_box;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Instant;
-use tress_accel::raw::{Exclusion, RawRay, PACKET};
 use tress_accel::{
     CurveShape, DensityGrid, DensitySettings, EmbreeAccel, HairFile, HairGeometry, HairOptions,
     HairStyle, ProceduralHair, SceneBuilder,
 };
-use tress_core::accel::BuildError;
 use tress_core::film::FilmSettings;
 use tress_core::light::{EnvironmentMap, Light};
-use tress_core::math::{Aabb, Ray, Vec2, Vec3};
+use tress_core::math::{Aabb, Vec2, Vec3};
 use tress_core::prepare::Preparation;
 use tress_core::rng::Pcg32;
 use tress_core::sampling::sample_uniform_sphere;
-use tress_core::{Accel, Bcsdf, Camera, FiberDensity, Hit, Integrator, Material, Scene};
-use tress_materials::dual_scattering::{fingerprint, DualScatteringSettings, DualScatteringTables};
+use tress_core::{Bcsdf, Camera, Material, Scene};
+use tress_materials::dual_scattering::{fingerprint, DualScatteringTables};
 use tress_materials::HairModel;
-use tress_scene::cost::{timed, Cost};
 use tress_scene::integrators::IntegratorDesc;
 
+mod plan;
 mod raw;
 mod renders;
 mod table;
+
+use plan::*;
 use raw::*;
 use renders::*;
 use table::*;
@@ -80,117 +77,6 @@ pub struct BenchArgs {
     /// when absent.
     #[arg(long, default_value = "../shared/data/hair/straight.hair")]
     pub hair_file: PathBuf,
-}
-
-/// Sizes of one run.
-struct Plan {
-    /// Procedural strand counts: the scaling pair (small, large).
-    strands: [u32; 2],
-    /// Rays per kind in the raw measurements.
-    rays: usize,
-    /// Film of the integrator renders: width = height, spp.
-    film: (u32, u32),
-    /// BCSDF calls per timing.
-    bcsdf_calls: usize,
-    /// Timed repetitions of every integrator render and replay; the fastest counts, since
-    /// interference from other processes only ever slows a run down.
-    runs: usize,
-    /// Resolution of the dual-scattering tables whose build time is measured.
-    tables: DualScatteringSettings,
-    /// Every registered integrator: with test settings for `--quick`, defaults otherwise.
-    integrators: Vec<IntegratorDesc>,
-}
-
-impl Plan {
-    fn new(quick: bool) -> Plan {
-        if quick {
-            Plan {
-                strands: [1_000, 10_000],
-                rays: 1 << 12,
-                film: (32, 2),
-                bcsdf_calls: 20_000,
-                runs: 1,
-                tables: DualScatteringSettings {
-                    theta_nodes: 16,
-                    h_nodes: 8,
-                    theta_quad: 16,
-                    phi_quad: 24,
-                    walks: 1024,
-                    ..Default::default()
-                },
-                integrators: IntegratorDesc::all_for_tests(),
-            }
-        } else {
-            Plan {
-                strands: [10_000, 100_000],
-                rays: 1 << 18,
-                film: (128, 8),
-                bcsdf_calls: 400_000,
-                runs: 3,
-                tables: DualScatteringSettings::default(),
-                integrators: IntegratorDesc::all(),
-            }
-        }
-    }
-}
-
-/// Segments per procedural strand.
-const SEGMENTS: u32 = 32;
-/// Strands of the `--huge` model.
-const HUGE_STRANDS: u32 = 1_000_000;
-/// Raw queries handed to a worker at a time (a multiple of the packet width).
-const CHUNK: usize = 1024;
-
-/// Where a model's hair comes from.
-#[derive(Clone)]
-enum Source {
-    /// Procedural wavy hair: strands, fiber radius.
-    Procedural(u32, f32),
-    File(PathBuf),
-}
-
-/// Whether the path tracer's ray-rate target applies: the large procedural model (100k strands
-/// at the common radius) and the hair file.
-fn ray_target(source: &Source, plan: &Plan) -> bool {
-    match *source {
-        Source::Procedural(n, r) => n == plan.strands[1] && n == 100_000 && r == RADIUS,
-        Source::File(_) => true,
-    }
-}
-
-/// Fiber radius of the procedural models (the procedural default).
-const RADIUS: f32 = 0.004;
-
-/// Radius of `strands` fibers covering as much as `reference` fibers of [`RADIUS`] do (equal
-/// total cross-section, so equal optical thickness and the same picture).
-fn equal_coverage_radius(strands: u32, reference: u32) -> f32 {
-    RADIUS * (reference as f32 / strands as f32).sqrt()
-}
-
-/// Label of the large procedural model thinned to the small one's coverage.
-fn thin_label(strands: u32) -> String {
-    format!("{}-thin", strand_label(strands))
-}
-
-struct ModelSpec {
-    name: String,
-    source: Source,
-    /// Raw measurements and the integrators' renders; otherwise (the huge model) the path
-    /// tracer on a small film only.
-    full: bool,
-    /// Every integrator, or only the path tracer (the round-curve variants).
-    all_integrators: bool,
-    curve: CurveShape,
-}
-
-fn strand_label(n: u32) -> String {
-    if n >= 1_000_000 && n.is_multiple_of(1_000_000) {
-        format!("{}M", n / 1_000_000)
-    } else if n >= 1000 && n.is_multiple_of(1000) {
-        format!("{}k", n / 1000)
-    } else {
-        n.to_string()
-    }
 }
 
 pub fn run(args: BenchArgs) -> Result<()> {
@@ -675,8 +561,4 @@ fn bench_model(
         table.push((name, "build"), "peak_rss", None, peak_mib, "MiB", note);
     }
     Ok(())
-}
-
-fn target(what: &str, met: bool) -> String {
-    format!("target {what}: {}", if met { "met" } else { "MISSED" })
 }

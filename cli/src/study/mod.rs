@@ -4,7 +4,7 @@
 mod plots;
 
 use crate::logging::Log;
-use crate::render_cmd::progress_bar;
+use crate::progress::progress_bar;
 use anyhow::Result;
 use clap::Args;
 use indicatif::ProgressBar;
@@ -24,7 +24,7 @@ pub struct StudyArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Worker threads (default: all cores). Images do not depend on it.
-    #[arg(long, value_parser = crate::parse_threads)]
+    #[arg(long, value_parser = crate::args::parse_threads)]
     pub threads: Option<usize>,
     /// No progress bar and no summary.
     #[arg(long)]

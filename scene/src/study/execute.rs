@@ -81,7 +81,7 @@ pub(super) fn execute(
                     .image
             }
             PlanReference::Exr(template) => {
-                let file = crate::scene_desc::resolve(
+                let file = crate::paths::resolve(
                     &plan.study_path,
                     Path::new(&template.replace("{scene}", &scene.name)),
                 );

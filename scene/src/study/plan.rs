@@ -4,6 +4,7 @@
 use super::file::{Reference, References, SceneRef, Study};
 use crate::integrators::IntegratorDesc;
 use crate::metrics::Rect;
+use crate::paths::resolve;
 use crate::scene_desc::{self, SceneDesc};
 use anyhow::{anyhow, Context, Result};
 use std::path::PathBuf;
@@ -328,7 +329,7 @@ impl Plan {
         for (i, s) in study.scenes.into_iter().enumerate() {
             let (name, source, mut desc, base) = match s {
                 SceneRef::File(p) => {
-                    let file = scene_desc::resolve(path, &p);
+                    let file = resolve(path, &p);
                     let desc = scene_desc::load(&file)
                         .with_context(|| format!("{}: scenes[{i}]", path.display()))?;
                     let name: String = file
@@ -434,7 +435,7 @@ impl Plan {
 
         let out = match (&settings.out, &study.output) {
             (Some(o), _) => o.clone(),
-            (None, Some(o)) => suffix(scene_desc::resolve(path, o), quick),
+            (None, Some(o)) => suffix(resolve(path, o), quick),
             (None, None) => suffix(PathBuf::from(format!("{stem}_study")), quick),
         };
         let command = format!(
