@@ -12,6 +12,7 @@ use crate::render_file::{self, parse_crop, Identity, PreviewArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use tress_core::film::{Aov, Outputs};
 use tress_core::image_io::Attribute;
@@ -254,6 +255,89 @@ impl OutputFiles<'_> {
 
 pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
     let desc = load_with_overrides(&args)?;
+    let out = output_path(&args)?;
+    let threads = args.threads.unwrap_or(0);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("creating the thread pool")?;
+    let verbose = !args.quiet;
+
+    let built = pool.install(|| scene_desc::build(&desc, &args.scene))?;
+    if verbose {
+        eprintln!("{}", built.summary);
+    }
+    let prep = tress_core::prepare::Preparation::new();
+    let integrator = build_integrator(&args, &desc, &built.scene, &pool, &prep, verbose)?;
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("creating output folder {}", dir.display()))?;
+    }
+    let files = OutputFiles {
+        args: &args,
+        desc: &desc,
+        out: out.clone(),
+        identity: Identity {
+            seed: desc.film.seed,
+            scene_hash: scene_hash(&desc, &args.scene)?,
+        },
+        camera: &built.scene.camera,
+    };
+
+    let interrupt = Interrupt::install()?;
+    // The integrator's per-film precomputation (a radiance cache), with its own bar; it counts
+    // as render time.
+    let t_prepare = Instant::now();
+    let prepare_bar = progress_bar(1000, verbose, "precomputing ");
+    let prepared = pool.install(|| {
+        integrator.for_film(&built.scene, &desc.film, &|done| {
+            prepare_bar.set_position((done * 1000.0) as u64)
+        })
+    });
+    prepare_bar.finish_and_clear();
+    let prepare_time = t_prepare.elapsed();
+    let stats = RenderStats {
+        wall: prepare_time,
+        precompute: prepare_time,
+        precompute_note: prepared.as_ref().map(|p| p.note.clone()),
+        ..Default::default()
+    };
+    let integrator: &dyn Integrator = match &prepared {
+        Some(p) => {
+            if verbose {
+                eprintln!("{}", p.note);
+            }
+            p.integrator.as_ref()
+        }
+        None => integrator.as_ref(),
+    };
+
+    let render = Waves {
+        args: &args,
+        desc: &desc,
+        scene: &built.scene,
+        integrator,
+        pool: &pool,
+        files: &files,
+    };
+    let rendered = render.run(interrupt.cancel_flag(), stats, verbose)?;
+    if rendered.reached == 0 {
+        eprintln!(
+            "interrupted before the first sample of every pixel was finished: nothing written"
+        );
+        return Err(interrupt.interrupted().into());
+    }
+    files.write(&rendered.sums, &rendered.stats, rendered.status)?;
+    report(&args, &desc, &out, &rendered, log);
+    if rendered.status == Status::Interrupted {
+        return Err(interrupt.interrupted().into());
+    }
+    Ok(())
+}
+
+/// The EXR to write: `--out`, by default `<scene name>.exr`; refused unless an `.exr`, or when
+/// a directory is in the way of it or its PNG.
+fn output_path(args: &RenderArgs) -> Result<PathBuf> {
     let out = match &args.out {
         Some(p) => p.clone(),
         None => PathBuf::from(format!("{}.exr", scene_stem(&args.scene))),
@@ -274,21 +358,22 @@ pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
             bail!("--out {}: {} is a directory", out.display(), path.display());
         }
     }
-    let threads = args.threads.unwrap_or(0);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .context("creating the thread pool")?;
-    let verbose = !args.quiet;
+    Ok(out)
+}
 
-    let built = pool.install(|| scene_desc::build(&desc, &args.scene))?;
-    if verbose {
-        eprintln!("{}", built.summary);
-    }
+/// Builds the scene's integrator; tells what it precomputed, and how long that took when it is
+/// worth a line (dual-scattering tables).
+fn build_integrator(
+    args: &RenderArgs,
+    desc: &SceneDesc,
+    scene: &tress_core::Scene,
+    pool: &rayon::ThreadPool,
+    prep: &tress_core::prepare::Preparation,
+    verbose: bool,
+) -> Result<Box<dyn Integrator>> {
     let t_integrator = Instant::now();
-    let prep = tress_core::prepare::Preparation::new();
     let integrator = pool
-        .install(|| desc.integrator.build(&built.scene, &prep))
+        .install(|| desc.integrator.build(scene, prep))
         .map_err(|e| {
             anyhow::anyhow!(
                 "{}: integrator {}: {e:#}",
@@ -296,7 +381,6 @@ pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
                 desc.integrator.name()
             )
         })?;
-    // Worth a line when the integrator precomputed something (dual-scattering tables).
     let setup = t_integrator.elapsed();
     if verbose {
         prep.take_notes()
@@ -310,127 +394,124 @@ pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
             setup.as_secs_f64()
         );
     }
-    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("creating output folder {}", dir.display()))?;
-    }
-    let files = OutputFiles {
-        args: &args,
-        desc: &desc,
-        out: out.clone(),
-        identity: Identity {
-            seed: desc.film.seed,
-            scene_hash: scene_hash(&desc, &args.scene)?,
-        },
-        camera: &built.scene.camera,
-    };
-    let outputs = args.outputs();
+    Ok(integrator)
+}
 
-    let interrupt = Interrupt::install()?;
-    let cancel = interrupt.cancel_flag();
+/// The render loop: waves of samples until the target spp, a time limit or an interrupt.
+struct Waves<'a> {
+    args: &'a RenderArgs,
+    desc: &'a SceneDesc,
+    scene: &'a tress_core::Scene,
+    integrator: &'a dyn Integrator,
+    pool: &'a rayon::ThreadPool,
+    files: &'a OutputFiles<'a>,
+}
 
-    // The integrator's per-film precomputation (a radiance cache), with its own bar; it counts
-    // as render time.
-    let t_prepare = Instant::now();
-    let prepare_bar = progress_bar(1000, verbose, "precomputing ");
-    let prepared = pool.install(|| {
-        integrator.for_film(&built.scene, &desc.film, &|done| {
-            prepare_bar.set_position((done * 1000.0) as u64)
-        })
-    });
-    prepare_bar.finish_and_clear();
-    let prepare_time = t_prepare.elapsed();
-    let integrator: &dyn Integrator = match &prepared {
-        Some(p) => {
-            if verbose {
-                eprintln!("{}", p.note);
+/// What the render loop finished.
+struct Rendered {
+    sums: SampleSums,
+    stats: RenderStats,
+    /// Samples per pixel finished.
+    reached: u64,
+    status: Status,
+}
+
+impl Waves<'_> {
+    /// Renders waves of cumulative 1, 2, 4, … spp, writing the partial image after each with
+    /// `--partial`; `stats` holds the precomputation's time.
+    fn run(&self, cancel: &AtomicBool, mut stats: RenderStats, verbose: bool) -> Result<Rendered> {
+        let (args, film) = (self.args, &self.desc.film);
+        let outputs = args.outputs();
+        let [x0, y0, x1, y1] = film.window();
+        let target = film.spp as u64;
+        let first = args.spp_offset;
+        let bar = progress_bar((x1 - x0) as u64 * (y1 - y0) as u64 * target, verbose, "");
+        let progress = |n: u64| bar.inc(n);
+        let limit = args.time_limit.map(Duration::from_secs_f64);
+        let start = Instant::now();
+        let mut sums = SampleSums::empty(
+            film.window(),
+            film.width,
+            film.height,
+            first,
+            outputs.clone(),
+        );
+        let mut reached = 0u64;
+        let mut status = Status::Complete;
+        while reached < target {
+            let next = (2 * reached).clamp(1, target);
+            let wave = self.pool.install(|| {
+                render::render_outputs(
+                    self.scene,
+                    self.integrator,
+                    film,
+                    &outputs,
+                    first + reached..first + next,
+                    cancel,
+                    &progress,
+                )
+            });
+            let Some(wave) = wave else {
+                status = Status::Interrupted;
+                break;
+            };
+            sums.append(&wave.sums).map_err(anyhow::Error::msg)?;
+            stats.add(&wave.stats);
+            reached = next;
+            if reached < target {
+                if limit.is_some_and(|l| start.elapsed() >= l) {
+                    status = Status::TimeLimit;
+                    break;
+                }
+                if args.partial {
+                    self.files.write(&sums, &stats, Status::Partial)?;
+                }
             }
-            p.integrator.as_ref()
         }
-        None => integrator.as_ref(),
-    };
+        bar.finish_and_clear();
+        Ok(Rendered {
+            sums,
+            stats,
+            reached,
+            status,
+        })
+    }
+}
 
-    let [x0, y0, x1, y1] = desc.film.window();
+/// The closing lines for people, the fields of the JSON summary, and a warning when samples
+/// were dropped.
+fn report(args: &RenderArgs, desc: &SceneDesc, out: &Path, rendered: &Rendered, log: &mut Log) {
+    let Rendered {
+        stats,
+        reached,
+        status,
+        ..
+    } = rendered;
+    let (reached, status) = (*reached, *status);
     let target = desc.film.spp as u64;
     let first = args.spp_offset;
-    let bar = progress_bar((x1 - x0) as u64 * (y1 - y0) as u64 * target, verbose, "");
-    let progress = |n: u64| bar.inc(n);
-    let limit = args.time_limit.map(Duration::from_secs_f64);
-    let start = Instant::now();
-    let mut done = SampleSums::empty(
-        desc.film.window(),
-        desc.film.width,
-        desc.film.height,
-        first,
-        outputs.clone(),
-    );
-    let mut stats = RenderStats {
-        wall: prepare_time,
-        precompute: prepare_time,
-        precompute_note: prepared.as_ref().map(|p| p.note.clone()),
-        ..Default::default()
-    };
-    let mut reached = 0u64;
-    let mut status = Status::Complete;
-    while reached < target {
-        let next = (2 * reached).clamp(1, target);
-        let wave = pool.install(|| {
-            render::render_outputs(
-                &built.scene,
-                integrator,
-                &desc.film,
-                &outputs,
-                first + reached..first + next,
-                cancel,
-                &progress,
-            )
-        });
-        let Some(wave) = wave else {
-            status = Status::Interrupted;
-            break;
-        };
-        done.append(&wave.sums).map_err(anyhow::Error::msg)?;
-        stats.add(&wave.stats);
-        reached = next;
-        if reached < target {
-            if limit.is_some_and(|l| start.elapsed() >= l) {
-                status = Status::TimeLimit;
-                break;
-            }
-            if args.partial {
-                files.write(&done, &stats, Status::Partial)?;
-            }
-        }
-    }
-    bar.finish_and_clear();
-
-    if reached == 0 {
-        eprintln!(
-            "interrupted before the first sample of every pixel was finished: nothing written"
-        );
-        return Err(interrupt.interrupted().into());
-    }
-    files.write(&done, &stats, status)?;
+    let verbose = !args.quiet;
     let png = out.with_extension("png");
-    let wrote = if args.preview.no_preview {
-        out.display().to_string()
-    } else {
-        format!("{} and {}", out.display(), png.display())
-    };
-    let spp_text = match status {
-        Status::Complete => format!("{reached} spp"),
-        Status::TimeLimit => format!(
-            "{reached} of {target} spp (time limit of {} s reached)",
-            args.time_limit.unwrap_or_default()
-        ),
-        _ => format!("{reached} of {target} spp (interrupted)"),
-    };
     if verbose || status == Status::Interrupted {
+        let wrote = if args.preview.no_preview {
+            out.display().to_string()
+        } else {
+            format!("{} and {}", out.display(), png.display())
+        };
+        let spp_text = match status {
+            Status::Complete => format!("{reached} spp"),
+            Status::TimeLimit => format!(
+                "{reached} of {target} spp (time limit of {} s reached)",
+                args.time_limit.unwrap_or_default()
+            ),
+            _ => format!("{reached} of {target} spp (interrupted)"),
+        };
         let range = if first > 0 {
             format!(" (samples {first}..{})", first + reached)
         } else {
             String::new()
         };
+        let [x0, y0, x1, y1] = desc.film.window();
         eprintln!(
             "rendered {}x{} at {spp_text}{range} with {} in {:.2} s: {:.3} Msamples/s, {:.3} Mrays/s",
             x1 - x0,
@@ -444,9 +525,9 @@ pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
     }
     // The summary line of `--log-format json`.
     let outputs = if args.preview.no_preview {
-        vec![out.clone()]
+        vec![out.to_path_buf()]
     } else {
-        vec![out.clone(), png.clone()]
+        vec![out.to_path_buf(), png.clone()]
     };
     log.record("outputs", outputs);
     log.record("integrator", desc.integrator.name());
@@ -474,10 +555,6 @@ pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
             100.0 * share
         );
     }
-    if status == Status::Interrupted {
-        return Err(interrupt.interrupted().into());
-    }
-    Ok(())
 }
 
 pub fn info(scene: &Path, defines: &[(String, String)]) -> Result<()> {

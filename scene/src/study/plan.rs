@@ -1,13 +1,13 @@
 //! The plan: the study resolved against its file, `--quick` and the caller's settings; seeds
 //! and hashes.
 
-use super::file::{Reference, References, SceneRef, Study};
+use super::file::{FilmOverride, Reference, References, RegionDesc, SceneRef, Study};
 use crate::integrators::IntegratorDesc;
 use crate::metrics::Rect;
 use crate::paths::resolve;
 use crate::scene_desc::{self, SceneDesc};
 use anyhow::{anyhow, Context, Result};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use tress_core::rng::hash_words;
 
 /// How to run a study: what `tress study` takes on its command line.
@@ -169,79 +169,103 @@ pub(super) fn middle_spp(spp: &[u32]) -> u32 {
     spp[spp.len() / 2]
 }
 
-impl Plan {
-    pub(super) fn new(study: Study, settings: &StudySettings) -> Result<Plan> {
-        let path = &settings.study;
-        let here = |what: String| anyhow!("{}: {what}", path.display());
-        let stem = path
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "study".into());
+/// An error about the study file `path`.
+fn error_at(path: &Path, what: String) -> anyhow::Error {
+    anyhow!("{}: {what}", path.display())
+}
 
-        if study.scenes.is_empty() {
-            return Err(here("scenes: the list is empty".into()));
-        }
-        if study.integrators.is_empty() {
-            return Err(here("integrators: the list is empty".into()));
-        }
-        let check_spp = |field: &str, spp: &[u32]| -> Result<()> {
-            if spp.is_empty() {
-                return Err(here(format!("{field}: the list is empty")));
-            }
-            if spp[0] == 0 || spp.windows(2).any(|w| w[0] >= w[1]) {
-                return Err(here(format!(
-                    "{field}: {spp:?} must be positive and strictly increasing"
-                )));
-            }
-            Ok(())
-        };
-        check_spp("spp", &study.spp)?;
-        if study.repetitions == 0 {
-            return Err(here("repetitions must be at least 1".into()));
-        }
-        if !(study.target_relmse.is_finite() && study.target_relmse > 0.0) {
+/// Refuses an spp list that is empty, or not positive and strictly increasing.
+fn check_spp(path: &Path, field: &str, spp: &[u32]) -> Result<()> {
+    if spp.is_empty() {
+        return Err(error_at(path, format!("{field}: the list is empty")));
+    }
+    if spp[0] == 0 || spp.windows(2).any(|w| w[0] >= w[1]) {
+        return Err(error_at(
+            path,
+            format!("{field}: {spp:?} must be positive and strictly increasing"),
+        ));
+    }
+    Ok(())
+}
+
+/// Checks what the study file sets apart from its scenes, `quick` and references; returns the
+/// names of its regions.
+fn check_study(study: &Study, path: &Path) -> Result<Vec<String>> {
+    let here = |what: String| error_at(path, what);
+    if study.scenes.is_empty() {
+        return Err(here("scenes: the list is empty".into()));
+    }
+    if study.integrators.is_empty() {
+        return Err(here("integrators: the list is empty".into()));
+    }
+    check_spp(path, "spp", &study.spp)?;
+    if study.repetitions == 0 {
+        return Err(here("repetitions must be at least 1".into()));
+    }
+    if !(study.target_relmse.is_finite() && study.target_relmse > 0.0) {
+        return Err(here(format!(
+            "target_relmse = {} must be finite and positive",
+            study.target_relmse
+        )));
+    }
+    if !study.exposure.is_finite() {
+        return Err(here(format!(
+            "exposure = {} must be finite",
+            study.exposure
+        )));
+    }
+    let region_names = check_regions(&study.regions, path)?;
+    if let Some(h) = study.heatmap_spp {
+        if !study.spp.contains(&h) {
             return Err(here(format!(
-                "target_relmse = {} must be finite and positive",
-                study.target_relmse
+                "heatmap_spp = {h} is not one of spp {:?}",
+                study.spp
             )));
         }
-        if !study.exposure.is_finite() {
-            return Err(here(format!(
-                "exposure = {} must be finite",
-                study.exposure
-            )));
-        }
-        let mut region_names: Vec<String> = Vec::new();
-        for r in &study.regions {
-            if !valid_name(&r.name) {
-                return Err(here(format!(
+    }
+    Ok(region_names)
+}
+
+/// The names of the regions, each checked: a valid name, given once, not empty.
+fn check_regions(regions: &[RegionDesc], path: &Path) -> Result<Vec<String>> {
+    let mut names: Vec<String> = Vec::new();
+    for r in regions {
+        if !valid_name(&r.name) {
+            return Err(error_at(
+                path,
+                format!(
                     "regions: name '{}' must be letters, digits, '_' or '-'",
                     r.name
-                )));
-            }
-            if region_names.contains(&r.name) {
-                return Err(here(format!("regions: '{}' is defined twice", r.name)));
-            }
-            if r.w == 0 || r.h == 0 {
-                return Err(here(format!("regions: '{}' is empty", r.name)));
-            }
-            region_names.push(r.name.clone());
+                ),
+            ));
         }
-        if let Some(h) = study.heatmap_spp {
-            if !study.spp.contains(&h) {
-                return Err(here(format!(
-                    "heatmap_spp = {h} is not one of spp {:?}",
-                    study.spp
-                )));
-            }
+        if names.contains(&r.name) {
+            return Err(error_at(
+                path,
+                format!("regions: '{}' is defined twice", r.name),
+            ));
         }
+        if r.w == 0 || r.h == 0 {
+            return Err(error_at(path, format!("regions: '{}' is empty", r.name)));
+        }
+        names.push(r.name.clone());
+    }
+    Ok(names)
+}
 
-        // --quick: scaled-down settings.
+/// The spp and repetitions a run uses: the study's, or under `--quick` its scaled-down ones.
+struct Scale {
+    quick: bool,
+    spp: Vec<u32>,
+    reps: u32,
+}
+
+impl Scale {
+    fn new(study: &Study, quick: bool, path: &Path) -> Result<Scale> {
         let q = &study.quick;
-        let quick = settings.quick;
         let spp = match (&q.spp, quick) {
             (Some(s), true) => {
-                check_spp("quick.spp", s)?;
+                check_spp(path, "quick.spp", s)?;
                 s.clone()
             }
             (None, true) => {
@@ -255,184 +279,312 @@ impl Plan {
             (_, false) => study.spp.clone(),
         };
         let reps = match (q.repetitions, quick) {
-            (Some(0), true) => return Err(here("quick.repetitions must be at least 1".into())),
+            (Some(0), true) => {
+                return Err(error_at(
+                    path,
+                    "quick.repetitions must be at least 1".into(),
+                ))
+            }
             (Some(r), true) => r,
             (None, true) => study.repetitions.min(3),
             (_, false) => study.repetitions,
         };
-        let max_spp = *spp.last().unwrap_or(&1);
-        let quick_ref = |full: u32, set: Option<u32>| -> u32 {
-            match (set, quick) {
-                (Some(s), true) => s,
-                (None, true) => full.min((16 * max_spp).max(64)),
-                (_, false) => full,
-            }
-        };
-        let reference = match study.reference {
-            Reference::Render { integrator, spp } => {
-                let spp = quick_ref(spp, q.reference_spp);
-                if spp == 0 {
-                    return Err(here("reference: spp must be at least 1".into()));
-                }
-                let label = integrator.name().to_string();
-                PlanReference::Render {
-                    integrator: plan_integrator(integrator, label),
-                    spp,
-                }
-            }
-            Reference::Exr(p) => PlanReference::Exr(p),
-        };
-        let own_spp = match study.references {
-            References::Common => None,
-            References::PerIntegrator { spp } => {
-                let spp = quick_ref(spp, q.per_integrator_spp);
-                if spp == 0 {
-                    return Err(here(
-                        "references: PerIntegrator spp must be at least 1".into(),
-                    ));
-                }
-                Some(spp)
-            }
-        };
-        let heatmap_spp = match study.heatmap_spp {
-            Some(h) if spp.contains(&h) => h,
-            _ => middle_spp(&spp),
-        };
+        Ok(Scale { quick, spp, reps })
+    }
 
-        // Integrator labels: the short name, numbered when several share it.
-        let names: Vec<&str> = study.integrators.iter().map(|d| d.name()).collect();
-        let integrators: Vec<PlanIntegrator> = study
-            .integrators
-            .iter()
-            .enumerate()
-            .map(|(i, d)| {
-                let name = names[i];
-                let label = if names.iter().filter(|n| **n == name).count() > 1 {
-                    let k = names[..=i].iter().filter(|n| **n == name).count();
-                    format!("{name}-{k}")
-                } else {
-                    name.to_string()
-                };
-                plan_integrator(d.clone(), label)
-            })
-            .collect();
-        let mut seen: Vec<&str> = Vec::new();
-        for i in &integrators {
-            if seen.contains(&i.ron.as_str()) {
-                return Err(here(format!("integrators: {} is listed twice", i.ron)));
-            }
-            seen.push(&i.ron);
+    /// A reference's spp: `full`, or under `--quick` the `quick` section's (`set`) or a
+    /// lighter one.
+    fn reference_spp(&self, full: u32, set: Option<u32>) -> u32 {
+        let max_spp = *self.spp.last().unwrap_or(&1);
+        match (set, self.quick) {
+            (Some(s), true) => s,
+            (None, true) => full.min((16 * max_spp).max(64)),
+            (_, false) => full,
         }
+    }
+}
 
-        // Scenes, with the film override and --quick resolution applied.
-        let mut scenes: Vec<PlanScene> = Vec::new();
-        for (i, s) in study.scenes.into_iter().enumerate() {
-            let (name, source, mut desc, base) = match s {
-                SceneRef::File(p) => {
-                    let file = resolve(path, &p);
-                    let desc = scene_desc::load(&file)
-                        .with_context(|| format!("{}: scenes[{i}]", path.display()))?;
-                    let name: String = file
-                        .file_stem()
-                        .map(|s| s.to_string_lossy().into_owned())
-                        .unwrap_or_default()
-                        .chars()
-                        .map(|c| if valid_name(&c.to_string()) { c } else { '_' })
-                        .collect();
-                    (name, file.display().to_string(), desc, file)
-                }
-                SceneRef::Inline { name, scene } => {
-                    if !valid_name(&name) {
-                        return Err(here(format!(
-                            "scenes[{i}]: name '{name}' must be letters, digits, '_' or '-'"
-                        )));
-                    }
-                    let source = format!("{} (inline scene '{name}')", path.display());
-                    (name, source, *scene, path.clone())
-                }
+/// The common reference, its spp scaled.
+fn plan_reference(
+    reference: Reference,
+    scale: &Scale,
+    quick_spp: Option<u32>,
+    path: &Path,
+) -> Result<PlanReference> {
+    Ok(match reference {
+        Reference::Render { integrator, spp } => {
+            let spp = scale.reference_spp(spp, quick_spp);
+            if spp == 0 {
+                return Err(error_at(path, "reference: spp must be at least 1".into()));
+            }
+            let label = integrator.name().to_string();
+            PlanReference::Render {
+                integrator: plan_integrator(integrator, label),
+                spp,
+            }
+        }
+        Reference::Exr(p) => PlanReference::Exr(p),
+    })
+}
+
+/// The spp of the integrators' own references, if the study wants them.
+fn own_reference_spp(
+    references: &References,
+    scale: &Scale,
+    quick_spp: Option<u32>,
+    path: &Path,
+) -> Result<Option<u32>> {
+    match *references {
+        References::Common => Ok(None),
+        References::PerIntegrator { spp } => {
+            let spp = scale.reference_spp(spp, quick_spp);
+            if spp == 0 {
+                return Err(error_at(
+                    path,
+                    "references: PerIntegrator spp must be at least 1".into(),
+                ));
+            }
+            Ok(Some(spp))
+        }
+    }
+}
+
+/// The integrators, labelled by their short name, numbered when several share it; the same
+/// settings listed twice are refused.
+fn plan_integrators(descs: &[IntegratorDesc], path: &Path) -> Result<Vec<PlanIntegrator>> {
+    let names: Vec<&str> = descs.iter().map(|d| d.name()).collect();
+    let integrators: Vec<PlanIntegrator> = descs
+        .iter()
+        .enumerate()
+        .map(|(i, d)| {
+            let name = names[i];
+            let label = if names.iter().filter(|n| **n == name).count() > 1 {
+                let k = names[..=i].iter().filter(|n| **n == name).count();
+                format!("{name}-{k}")
+            } else {
+                name.to_string()
             };
-            if scenes.iter().any(|o| o.name == name) {
-                return Err(here(format!(
-                    "scenes[{i}]: a scene named '{name}' is already in the study; scene names \
-                     (file stems) must differ"
-                )));
-            }
-            if let Some(f) = study.film {
-                desc.film.width = f.width;
-                desc.film.height = f.height;
-            }
-            desc.film.crop = None;
-            desc.film.spp = 1;
-            desc.film.seed = 0;
-            desc.film
-                .validate()
-                .map_err(|e| here(format!("scene '{name}': film: {e}")))?;
-            let (w0, h0) = (desc.film.width, desc.film.height);
-            if quick {
-                // An EXR reference fixes the resolution.
-                let exr_ref = matches!(reference, PlanReference::Exr(_));
-                match q.film {
-                    Some(f) => {
-                        desc.film.width = f.width;
-                        desc.film.height = f.height;
-                    }
-                    None if !exr_ref && w0.max(h0) > 64 => {
-                        let s = 64.0 / w0.max(h0) as f64;
-                        desc.film.width = ((w0 as f64 * s).round() as u32).max(1);
-                        desc.film.height = ((h0 as f64 * s).round() as u32).max(1);
-                    }
-                    None => {}
-                }
-                desc.film
-                    .validate()
-                    .map_err(|e| here(format!("quick.film: {e}")))?;
-            }
-            let (w, h) = (desc.film.width, desc.film.height);
-            let mut regions = Vec::new();
-            for r in &study.regions {
-                // Region coordinates refer to the study's film; --quick scales them along.
-                let sx = |v: u32| (v as u64 * w as u64 / w0 as u64) as u32;
-                let sy = |v: u32| (v as u64 * h as u64 / h0 as u64) as u32;
-                let rect = Rect {
-                    x: sx(r.x),
-                    y: sy(r.y),
-                    w: sx(r.w).max(1),
-                    h: sy(r.h).max(1),
-                };
-                let film = Rect { x: 0, y: 0, w, h };
-                if rect.x as u64 + rect.w as u64 > w as u64
-                    || rect.y as u64 + rect.h as u64 > h as u64
-                {
-                    return Err(here(format!(
-                        "regions: '{}' ({rect}) is not inside scene '{name}''s {}x{} film",
-                        r.name, film.w, film.h
-                    )));
-                }
-                regions.push(rect);
-            }
-            let mut keyed = desc.clone();
-            keyed.integrator = IntegratorDesc::default();
-            // The files' contents and tress's version too: replacing an environment map (or
-            // updating tress) must not reuse renders of the old one.
-            let files = desc
-                .files_hash(&base)
-                .map_err(|e| here(format!("scene '{name}': {e}")))?;
-            let content = str_hash(&format!(
-                "{}|{}|{files:016x}|tress {}",
-                ron::to_string(&keyed).unwrap_or_else(|_| format!("{keyed:?}")),
-                base.display(),
-                env!("CARGO_PKG_VERSION")
+            plan_integrator(d.clone(), label)
+        })
+        .collect();
+    let mut seen: Vec<&str> = Vec::new();
+    for i in &integrators {
+        if seen.contains(&i.ron.as_str()) {
+            return Err(error_at(
+                path,
+                format!("integrators: {} is listed twice", i.ron),
             ));
-            scenes.push(PlanScene {
+        }
+        seen.push(&i.ron);
+    }
+    Ok(integrators)
+}
+
+/// A scene of the study as written: its name, where it came from (for messages), its
+/// description and the file its relative paths resolve against.
+struct SceneSource {
+    name: String,
+    source: String,
+    desc: SceneDesc,
+    base: PathBuf,
+}
+
+/// Loads scene `i` of the study file `path`, or takes it inline.
+fn scene_source(i: usize, scene: SceneRef, path: &Path) -> Result<SceneSource> {
+    Ok(match scene {
+        SceneRef::File(p) => {
+            let file = resolve(path, &p);
+            let desc = scene_desc::load(&file)
+                .with_context(|| format!("{}: scenes[{i}]", path.display()))?;
+            let name: String = file
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default()
+                .chars()
+                .map(|c| if valid_name(&c.to_string()) { c } else { '_' })
+                .collect();
+            SceneSource {
+                name,
+                source: file.display().to_string(),
+                desc,
+                base: file,
+            }
+        }
+        SceneRef::Inline { name, scene } => {
+            if !valid_name(&name) {
+                return Err(error_at(
+                    path,
+                    format!("scenes[{i}]: name '{name}' must be letters, digits, '_' or '-'"),
+                ));
+            }
+            let source = format!("{} (inline scene '{name}')", path.display());
+            SceneSource {
                 name,
                 source,
-                desc,
-                base,
-                content,
-                regions,
-            });
+                desc: *scene,
+                base: path.to_path_buf(),
+            }
         }
+    })
+}
 
+/// How the study sets the film of its scenes.
+struct FilmPlan {
+    /// The study's `film`: every scene's size.
+    size: Option<FilmOverride>,
+    /// Under `--quick`: the `quick` section's film, and whether an EXR reference fixes the
+    /// resolution.
+    quick: Option<(Option<FilmOverride>, bool)>,
+}
+
+impl FilmPlan {
+    /// Sets the film of `scene` (named `name`): the study's size, then `--quick`'s; returns the
+    /// size before `--quick`, which region coordinates refer to.
+    fn apply(&self, desc: &mut SceneDesc, name: &str, path: &Path) -> Result<(u32, u32)> {
+        let film = &mut desc.film;
+        if let Some(f) = self.size {
+            film.width = f.width;
+            film.height = f.height;
+        }
+        film.crop = None;
+        film.spp = 1;
+        film.seed = 0;
+        film.validate()
+            .map_err(|e| error_at(path, format!("scene '{name}': film: {e}")))?;
+        let (w0, h0) = (film.width, film.height);
+        if let Some((quick_film, exr_reference)) = self.quick {
+            match quick_film {
+                Some(f) => {
+                    film.width = f.width;
+                    film.height = f.height;
+                }
+                None if !exr_reference && w0.max(h0) > 64 => {
+                    let s = 64.0 / w0.max(h0) as f64;
+                    film.width = ((w0 as f64 * s).round() as u32).max(1);
+                    film.height = ((h0 as f64 * s).round() as u32).max(1);
+                }
+                None => {}
+            }
+            film.validate()
+                .map_err(|e| error_at(path, format!("quick.film: {e}")))?;
+        }
+        Ok((w0, h0))
+    }
+}
+
+/// The regions in the film of scene `name`, `(w, h)`: their coordinates refer to the study's
+/// film `(w0, h0)`, and `--quick` scales them along.
+fn scene_regions(
+    regions: &[RegionDesc],
+    (w0, h0): (u32, u32),
+    (w, h): (u32, u32),
+    name: &str,
+    path: &Path,
+) -> Result<Vec<Rect>> {
+    let mut rects = Vec::new();
+    for r in regions {
+        let sx = |v: u32| (v as u64 * w as u64 / w0 as u64) as u32;
+        let sy = |v: u32| (v as u64 * h as u64 / h0 as u64) as u32;
+        let rect = Rect {
+            x: sx(r.x),
+            y: sy(r.y),
+            w: sx(r.w).max(1),
+            h: sy(r.h).max(1),
+        };
+        if rect.x as u64 + rect.w as u64 > w as u64 || rect.y as u64 + rect.h as u64 > h as u64 {
+            return Err(error_at(
+                path,
+                format!(
+                    "regions: '{}' ({rect}) is not inside scene '{name}''s {w}x{h} film",
+                    r.name
+                ),
+            ));
+        }
+        rects.push(rect);
+    }
+    Ok(rects)
+}
+
+/// The hash of everything that determines a scene's images but the integrator: its
+/// description, where its paths resolve, the contents of the files it reads and tress's version
+/// (replacing an environment map, or updating tress, must not reuse renders of the old one).
+fn content_hash(desc: &SceneDesc, base: &Path, name: &str, path: &Path) -> Result<u64> {
+    let mut keyed = desc.clone();
+    keyed.integrator = IntegratorDesc::default();
+    let files = desc
+        .files_hash(base)
+        .map_err(|e| error_at(path, format!("scene '{name}': {e}")))?;
+    Ok(str_hash(&format!(
+        "{}|{}|{files:016x}|tress {}",
+        ron::to_string(&keyed).unwrap_or_else(|_| format!("{keyed:?}")),
+        base.display(),
+        env!("CARGO_PKG_VERSION")
+    )))
+}
+
+/// The scenes of the study, with the film and regions planned.
+fn plan_scenes(
+    scenes: Vec<SceneRef>,
+    film: &FilmPlan,
+    regions: &[RegionDesc],
+    path: &Path,
+) -> Result<Vec<PlanScene>> {
+    let mut planned: Vec<PlanScene> = Vec::new();
+    for (i, s) in scenes.into_iter().enumerate() {
+        let SceneSource {
+            name,
+            source,
+            mut desc,
+            base,
+        } = scene_source(i, s, path)?;
+        if planned.iter().any(|o| o.name == name) {
+            return Err(error_at(
+                path,
+                format!(
+                    "scenes[{i}]: a scene named '{name}' is already in the study; scene names \
+                     (file stems) must differ"
+                ),
+            ));
+        }
+        let study_size = film.apply(&mut desc, &name, path)?;
+        let size = (desc.film.width, desc.film.height);
+        let regions = scene_regions(regions, study_size, size, &name, path)?;
+        let content = content_hash(&desc, &base, &name, path)?;
+        planned.push(PlanScene {
+            name,
+            source,
+            desc,
+            base,
+            content,
+            regions,
+        });
+    }
+    Ok(planned)
+}
+
+impl Plan {
+    pub(super) fn new(study: Study, settings: &StudySettings) -> Result<Plan> {
+        let path = &settings.study;
+        let stem = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "study".into());
+        let region_names = check_study(&study, path)?;
+        let quick = settings.quick;
+        let scale = Scale::new(&study, quick, path)?;
+        let q = &study.quick;
+        let reference = plan_reference(study.reference, &scale, q.reference_spp, path)?;
+        let own_spp = own_reference_spp(&study.references, &scale, q.per_integrator_spp, path)?;
+        let heatmap_spp = match study.heatmap_spp {
+            Some(h) if scale.spp.contains(&h) => h,
+            _ => middle_spp(&scale.spp),
+        };
+        let integrators = plan_integrators(&study.integrators, path)?;
+        let film = FilmPlan {
+            size: study.film,
+            quick: quick.then_some((q.film, matches!(reference, PlanReference::Exr(_)))),
+        };
+        let scenes = plan_scenes(study.scenes, &film, &study.regions, path)?;
         let out = match (&settings.out, &study.output) {
             (Some(o), _) => o.clone(),
             (None, Some(o)) => suffix(resolve(path, o), quick),
@@ -450,8 +602,8 @@ impl Plan {
             out,
             scenes,
             integrators,
-            spp,
-            reps,
+            spp: scale.spp,
+            reps: scale.reps,
             seed: study.seed,
             reference,
             own_spp,
