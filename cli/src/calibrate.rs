@@ -12,6 +12,7 @@
 //! its own four corners and fit, and the one whose fitted means come closest is kept (dark hair
 //! gains from a traced bounce, light hair loses: README). A last render checks the choice.
 
+use crate::args::RunArgs;
 use crate::progress::progress_bar;
 use crate::render_file::parse_crop;
 use anyhow::{bail, Context, Result};
@@ -52,12 +53,8 @@ pub struct CalibrateArgs {
     /// Write the calibrated integrator (RON, for a scene's `integrator:` or `--integrator`).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Worker threads (default: all cores).
-    #[arg(long, value_parser = crate::args::parse_threads)]
-    pub threads: Option<usize>,
-    /// No progress bars.
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub run: RunArgs,
 }
 
 /// Renders 1 where the camera sees hair first, 0 elsewhere: averaged over a pixel's samples,
@@ -380,17 +377,14 @@ impl Fitting<'_> {
 
 pub fn run(args: CalibrateArgs) -> Result<()> {
     let (desc, target, reference_integrator) = load(&args)?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads.unwrap_or(0))
-        .build()
-        .context("creating the thread pool")?;
+    let pool = args.run.thread_pool()?;
     let built = pool.install(|| scene_desc::build(&desc, &args.scene))?;
     let renders = Renders {
         pool: &pool,
         scene: &built.scene,
         film: &desc.film,
         cancel: AtomicBool::new(false),
-        verbose: !args.quiet,
+        verbose: !args.run.quiet,
     };
     let (mask, hair_pixels) = hair_mask(&renders, &args)?;
     // One preparation context: the corner and check renders share their tables.

@@ -108,13 +108,13 @@ fn run(cli: Cli, log: &mut logging::Log) -> Result<()> {
     let quiet = log.json();
     match cli.command {
         Command::Render(mut args) => {
-            args.quiet |= quiet;
+            args.run.quiet |= quiet;
             render_cmd::render(args, log)
         }
         Command::Info { scene, defines } => render_cmd::info(&scene, &defines),
         Command::Bcsdf(cmd) => bcsdf_cmd::run(cmd),
         Command::Study(mut args) => {
-            args.quiet |= quiet;
+            args.run.quiet |= quiet;
             study::run(args, log).map(|_| ())
         }
         Command::Diff(args) => diff::run(args, log),
@@ -125,7 +125,7 @@ fn run(cli: Cli, log: &mut logging::Log) -> Result<()> {
         }
         Command::Farm(args) => farm::run(args),
         Command::Calibrate(mut args) => {
-            args.quiet |= quiet;
+            args.run.quiet |= quiet;
             calibrate::run(args)
         }
         Command::Init { path } => init(&path),

@@ -5,6 +5,7 @@
 //! Between waves the render can stop at a time limit, write a partial image, or, after Ctrl-C,
 //! stop and write the samples finished so far.
 
+use crate::args::RunArgs;
 use crate::interrupt::Interrupt;
 use crate::logging::Log;
 use crate::progress::progress_bar;
@@ -46,9 +47,6 @@ pub struct RenderArgs {
     /// Random seed; overrides the scene's film.seed.
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Worker threads (default: all cores). The image does not depend on it.
-    #[arg(long, value_parser = crate::args::parse_threads)]
-    pub threads: Option<usize>,
     /// Render only the pixel window x0,y0,x1,y1 (x1, y1 exclusive). The image equals the same
     /// window of the full render bit for bit.
     #[arg(long, value_parser = parse_crop)]
@@ -84,9 +82,8 @@ pub struct RenderArgs {
     pub aov: Vec<Aov>,
     #[command(flatten)]
     pub preview: PreviewArgs,
-    /// No progress bar and no summary.
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub run: RunArgs,
 }
 
 fn parse_aov(s: &str) -> Result<Aov, String> {
@@ -256,12 +253,8 @@ impl OutputFiles<'_> {
 pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
     let desc = load_with_overrides(&args)?;
     let out = output_path(&args)?;
-    let threads = args.threads.unwrap_or(0);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .context("creating the thread pool")?;
-    let verbose = !args.quiet;
+    let pool = args.run.thread_pool()?;
+    let verbose = !args.run.quiet;
 
     let built = pool.install(|| scene_desc::build(&desc, &args.scene))?;
     if verbose {
@@ -490,7 +483,7 @@ fn report(args: &RenderArgs, desc: &SceneDesc, out: &Path, rendered: &Rendered, 
     let (reached, status) = (*reached, *status);
     let target = desc.film.spp as u64;
     let first = args.spp_offset;
-    let verbose = !args.quiet;
+    let verbose = !args.run.quiet;
     let png = out.with_extension("png");
     if verbose || status == Status::Interrupted {
         let wrote = if args.preview.no_preview {

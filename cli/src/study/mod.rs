@@ -3,6 +3,7 @@
 
 mod plots;
 
+use crate::args::RunArgs;
 use crate::logging::Log;
 use crate::progress::progress_bar;
 use anyhow::Result;
@@ -23,12 +24,8 @@ pub struct StudyArgs {
     /// appended for --quick).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Worker threads (default: all cores). Images do not depend on it.
-    #[arg(long, value_parser = crate::args::parse_threads)]
-    pub threads: Option<usize>,
-    /// No progress bar and no summary.
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub run: RunArgs,
 }
 
 /// The study's progress bar; notes go above it, or to stderr when it is hidden or done.
@@ -58,8 +55,8 @@ pub fn run(args: StudyArgs, log: &mut Log) -> Result<StudyOutputs> {
         study: args.study,
         quick: args.quick,
         out: args.out,
-        threads: args.threads,
-        verbose: !args.quiet,
+        threads: args.run.threads,
+        verbose: !args.run.quiet,
     };
     let bar = Bar(progress_bar(0, settings.verbose, "study "));
     let outputs = study::run(&settings, &bar, Some(&plots::Plots))?;
