@@ -71,10 +71,10 @@ impl SceneDesc {
         Ok(files)
     }
 
-    /// A hash of the contents of every file the scene reads ([`referenced_files`]
-    /// (Self::referenced_files)): part of the keys of study caches and of the scene hash that
-    /// merged pieces must share, so that renders of a file's old contents are not taken for
-    /// renders of its new ones.
+    /// A hash of the contents of every file the scene reads
+    /// ([`referenced_files`](Self::referenced_files)): part of the keys of study caches and of
+    /// the scene hash that merged pieces must share, so that renders of a file's old contents
+    /// are not taken for renders of its new ones.
     pub fn files_hash(&self, scene_path: &Path) -> Result<u64> {
         let mut h: u64 = 0xcbf2_9ce4_8422_2325;
         for f in self.referenced_files(scene_path)? {

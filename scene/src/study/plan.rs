@@ -18,7 +18,7 @@ pub struct StudySettings {
     /// Scaled-down run for smoke tests: the study's `quick` section, or by default spp ≤ 16, at
     /// most 3 repetitions, lighter references and films of at most 64 pixels a side.
     pub quick: bool,
-    /// Output folder (default: the study's `output`, else ./<study name>_study; `_quick` is
+    /// Output folder (default: the study's `output`, else `./<study name>_study`; `_quick` is
     /// appended for `quick`).
     pub out: Option<PathBuf>,
     /// Worker threads (default: all cores). Images do not depend on it.

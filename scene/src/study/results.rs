@@ -65,11 +65,11 @@ pub struct SceneFigures {
     /// Per integrator: the relative error map at `heatmap_spp`, repetition 0, row-major over
     /// the film.
     pub heat: Vec<Option<Vec<f32>>>,
-    /// [sheet region][integrator][spp index]: crops of repetition 0.
+    /// Crops of repetition 0, by sheet region, integrator and spp index.
     pub crops: Vec<Vec<Vec<Option<Picture>>>>,
-    /// [sheet region]: the common reference's crop.
+    /// The common reference's crop, by sheet region.
     pub ref_crops: Vec<Picture>,
-    /// [sheet region][integrator]: the crops of the integrators' own references.
+    /// The crops of the integrators' own references, by sheet region and integrator.
     pub own_crops: Vec<Vec<Option<Picture>>>,
 }
 
