@@ -29,7 +29,7 @@ use tress_core::limits::Limits;
 /// ```
 ///
 /// (Scene files let newtype variants omit their inner parentheses; plain RON needs
-/// `Hair((path: …))`. The `tress_cli` tests parse these examples.)
+/// `Hair((path: …))`. The `tress_scene` tests parse these examples.)
 ///
 /// Paths are used as given; resolve relative paths before loading ([`HairSource::path_mut`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]

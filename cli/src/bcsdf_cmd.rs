@@ -77,7 +77,7 @@ pub fn run(cmd: BcsdfCommand) -> Result<()> {
 }
 
 fn build_model(ron_text: &str) -> Result<Arc<dyn Bcsdf>> {
-    let model: HairModel = crate::ron_options().from_str(ron_text).map_err(|e| {
+    let model: HairModel = tress_scene::ron_options().from_str(ron_text).map_err(|e| {
         anyhow!(
             "--model: {e}\n  registered models: {}",
             HairModel::names().join(", ")
@@ -242,7 +242,7 @@ fn eval(a: EvalArgs) -> Result<()> {
         writeln!(out, "{},{},{},{}", f.x, f.y, f.z, bcsdf.pdf(wo, wi, h))?;
     }
     match a.output {
-        Some(p) => crate::atomic_write(&p, out.as_bytes())?,
+        Some(p) => tress_scene::output::atomic_write(&p, out.as_bytes())?,
         None => print!("{out}"),
     }
     Ok(())

@@ -10,13 +10,11 @@
 //! channels' means over the hair pixels against the path tracer's. A traced bounce only moves
 //! where the estimate is taken, so the means stay bilinear: each candidate `path_bounces` gets
 //! its own four corners and fit, and the one whose fitted means come closest is kept (dark hair
-//! gains from a traced bounce, light hair loses: docs/src/guide/calibrate.md). A last render
-//! checks the choice.
+//! gains from a traced bounce, light hair loses: README). A last render checks the choice.
 
-use crate::diff::REL_EPSILON;
-use crate::render_cmd::progress_bar;
+use crate::args::RunArgs;
+use crate::progress::progress_bar;
 use crate::render_file::parse_crop;
-use crate::{atomic_write, integrators::IntegratorDesc, scene_desc};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -26,6 +24,10 @@ use tress_core::render::render_samples;
 use tress_core::{Hit, HitKind, Image, Integrator, Ray, Rgb, Sampler, Scene};
 use tress_dual_uniform::DualSettings;
 use tress_materials::dual_scattering::{DensityFactors, MultipleScattering};
+use tress_scene::integrators::IntegratorDesc;
+use tress_scene::metrics::REL_EPSILON;
+use tress_scene::output::atomic_write;
+use tress_scene::scene_desc::{self, SceneDesc};
 
 #[derive(Args, Debug)]
 pub struct CalibrateArgs {
@@ -51,12 +53,8 @@ pub struct CalibrateArgs {
     /// Write the calibrated integrator (RON, for a scene's `integrator:` or `--integrator`).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Worker threads (default: all cores).
-    #[arg(long, value_parser = crate::parse_threads)]
-    pub threads: Option<usize>,
-    /// No progress bars.
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub run: RunArgs,
 }
 
 /// Renders 1 where the camera sees hair first, 0 elsewhere: averaged over a pixel's samples,
@@ -180,7 +178,27 @@ struct Candidate {
     misfit: f64,
 }
 
-pub fn run(args: CalibrateArgs) -> Result<()> {
+/// The dual-scattering integrator being calibrated: its settings, and its kind.
+struct Target {
+    settings: DualSettings,
+    with_settings: fn(DualSettings) -> IntegratorDesc,
+}
+
+impl Target {
+    /// The integrator with `d_f`, `d_b` and `path_bounces` set.
+    fn with_factors(&self, d_f: f64, d_b: f64, path_bounces: u32) -> IntegratorDesc {
+        (self.with_settings)(DualSettings {
+            d_f: Some(d_f as f32),
+            d_b: Some(d_b as f32),
+            path_bounces,
+            ..self.settings.clone()
+        })
+    }
+}
+
+/// The scene with the crop applied, the integrator to calibrate (set as the scene's) and the
+/// path tracer of the reference: the scene's own, or one 100 bounces deep.
+fn load(args: &CalibrateArgs) -> Result<(SceneDesc, Target, IntegratorDesc)> {
     let mut desc = scene_desc::load(&args.scene)?;
     if let Some(crop) = args.crop {
         desc.film.crop = Some(crop);
@@ -219,38 +237,56 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         }),
     };
     desc.integrator = with_settings(settings.clone());
+    let target = Target {
+        settings,
+        with_settings,
+    };
+    Ok((desc, target, reference_integrator))
+}
 
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads.unwrap_or(0))
-        .build()
-        .context("creating the thread pool")?;
-    let built =
-        pool.install(|| scene_desc::build(&desc, &args.scene, &crate::limits_from_env()))?;
-    let scene = &built.scene;
-    let cancel = AtomicBool::new(false);
-    let render = |integrator: &dyn Integrator, spp: u32, label: &str| -> Result<Image> {
+/// Renders of the scene's film (or crop window) at some spp, each with a progress bar.
+struct Renders<'a> {
+    pool: &'a rayon::ThreadPool,
+    scene: &'a Scene,
+    film: &'a FilmSettings,
+    /// Nothing cancels them; the render loop wants a flag.
+    cancel: AtomicBool,
+    verbose: bool,
+}
+
+impl Renders<'_> {
+    fn render(&self, integrator: &dyn Integrator, spp: u32, label: &str) -> Result<Image> {
         let film = FilmSettings {
             spp,
-            ..desc.film.clone()
+            ..self.film.clone()
         };
         let [x0, y0, x1, y1] = film.window();
         let bar = progress_bar(
             (x1 - x0) as u64 * (y1 - y0) as u64 * spp as u64,
-            !args.quiet,
+            self.verbose,
             label,
         );
-        let out = pool
+        let out = self
+            .pool
             .install(|| {
-                render_samples(scene, integrator, &film, 0..spp as u64, &cancel, &|n| {
-                    bar.inc(n)
-                })
+                render_samples(
+                    self.scene,
+                    integrator,
+                    &film,
+                    0..spp as u64,
+                    &self.cancel,
+                    &|n| bar.inc(n),
+                )
             })
             .context("render interrupted")?;
         bar.finish_and_clear();
         Ok(out.sums.image())
-    };
+    }
+}
 
-    let coverage = render(&HairCoverage, 16, "hair coverage")?;
+/// The pixels that are mostly hair, and how many there are (refused when none is).
+fn hair_mask(renders: &Renders, args: &CalibrateArgs) -> Result<(Vec<bool>, usize)> {
+    let coverage = renders.render(&HairCoverage, 16, "hair coverage")?;
     let mask: Vec<bool> = coverage.pixels.iter().map(|p| p.x >= 0.5).collect();
     let hair_pixels = mask.iter().filter(|&&m| m).count();
     if hair_pixels == 0 {
@@ -260,15 +296,108 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
             if args.crop.is_some() { " window" } else { "" }
         );
     }
+    Ok((mask, hair_pixels))
+}
+
+/// Fitting the factors: the renders of the integrator being calibrated, over the hair pixels,
+/// against the path-traced reference's means there.
+struct Fitting<'a> {
+    renders: &'a Renders<'a>,
+    target: &'a Target,
+    prep: &'a tress_core::prepare::Preparation,
+    spp: u32,
+    mask: &'a [bool],
+    reference_mean: [f64; 3],
+    /// `x = d_f^forward_power` is what the hair means are bilinear in (the paper's d_f enters
+    /// squared; see the module docs).
+    forward_power: f64,
+    /// The integrator's own `(x, y)`.
+    default: (f64, f64),
+}
+
+impl Fitting<'_> {
+    /// A render with the factors `d_f`, `d_b` and `path_bounces`.
+    fn image(&self, d_f: f64, d_b: f64, path_bounces: u32, label: &str) -> Result<Image> {
+        let integrator = self
+            .target
+            .with_factors(d_f, d_b, path_bounces)
+            .build(self.renders.scene, self.prep)?;
+        self.renders.render(integrator.as_ref(), self.spp, label)
+    }
+
+    /// Fits the factors for `path_bounces` from the four corner renders, and says how well
+    /// the defaults and the fit match.
+    fn candidate(&self, path_bounces: u32) -> Result<Candidate> {
+        let mut corner = [[[0.0; 3]; 2]; 2];
+        for (i, row) in corner.iter_mut().enumerate() {
+            for (j, c) in row.iter_mut().enumerate() {
+                let label = format!("path_bounces = {path_bounces}, d_f = {i}, d_b = {j}");
+                let img = self.image(i as f64, j as f64, path_bounces, &label)?;
+                *c = masked_mean(&img, self.mask);
+            }
+        }
+        let bilinear = Bilinear { corner };
+        let (x, y) = fit(&bilinear, self.reference_mean);
+        let (default_x, default_y) = self.default;
+        println!(
+            "path_bounces = {path_bounces}: default d_f = {:.3}, d_b = {:.3}: ÷ path {}; fitted \
+             d_f = {:.3}, d_b = {:.3}: ÷ path {} (predicted)",
+            default_x.powf(1.0 / self.forward_power),
+            default_y,
+            ratios(bilinear.at(default_x, default_y), self.reference_mean),
+            x.powf(1.0 / self.forward_power),
+            y,
+            ratios(bilinear.at(x, y), self.reference_mean),
+        );
+        let misfit = misfit(bilinear.at(x, y), self.reference_mean);
+        Ok(Candidate {
+            path_bounces,
+            bilinear,
+            x,
+            y,
+            misfit,
+        })
+    }
+
+    /// The candidate `path_bounces` whose fit comes closest to the reference.
+    fn best(&self, path_bounces: &[u32]) -> Result<Candidate> {
+        let mut candidates = path_bounces.to_vec();
+        candidates.sort_unstable();
+        candidates.dedup();
+        let mut best: Option<Candidate> = None;
+        for &path_bounces in &candidates {
+            let candidate = self.candidate(path_bounces)?;
+            if best.as_ref().is_none_or(|b| candidate.misfit < b.misfit) {
+                best = Some(candidate);
+            }
+        }
+        best.ok_or_else(|| anyhow::anyhow!("--path-bounces: give at least one value"))
+    }
+}
+
+pub fn run(args: CalibrateArgs) -> Result<()> {
+    let (desc, target, reference_integrator) = load(&args)?;
+    let pool = args.run.thread_pool()?;
+    let built =
+        pool.install(|| scene_desc::build(&desc, &args.scene, &crate::limits_from_env()))?;
+    let renders = Renders {
+        pool: &pool,
+        scene: &built.scene,
+        film: &desc.film,
+        cancel: AtomicBool::new(false),
+        verbose: !args.run.quiet,
+    };
+    let (mask, hair_pixels) = hair_mask(&renders, &args)?;
     // One preparation context: the corner and check renders share their tables.
     let prep = tress_core::prepare::Preparation::with_limits(crate::limits_from_env());
-    let path = reference_integrator.build(scene, &prep)?;
-    let reference = render(path.as_ref(), args.reference_spp, "path reference")?;
+    let path = reference_integrator.build(&built.scene, &prep)?;
+    let reference = renders.render(path.as_ref(), args.reference_spp, "path reference")?;
     let reference_mean = masked_mean(&reference, &mask);
     if reference_mean.iter().any(|&m| m <= 0.0) {
         bail!("the path-traced reference is black in a channel over the hair pixels");
     }
 
+    let settings = &target.settings;
     let model = settings.tables.multiple_scattering;
     // The paper's d_f enters squared (module docs).
     let forward_power = match model {
@@ -278,17 +407,6 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     let defaults = DensityFactors::for_model(model);
     let default_x = (settings.d_f.unwrap_or(defaults.d_f) as f64).powf(forward_power);
     let default_y = settings.d_b.unwrap_or(defaults.d_b) as f64;
-    let with_factors = |d_f: f64, d_b: f64, path_bounces: u32| DualSettings {
-        d_f: Some(d_f as f32),
-        d_b: Some(d_b as f32),
-        path_bounces,
-        ..settings.clone()
-    };
-    let ds_image = |s: DualSettings, label: &str| -> Result<Image> {
-        let integrator = with_settings(s).build(scene, &prep)?;
-        render(integrator.as_ref(), args.spp, label)
-    };
-
     println!(
         "{}: {hair_pixels} hair pixels; path reference {} spp, dual scattering {} spp ({model:?})",
         args.scene.display(),
@@ -299,61 +417,45 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         "path reference, hair mean R/G/B: {:.4} / {:.4} / {:.4}",
         reference_mean[0], reference_mean[1], reference_mean[2]
     );
-    let mut candidates = args.path_bounces.clone();
-    candidates.sort_unstable();
-    candidates.dedup();
-    let mut best: Option<Candidate> = None;
-    for &path_bounces in &candidates {
-        let mut corner = [[[0.0; 3]; 2]; 2];
-        for (i, row) in corner.iter_mut().enumerate() {
-            for (j, c) in row.iter_mut().enumerate() {
-                let label = format!("path_bounces = {path_bounces}, d_f = {i}, d_b = {j}");
-                let img = ds_image(with_factors(i as f64, j as f64, path_bounces), &label)?;
-                *c = masked_mean(&img, &mask);
-            }
-        }
-        let bilinear = Bilinear { corner };
-        let (x, y) = fit(&bilinear, reference_mean);
-        println!(
-            "path_bounces = {path_bounces}: default d_f = {:.3}, d_b = {:.3}: ÷ path {}; fitted \
-             d_f = {:.3}, d_b = {:.3}: ÷ path {} (predicted)",
-            default_x.powf(1.0 / forward_power),
-            default_y,
-            ratios(bilinear.at(default_x, default_y), reference_mean),
-            x.powf(1.0 / forward_power),
-            y,
-            ratios(bilinear.at(x, y), reference_mean),
-        );
-        let error = misfit(bilinear.at(x, y), reference_mean);
-        if best.as_ref().is_none_or(|b| error < b.misfit) {
-            best = Some(Candidate {
-                path_bounces,
-                bilinear,
-                x,
-                y,
-                misfit: error,
-            });
-        }
-    }
-    let Some(Candidate {
+    let fitting = Fitting {
+        renders: &renders,
+        target: &target,
+        prep: &prep,
+        spp: args.spp,
+        mask: &mask,
+        reference_mean,
+        forward_power,
+        default: (default_x, default_y),
+    };
+    let best = fitting.best(&args.path_bounces)?;
+    conclude(&args, &fitting, &best, &reference)
+}
+
+/// Renders the fitted factors to check them, says how well they match, and writes them with
+/// `--out`.
+fn conclude(
+    args: &CalibrateArgs,
+    fitting: &Fitting,
+    best: &Candidate,
+    reference: &Image,
+) -> Result<()> {
+    let Candidate {
         path_bounces,
-        bilinear,
+        ref bilinear,
         x,
         y,
         ..
-    }) = best
-    else {
-        bail!("--path-bounces: give at least one value");
-    };
-    let (d_f, d_b) = (x.powf(1.0 / forward_power), y);
-    let fitted_image = ds_image(with_factors(d_f, d_b, path_bounces), "check")?;
-    let fitted_mean = masked_mean(&fitted_image, &mask);
+    } = *best;
+    let (mask, reference_mean) = (fitting.mask, fitting.reference_mean);
+    let (d_f, d_b) = (x.powf(1.0 / fitting.forward_power), y);
+    let fitted_image = fitting.image(d_f, d_b, path_bounces, "check")?;
+    let fitted_mean = masked_mean(&fitted_image, mask);
     println!(
         "fitted  path_bounces = {path_bounces}, d_f = {d_f:.3}, d_b = {d_b:.3}: ÷ path {} \
          (predicted), {} (rendered), hair relMSE {:.3e}",
         ratios(bilinear.at(x, y), reference_mean),
         ratios(fitted_mean, reference_mean),
-        masked_relmse(&fitted_image, &reference, &mask)
+        masked_relmse(&fitted_image, reference, mask)
     );
     // Stopped at a bound with a channel still more than 1 % off: say which factor ran out.
     let worst = bilinear
@@ -372,17 +474,17 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         }
     }
     if let Some(out) = &args.out {
-        let fitted = with_settings(DualSettings {
-            d_f: Some((d_f * 1000.0).round() as f32 / 1000.0),
-            d_b: Some((d_b * 1000.0).round() as f32 / 1000.0),
+        let fitted = fitting.target.with_factors(
+            f64::from((d_f * 1000.0).round() as f32 / 1000.0),
+            f64::from((d_b * 1000.0).round() as f32 / 1000.0),
             path_bounces,
-            ..settings
-        });
+        );
         let text = format!(
             "// tress calibrate {}: hair mean ÷ path {} (R/G/B)\n{}\n",
             args.scene.display(),
             ratios(fitted_mean, reference_mean),
-            crate::ron_options().to_string_pretty(&fitted, ron::ser::PrettyConfig::default())?
+            tress_scene::ron_options()
+                .to_string_pretty(&fitted, ron::ser::PrettyConfig::default())?
         );
         atomic_write(out, text.as_bytes())?;
         println!("wrote {}", out.display());

@@ -1,14 +1,6 @@
 //! `tress diff A.exr B.exr`: error metrics of an image A against a reference B, and colour-mapped
-//! per-pixel error maps. `tress study` computes its metrics with the same functions.
-//!
-//! Definitions (over the pixels of the compared region, per channel, then over all channels):
-//! - `MSE    = mean (A − B)²`
-//! - `relMSE = mean (A − B)² / (B² + ε)` with ε = [`REL_EPSILON`] = 1e-2, so dark pixels do not
-//!   dominate and bright ones do not drown the rest
-//!   (docs/src/reference/hair-maths.md#measuring-an-estimator);
-//! - `PSNR   = 10 log10(peak² / MSE)` dB, peak = the largest value of B over the region and all
-//!   channels (1 when B is black there), the same peak for every channel;
-//! - `mean difference = mean (A − B)`: the bias when A averages independent renders.
+//! per-pixel error maps. MSE, relMSE, PSNR and the mean difference are
+//! [`tress_scene::metrics`], which studies compute too.
 //!
 //! Two perceptual metrics compare the images as they are seen: tone-mapped like the PNG
 //! previews (scaled by 2^`--exposure`, mapped by `--tonemap`, sRGB-encoded to [0, 1]).
@@ -25,237 +17,36 @@
 //!   most 1. The region is cropped before the comparison, so its border pixels are filtered
 //!   without their neighbours outside.
 
-use crate::{logging, plot};
+use crate::logging::Log;
+use crate::plot;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use tress_core::image_io::{self, ToneMap};
 use tress_core::Image;
+use tress_scene::metrics::{
+    avg3, check_compatible, check_finite, error_map, metrics, resolve_region, MapKind, Metrics,
+    Rect, REL_EPSILON,
+};
+use tress_scene::picture::srgb;
 
-/// ε of the relative MSE.
-pub const REL_EPSILON: f64 = 1e-2;
-
-/// A pixel rectangle in film coordinates (the full film, not the rendered window).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Rect {
-    pub x: u32,
-    pub y: u32,
-    pub w: u32,
-    pub h: u32,
-}
-
-impl Rect {
-    /// Parses `x,y,w,h`.
-    pub fn parse(s: &str) -> Result<Rect, String> {
-        let parts: Vec<&str> = s.split(',').collect();
-        if parts.len() != 4 {
-            return Err(format!("expected x,y,w,h, got '{s}'"));
-        }
-        let mut v = [0u32; 4];
-        for (o, p) in v.iter_mut().zip(&parts) {
-            *o = p
-                .trim()
-                .parse()
-                .map_err(|_| format!("'{p}' is not a non-negative integer"))?;
-        }
-        if v[2] == 0 || v[3] == 0 {
-            return Err(format!("region '{s}' is empty"));
-        }
-        Ok(Rect {
-            x: v[0],
-            y: v[1],
-            w: v[2],
-            h: v[3],
-        })
-    }
-
-    /// The rendered window of `img`, in film coordinates.
-    pub fn window_of(img: &Image) -> Rect {
-        Rect {
-            x: img.x0,
-            y: img.y0,
-            w: img.width,
-            h: img.height,
-        }
-    }
-
-    fn contains(&self, o: &Rect) -> bool {
-        o.x >= self.x
-            && o.y >= self.y
-            && o.x as u64 + o.w as u64 <= self.x as u64 + self.w as u64
-            && o.y as u64 + o.h as u64 <= self.y as u64 + self.h as u64
-    }
-}
-
-impl std::fmt::Display for Rect {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}x{} at ({}, {})", self.w, self.h, self.x, self.y)
-    }
-}
-
-/// Describes an image's geometry for mismatch messages.
-fn geometry(img: &Image) -> String {
-    format!(
-        "window {} of a {}x{} film",
-        Rect::window_of(img),
-        img.full_width,
-        img.full_height
-    )
-}
-
-/// Checks that `a` and `b` cover the same window of the same film; the error describes both.
-pub fn check_compatible(a: &Image, b: &Image) -> Result<(), String> {
-    if (a.full_width, a.full_height, a.x0, a.y0, a.width, a.height)
-        != (b.full_width, b.full_height, b.x0, b.y0, b.width, b.height)
-    {
-        return Err(format!(
-            "the images differ in size: {} vs {}",
-            geometry(a),
-            geometry(b)
-        ));
-    }
-    Ok(())
-}
-
-/// The region to compare: `region`, checked to lie inside the rendered window, or the window.
-pub fn resolve_region(img: &Image, region: Option<Rect>) -> Result<Rect, String> {
-    let window = Rect::window_of(img);
-    match region {
-        None => Ok(window),
-        Some(r) if window.contains(&r) => Ok(r),
-        Some(r) => Err(format!(
-            "region {r} is not inside the rendered {}",
-            geometry(img)
-        )),
-    }
-}
-
-/// Errors of A against the reference B over one region.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Metrics {
-    pub mse: [f64; 3],
-    pub relmse: [f64; 3],
-    pub mean_diff: [f64; 3],
-    pub mean_a: [f64; 3],
-    pub mean_b: [f64; 3],
-    /// PSNR peak: the largest value of B (1 if B is black).
-    pub peak: f64,
-}
-
-fn avg3(v: [f64; 3]) -> f64 {
-    (v[0] + v[1] + v[2]) / 3.0
-}
-
-impl Metrics {
-    pub fn mse_all(&self) -> f64 {
-        avg3(self.mse)
-    }
-    pub fn relmse_all(&self) -> f64 {
-        avg3(self.relmse)
-    }
-    pub fn mean_diff_all(&self) -> f64 {
-        avg3(self.mean_diff)
-    }
-    pub fn mean_a_all(&self) -> f64 {
-        avg3(self.mean_a)
-    }
-    pub fn mean_b_all(&self) -> f64 {
-        avg3(self.mean_b)
-    }
-    /// PSNR in dB for a given MSE (infinite for identical images).
-    pub fn psnr(&self, mse: f64) -> f64 {
-        10.0 * (self.peak * self.peak / mse).log10()
-    }
-}
-
-/// Iterates the pixel pairs of `rect` (film coordinates), which must lie in the shared window.
-fn pairs<'a>(
-    a: &'a Image,
-    b: &'a Image,
-    rect: Rect,
-) -> impl Iterator<Item = (glam::Vec3, glam::Vec3)> + 'a {
-    (rect.y..rect.y + rect.h).flat_map(move |y| {
-        (rect.x..rect.x + rect.w)
-            .map(move |x| (a.get(x - a.x0, y - a.y0), b.get(x - b.x0, y - b.y0)))
-    })
-}
-
-/// Metrics of `a` against the reference `b` over `rect`. The images must be compatible
-/// ([`check_compatible`]) and `rect` inside their window ([`resolve_region`]).
-pub fn metrics(a: &Image, b: &Image, rect: Rect) -> Metrics {
-    let mut m = Metrics {
-        mse: [0.0; 3],
-        relmse: [0.0; 3],
-        mean_diff: [0.0; 3],
-        mean_a: [0.0; 3],
-        mean_b: [0.0; 3],
-        peak: 0.0,
-    };
-    for (pa, pb) in pairs(a, b, rect) {
-        for c in 0..3 {
-            let (va, vb) = (pa[c] as f64, pb[c] as f64);
-            let d = va - vb;
-            m.mse[c] += d * d;
-            m.relmse[c] += d * d / (vb * vb + REL_EPSILON);
-            m.mean_diff[c] += d;
-            m.mean_a[c] += va;
-            m.mean_b[c] += vb;
-            m.peak = m.peak.max(vb);
-        }
-    }
-    let n = rect.w as f64 * rect.h as f64;
-    for v in [
-        &mut m.mse,
-        &mut m.relmse,
-        &mut m.mean_diff,
-        &mut m.mean_a,
-        &mut m.mean_b,
-    ] {
-        for c in v.iter_mut() {
-            *c /= n;
-        }
-    }
-    if m.peak <= 0.0 {
-        m.peak = 1.0;
-    }
-    m
-}
-
-/// What an error map shows per pixel.
+/// What an error map shows per pixel (`--map-kind`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum MapKind {
+pub enum MapArg {
     /// RMS over the channels of |A − B|.
     Abs,
     /// RMS over the channels of |A − B| / sqrt(B² + ε): the per-pixel square root of relMSE.
     Rel,
 }
 
-impl MapKind {
-    /// Colour-bar label.
-    pub fn label(self) -> &'static str {
-        match self {
-            MapKind::Abs => "|A - B| (RMS over RGB)",
-            MapKind::Rel => "|A - B| / sqrt(B² + 0.01) (RMS over RGB)",
+impl From<MapArg> for MapKind {
+    fn from(arg: MapArg) -> MapKind {
+        match arg {
+            MapArg::Abs => MapKind::Abs,
+            MapArg::Rel => MapKind::Rel,
         }
     }
-}
-
-/// Per-pixel error of `a` against `b` over `rect`, row-major (`rect.w × rect.h`).
-pub fn error_map(a: &Image, b: &Image, rect: Rect, kind: MapKind) -> Vec<f32> {
-    pairs(a, b, rect)
-        .map(|(pa, pb)| {
-            let mut s = 0.0f64;
-            for c in 0..3 {
-                let d = (pa[c] - pb[c]) as f64;
-                s += match kind {
-                    MapKind::Abs => d * d,
-                    MapKind::Rel => d * d / ((pb[c] as f64).powi(2) + REL_EPSILON),
-                };
-            }
-            (s / 3.0).sqrt() as f32
-        })
-        .collect()
 }
 
 /// How the perceptual metrics see an image: the PNG previews' exposure and tone mapping.
@@ -269,7 +60,7 @@ pub struct Display {
 impl Display {
     /// sRGB-encoded display values in [0, 1] (the PNG preview's before 8-bit rounding).
     fn encode(&self, c: glam::Vec3) -> [f32; 3] {
-        self.tonemap.apply(c * self.gain).to_array().map(plot::srgb)
+        self.tonemap.apply(c * self.gain).to_array().map(srgb)
     }
 
     /// The region of `img` as planar display values, one plane per channel, row-major.
@@ -446,8 +237,8 @@ pub struct DiffArgs {
     #[arg(long)]
     pub map: Option<PathBuf>,
     /// What the error map shows.
-    #[arg(long, value_enum, default_value_t = MapKind::Abs)]
-    pub map_kind: MapKind,
+    #[arg(long, value_enum, default_value_t = MapArg::Abs)]
+    pub map_kind: MapArg,
     /// Exposure of the previews SSIM and FLIP compare, in stops (as `tress render --exposure`).
     #[arg(long, default_value_t = 0.0, value_parser = parse_exposure, allow_hyphen_values = true)]
     pub exposure: f32,
@@ -460,21 +251,7 @@ pub struct DiffArgs {
     pub flip_ppd: f32,
 }
 
-/// Refuses an image (read from `path`) holding NaN or infinite pixels, to be compared with
-/// another: one NaN makes every metric NaN, which `diff` printed, and a study wrote into its
-/// summary, with success.
-pub fn check_finite(image: &Image, path: &Path) -> Result<()> {
-    let bad = image.pixels.iter().filter(|p| !p.is_finite()).count();
-    if bad > 0 {
-        bail!(
-            "{}: {bad} pixels are NaN or infinite; the error metrics would be NaN",
-            path.display()
-        );
-    }
-    Ok(())
-}
-
-pub fn run(args: DiffArgs) -> Result<()> {
+pub fn run(args: DiffArgs, log: &mut Log) -> Result<()> {
     let (a, _) = image_io::read_exr(&args.a)?;
     let (b, _) = image_io::read_exr(&args.b)?;
     let both = || format!("{} vs {}", args.a.display(), args.b.display());
@@ -495,15 +272,15 @@ pub fn run(args: DiffArgs) -> Result<()> {
         None => None,
     };
     for (key, value) in summary_fields(&args, rect, &m, ssim, flip, map) {
-        logging::record(&key, value);
+        log.record(&key, value);
     }
-    if !logging::json() {
+    if !log.json() {
         print_table(&args, rect, &m, ssim, flip);
         if let (Some(path), Some(scale)) = (&args.map, map) {
             println!(
                 "error map: {} ({}, log colour scale {:.3e} to {:.3e})",
                 path.display(),
-                args.map_kind.label(),
+                MapKind::from(args.map_kind).label(),
                 scale.lo,
                 scale.hi
             );
@@ -523,7 +300,7 @@ fn write_map(
     if map.extension().and_then(|e| e.to_str()) != Some("png") {
         bail!("--map {}: the error map must be a .png file", map.display());
     }
-    let values = error_map(a, b, rect, args.map_kind);
+    let values = error_map(a, b, rect, args.map_kind.into());
     let scale = plot::LogScale::fit(&values);
     let panel = plot::HeatPanel {
         title: format!("{} vs {}", file_name(&args.a), file_name(&args.b)),
@@ -531,7 +308,7 @@ fn write_map(
         height: rect.h,
         values,
     };
-    plot::write_heat_maps(map, &[panel], scale, args.map_kind.label())
+    plot::write_heat_maps(map, &[panel], scale, MapKind::from(args.map_kind).label())
         .with_context(|| format!("writing the error map {}", map.display()))?;
     Ok(scale)
 }
@@ -655,37 +432,6 @@ mod tests {
             }
         }
         img
-    }
-
-    #[test]
-    fn hand_computed_metrics() {
-        let b = image(2, 1, |x, _| Vec3::splat(x as f32 + 1.0)); // 1, 2
-        let a = image(2, 1, |x, _| Vec3::new(x as f32 + 1.5, x as f32 + 1.0, 0.0)); // +0.5, 0, −B
-        let m = metrics(&a, &b, Rect::window_of(&a));
-        assert_eq!(m.mse[0], 0.25);
-        assert_eq!(m.mse[1], 0.0);
-        assert_eq!(m.mse[2], (1.0 + 4.0) / 2.0);
-        let rel_r = (0.25 / (1.0 + REL_EPSILON) + 0.25 / (4.0 + REL_EPSILON)) / 2.0;
-        assert!((m.relmse[0] - rel_r).abs() < 1e-15);
-        assert_eq!(m.mean_diff, [0.5, 0.0, -1.5]);
-        assert_eq!(m.peak, 2.0);
-        assert!((m.psnr(0.25) - 10.0 * 16f64.log10()).abs() < 1e-12);
-        // A region: only the second pixel.
-        let r = resolve_region(
-            &a,
-            Some(Rect {
-                x: 1,
-                y: 0,
-                w: 1,
-                h: 1,
-            }),
-        )
-        .unwrap();
-        assert_eq!(metrics(&a, &b, r).mse, [0.25, 0.0, 4.0]);
-        assert_eq!(
-            error_map(&a, &b, r, MapKind::Abs),
-            vec![((0.25f64 + 4.0) / 3.0).sqrt() as f32]
-        );
     }
 
     /// Display values in [0, 1] from integer patterns, so that the scikit-image script that

@@ -4,13 +4,14 @@
 //! `tress merge` command that assembles their outputs into the image of the single full render.
 //! Every job writes its exact sample sums (`--sums`), which the merge needs.
 
-use crate::integrators::IntegratorDesc;
-use crate::scene_desc;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use tress_core::film::Aov;
+use tress_scene::integrators::IntegratorDesc;
+use tress_scene::placeholders::{self, Defines};
+use tress_scene::scene_desc;
 
 fn parse_aov(s: &str) -> Result<Aov, String> {
     s.parse()
@@ -49,7 +50,7 @@ pub struct FarmArgs {
     pub aov: Vec<Aov>,
     /// Values for the scene's `${name}` placeholders, passed to every job (see `tress render
     /// -D`).
-    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = scene_desc::parse_define)]
+    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = placeholders::parse_define)]
     pub defines: Vec<(String, String)>,
     /// The tress executable the commands run. Default: this one, by absolute path.
     #[arg(long)]
@@ -81,7 +82,7 @@ fn utf8(p: &Path) -> Result<String> {
 }
 
 pub fn run(args: FarmArgs) -> Result<()> {
-    let defines = scene_desc::defines(&args.defines)?;
+    let defines = placeholders::defines(&args.defines)?;
     let mut desc = scene_desc::load_with(&args.scene, &defines)?;
     if let Some(spp) = args.spp {
         desc.film.spp = spp;
@@ -129,28 +130,7 @@ pub fn run(args: FarmArgs) -> Result<()> {
         Some(t) => shell_quote(t),
         None => utf8(&std::env::current_exe().context("finding the tress executable")?)?,
     };
-    let mut common = Vec::new();
-    for (name, value) in &defines {
-        common.push(format!("-D {}", shell_quote(&format!("{name}={value}"))));
-    }
-    if let Some(seed) = args.seed {
-        common.push(format!("--seed {seed}"));
-    }
-    if let Some(name) = &args.integrator {
-        common.push(format!("--integrator {}", shell_quote(name)));
-    }
-    if let Some(t) = args.threads {
-        common.push(format!("--threads {t}"));
-    }
-    if args.alpha {
-        common.push("--alpha".into());
-    }
-    let aovs: BTreeSet<Aov> = args.aov.iter().copied().collect();
-    if !aovs.is_empty() {
-        let names: Vec<&str> = aovs.iter().map(|a| a.name()).collect();
-        common.push(format!("--aov {}", names.join(",")));
-    }
-    let common = common.iter().map(|c| format!(" {c}")).collect::<String>();
+    let common = job_options(&args, &defines);
 
     let (tiles, passes) = (args.tiles as u64, args.passes as u64);
     let spp = film.spp as u64;
@@ -197,6 +177,33 @@ pub fn run(args: FarmArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The options every render job shares: the placeholders' values, the seed, integrator, threads
+/// and outputs given to `tress farm`, each with a leading space.
+fn job_options(args: &FarmArgs, defines: &Defines) -> String {
+    let mut common = Vec::new();
+    for (name, value) in defines {
+        common.push(format!("-D {}", shell_quote(&format!("{name}={value}"))));
+    }
+    if let Some(seed) = args.seed {
+        common.push(format!("--seed {seed}"));
+    }
+    if let Some(name) = &args.integrator {
+        common.push(format!("--integrator {}", shell_quote(name)));
+    }
+    if let Some(t) = args.threads {
+        common.push(format!("--threads {t}"));
+    }
+    if args.alpha {
+        common.push("--alpha".into());
+    }
+    let aovs: BTreeSet<Aov> = args.aov.iter().copied().collect();
+    if !aovs.is_empty() {
+        let names: Vec<&str> = aovs.iter().map(|a| a.name()).collect();
+        common.push(format!("--aov {}", names.join(",")));
+    }
+    common.iter().map(|c| format!(" {c}")).collect::<String>()
 }
 
 /// Decimal digits of `n` (at least 1), for zero-padded names that sort in order.

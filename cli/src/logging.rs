@@ -8,11 +8,11 @@
 //! ```
 //!
 //! with `status` `ok`, `error` (and `error`: the message) or `interrupted`, plus whatever the
-//! command recorded with [`record`] before it ended.
+//! command recorded with [`Log::record`] before it ended. A [`Log`] belongs to one run of one
+//! command: `main` makes it and hands it to the command.
 
 use serde::Serialize;
 use serde_json::{Map, Value};
-use std::sync::{Mutex, OnceLock};
 
 /// How commands report.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
@@ -24,29 +24,6 @@ pub enum LogFormat {
     Json,
 }
 
-static FORMAT: OnceLock<LogFormat> = OnceLock::new();
-static FIELDS: Mutex<Option<Map<String, Value>>> = Mutex::new(None);
-
-/// Sets the format for the whole run (the first call wins).
-pub fn set_format(format: LogFormat) {
-    let _ = FORMAT.set(format);
-}
-
-/// Whether the run reports in JSON.
-pub fn json() -> bool {
-    FORMAT.get() == Some(&LogFormat::Json)
-}
-
-/// Adds `key` to the command's JSON summary (replacing an earlier value). Values that cannot be
-/// represented in JSON (non-finite floats) are written as `null`.
-pub fn record(key: &str, value: impl Serialize) {
-    let value = serde_json::to_value(value).unwrap_or(Value::Null);
-    let mut fields = FIELDS.lock().unwrap_or_else(|e| e.into_inner());
-    fields
-        .get_or_insert_with(Map::new)
-        .insert(key.to_string(), value);
-}
-
 /// How a command ended.
 pub enum Outcome<'a> {
     Ok,
@@ -54,33 +31,61 @@ pub enum Outcome<'a> {
     Error(&'a anyhow::Error),
 }
 
-/// The summary line of `command`: its status and the recorded fields (keys in sorted order).
-pub fn summary_line(command: &str, outcome: Outcome) -> String {
-    let mut line = Map::new();
-    line.insert("command".into(), command.into());
-    let status = match outcome {
-        Outcome::Ok => "ok",
-        Outcome::Interrupted => "interrupted",
-        Outcome::Error(_) => "error",
-    };
-    line.insert("status".into(), status.into());
-    if let Outcome::Error(e) = outcome {
-        line.insert("error".into(), format!("{e:#}").into());
-    }
-    let fields = FIELDS.lock().unwrap_or_else(|e| e.into_inner()).take();
-    for (k, v) in fields.unwrap_or_default() {
-        // The status is the runner's to say.
-        if !line.contains_key(&k) {
-            line.insert(k, v);
-        }
-    }
-    Value::Object(line).to_string()
+/// The report of one command's run: its format and the fields of its JSON summary.
+#[derive(Debug)]
+pub struct Log {
+    format: LogFormat,
+    fields: Map<String, Value>,
 }
 
-/// Prints the summary line of `command` on stdout when the run reports in JSON.
-pub fn finish(command: &str, outcome: Outcome) {
-    if json() {
-        println!("{}", summary_line(command, outcome));
+impl Log {
+    /// An empty report in `format`.
+    pub fn new(format: LogFormat) -> Log {
+        Log {
+            format,
+            fields: Map::new(),
+        }
+    }
+
+    /// Whether the run reports in JSON.
+    pub fn json(&self) -> bool {
+        self.format == LogFormat::Json
+    }
+
+    /// Adds `key` to the command's JSON summary (replacing an earlier value). Values that
+    /// cannot be represented in JSON (non-finite floats) are written as `null`.
+    pub fn record(&mut self, key: &str, value: impl Serialize) {
+        let value = serde_json::to_value(value).unwrap_or(Value::Null);
+        self.fields.insert(key.to_string(), value);
+    }
+
+    /// The summary line of `command`: its status and the recorded fields (keys in sorted order).
+    pub fn summary_line(&self, command: &str, outcome: Outcome) -> String {
+        let mut line = Map::new();
+        line.insert("command".into(), command.into());
+        let status = match outcome {
+            Outcome::Ok => "ok",
+            Outcome::Interrupted => "interrupted",
+            Outcome::Error(_) => "error",
+        };
+        line.insert("status".into(), status.into());
+        if let Outcome::Error(e) = outcome {
+            line.insert("error".into(), format!("{e:#}").into());
+        }
+        for (k, v) in &self.fields {
+            // The status is the runner's to say.
+            if !line.contains_key(k) {
+                line.insert(k.clone(), v.clone());
+            }
+        }
+        Value::Object(line).to_string()
+    }
+
+    /// Prints the summary line of `command` on stdout when the run reports in JSON.
+    pub fn finish(&self, command: &str, outcome: Outcome) {
+        if self.json() {
+            println!("{}", self.summary_line(command, outcome));
+        }
     }
 }
 
@@ -90,12 +95,14 @@ mod tests {
 
     #[test]
     fn the_summary_line_is_one_json_object_with_the_recorded_fields() {
-        record("spp", 64u32);
-        record("time_s", 1.5f64);
-        record("outputs", ["a.exr", "a.png"]);
-        record("not_finite", f64::NAN);
-        record("spp", 128u32);
-        let line = summary_line("render", Outcome::Ok);
+        let mut log = Log::new(LogFormat::Json);
+        log.record("spp", 64u32);
+        log.record("time_s", 1.5f64);
+        log.record("outputs", ["a.exr", "a.png"]);
+        log.record("not_finite", f64::NAN);
+        log.record("spp", 128u32);
+        log.record("status", "recorded");
+        let line = log.summary_line("render", Outcome::Ok);
         assert!(!line.contains('\n'));
         let v: Value = serde_json::from_str(&line).unwrap();
         assert_eq!(v["command"], "render");
@@ -104,9 +111,11 @@ mod tests {
         assert_eq!(v["time_s"], 1.5);
         assert_eq!(v["outputs"][1], "a.png");
         assert!(v["not_finite"].is_null());
-        // Taken: the next command starts empty.
+        // Each run has its own log: another command's starts empty.
         let e = anyhow::anyhow!("inner").context("outer");
-        let v: Value = serde_json::from_str(&summary_line("diff", Outcome::Error(&e))).unwrap();
+        let other = Log::new(LogFormat::Json);
+        let v: Value =
+            serde_json::from_str(&other.summary_line("diff", Outcome::Error(&e))).unwrap();
         assert_eq!(v["status"], "error");
         assert_eq!(v["error"], "outer: inner");
         assert!(v.get("spp").is_none());

@@ -3,8 +3,7 @@
 // The commands live in the library target (so that fuzz targets and the Python bindings reach
 // exactly what the binary runs); the binary parses the command line and dispatches.
 use tress_cli::{
-    atomic_write, bcsdf_cmd, bench, calibrate, diff, farm, interrupt, logging, merge, render_cmd,
-    study,
+    bcsdf_cmd, bench, calibrate, diff, farm, interrupt, logging, merge, render_cmd, study,
 };
 
 use anyhow::Result;
@@ -33,7 +32,7 @@ enum Command {
         /// Scene file (RON).
         scene: PathBuf,
         /// Values for the scene's `${name}` placeholders: `-D spp=64`.
-        #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = tress_cli::scene_desc::parse_define)]
+        #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = tress_scene::placeholders::parse_define)]
         defines: Vec<(String, String)>,
     },
     /// Tools for adding and tuning hair models: furnace, eval.
@@ -71,7 +70,7 @@ fn main() {
     let matches = Cli::command().get_matches();
     let command = matches.subcommand_name().unwrap_or_default().to_string();
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
-    logging::set_format(cli.log_format);
+    let mut log = logging::Log::new(cli.log_format);
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
@@ -81,8 +80,8 @@ fn main() {
         .with_ansi(std::io::stderr().is_terminal())
         .without_time()
         .init();
-    let result = run(cli);
-    logging::finish(
+    let result = run(cli, &mut log);
+    log.finish(
         &command,
         match &result {
             Ok(()) => logging::Outcome::Ok,
@@ -104,21 +103,21 @@ fn main() {
     }
 }
 
-fn run(cli: Cli) -> Result<()> {
+fn run(cli: Cli, log: &mut logging::Log) -> Result<()> {
     // JSON reports replace the progress bars and the readable summaries.
-    let quiet = logging::json();
+    let quiet = log.json();
     match cli.command {
         Command::Render(mut args) => {
-            args.quiet |= quiet;
-            render_cmd::render(args)
+            args.run.quiet |= quiet;
+            render_cmd::render(args, log)
         }
         Command::Info { scene, defines } => render_cmd::info(&scene, &defines),
         Command::Bcsdf(cmd) => bcsdf_cmd::run(cmd),
         Command::Study(mut args) => {
-            args.quiet |= quiet;
-            study::run(args).map(|_| ())
+            args.run.quiet |= quiet;
+            study::run(args, log).map(|_| ())
         }
-        Command::Diff(args) => diff::run(args),
+        Command::Diff(args) => diff::run(args, log),
         Command::Bench(args) => bench::run(args),
         Command::Merge(mut args) => {
             args.quiet |= quiet;
@@ -126,7 +125,7 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Farm(args) => farm::run(args),
         Command::Calibrate(mut args) => {
-            args.quiet |= quiet;
+            args.run.quiet |= quiet;
             calibrate::run(args)
         }
         Command::Init { path } => init(&path),
@@ -141,7 +140,7 @@ fn init(path: &std::path::Path) -> Result<()> {
     if path.exists() {
         anyhow::bail!("{} exists: not overwritten", path.display());
     }
-    atomic_write(path, STARTER_SCENE.as_bytes())?;
+    tress_scene::output::atomic_write(path, STARTER_SCENE.as_bytes())?;
     eprintln!(
         "wrote {}; render it with: tress render {}",
         path.display(),

@@ -39,6 +39,51 @@ pub struct MergeArgs {
 }
 
 pub fn run(args: MergeArgs) -> Result<()> {
+    check_output(&args)?;
+    let pieces = args
+        .pieces
+        .iter()
+        .map(|p| read_piece(p))
+        .collect::<Result<Vec<_>>>()?;
+    let plan = plan(&pieces, args.crop)?;
+    let total = plan.samples.end - plan.samples.start;
+    if let Some(expected) = args.expect_spp {
+        check_expected_spp(&plan, expected)?;
+    }
+    let merged = merge_sums(&pieces, &plan)?;
+    let first = &pieces[0];
+    let attributes = merged_attributes(&pieces);
+    let identity = Identity {
+        seed: first.seed,
+        scene_hash: first.scene_hash.clone(),
+    };
+    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("creating output folder {}", dir.display()))?;
+    }
+    args.preview.write_with(
+        &args.out,
+        |p| write_render(p, &merged, args.sums, &identity, &attributes),
+        &merged.image(),
+    )?;
+    if !args.quiet {
+        let [x0, y0, x1, y1] = plan.window;
+        eprintln!(
+            "merged {} pieces ({} sample ranges) into {}x{} pixels at {total} spp (samples [{}, {}))",
+            pieces.len(),
+            plan.groups.len(),
+            x1 - x0,
+            y1 - y0,
+            plan.samples.start,
+            plan.samples.end
+        );
+        eprintln!("wrote {}", args.out.display());
+    }
+    Ok(())
+}
+
+/// Refuses an output that is not an EXR, or that is one of the pieces.
+fn check_output(args: &MergeArgs) -> Result<()> {
     if !args
         .out
         .extension()
@@ -65,29 +110,30 @@ pub fn run(args: MergeArgs) -> Result<()> {
             );
         }
     }
-    let pieces = args
-        .pieces
-        .iter()
-        .map(|p| read_piece(p))
-        .collect::<Result<Vec<_>>>()?;
-    let plan = plan(&pieces, args.crop)?;
-    let total = plan.samples.end - plan.samples.start;
-    if let Some(expected) = args.expect_spp {
-        if total != expected {
-            bail!(
-                "the pieces hold samples [{}, {}) = {total} per pixel, but {expected} were expected: \
-                 {}",
-                plan.samples.start,
-                plan.samples.end,
-                if total < expected {
-                    "some passes are missing"
-                } else {
-                    "there are more passes than expected"
-                }
-            );
-        }
-    }
+    Ok(())
+}
 
+/// Refuses pieces that do not hold `expected` samples per pixel (`--expect-spp`).
+fn check_expected_spp(plan: &Plan, expected: u64) -> Result<()> {
+    let total = plan.samples.end - plan.samples.start;
+    if total != expected {
+        bail!(
+            "the pieces hold samples [{}, {}) = {total} per pixel, but {expected} were expected: \
+             {}",
+            plan.samples.start,
+            plan.samples.end,
+            if total < expected {
+                "some passes are missing"
+            } else {
+                "there are more passes than expected"
+            }
+        );
+    }
+    Ok(())
+}
+
+/// The sums of the pieces, sample range after sample range, over the merged window.
+fn merge_sums(pieces: &[Piece], plan: &Plan) -> Result<SampleSums> {
     let first = &pieces[0];
     let outputs = first.outputs.clone();
     let mut merged = SampleSums::empty(
@@ -126,7 +172,13 @@ pub fn run(args: MergeArgs) -> Result<()> {
             .append(&group_sums)
             .map_err(|e| anyhow!("merging the pieces: {e}"))?;
     }
+    Ok(merged)
+}
 
+/// The merged image's header: what the pieces share (scene, integrator, camera) from the first,
+/// their statistics summed, and how many they were.
+fn merged_attributes(pieces: &[Piece]) -> Vec<(&'static str, Attribute)> {
+    let first = &pieces[0];
     let sum_attr = |name: &str| -> f64 {
         pieces
             .iter()
@@ -134,7 +186,7 @@ pub fn run(args: MergeArgs) -> Result<()> {
             .sum()
     };
     // What the pieces share (scene, integrator, camera) is copied from the first.
-    let mut attributes: Vec<(&str, Attribute)> = [
+    let mut attributes: Vec<(&'static str, Attribute)> = [
         "tress:scene",
         "tress:integrator",
         "worldToCamera",
@@ -147,33 +199,7 @@ pub fn run(args: MergeArgs) -> Result<()> {
         attributes.push((statistic, Attribute::Double(sum_attr(statistic))));
     }
     attributes.push(("tress:merged_from", Attribute::whole(pieces.len() as u64)));
-    let identity = Identity {
-        seed: first.seed,
-        scene_hash: first.scene_hash.clone(),
-    };
-    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("creating output folder {}", dir.display()))?;
-    }
-    args.preview.write_with(
-        &args.out,
-        |p| write_render(p, &merged, args.sums, &identity, &attributes),
-        &merged.image(),
-    )?;
-    if !args.quiet {
-        let [x0, y0, x1, y1] = plan.window;
-        eprintln!(
-            "merged {} pieces ({} sample ranges) into {}x{} pixels at {total} spp (samples [{}, {}))",
-            pieces.len(),
-            plan.groups.len(),
-            x1 - x0,
-            y1 - y0,
-            plan.samples.start,
-            plan.samples.end
-        );
-        eprintln!("wrote {}", args.out.display());
-    }
-    Ok(())
+    attributes
 }
 
 /// Pieces that render the same sample range.
@@ -191,6 +217,20 @@ struct Plan {
 /// Checks that the pieces belong together and tile the window for every sample range, and that
 /// the ranges follow each other without gaps or overlaps.
 fn plan(pieces: &[Piece], crop: Option<[u32; 4]>) -> Result<Plan> {
+    check_compatible(pieces)?;
+    let window = merged_window(pieces, crop)?;
+    let groups = sample_groups(pieces)?;
+    check_coverage(pieces, window, &groups)?;
+    let samples = groups[0].samples.start..groups[groups.len() - 1].samples.end;
+    Ok(Plan {
+        window,
+        samples,
+        groups,
+    })
+}
+
+/// Refuses pieces of different films, seeds, scenes or outputs.
+fn check_compatible(pieces: &[Piece]) -> Result<()> {
     let first = &pieces[0];
     for p in &pieces[1..] {
         let mismatch = |what: &str, a: String, b: String| {
@@ -229,7 +269,13 @@ fn plan(pieces: &[Piece], crop: Option<[u32; 4]>) -> Result<Plan> {
             ));
         }
     }
+    Ok(())
+}
 
+/// The window to merge: `--crop`, the pieces' common window, or the whole film; every piece
+/// must lie in it.
+fn merged_window(pieces: &[Piece], crop: Option<[u32; 4]>) -> Result<[u32; 4]> {
+    let first = &pieces[0];
     let window = match crop {
         Some(c) => {
             let [x0, y0, x1, y1] = c;
@@ -259,7 +305,12 @@ fn plan(pieces: &[Piece], crop: Option<[u32; 4]>) -> Result<Plan> {
             );
         }
     }
+    Ok(window)
+}
 
+/// The pieces grouped by sample range, in order; the ranges must follow each other without
+/// gaps or overlaps.
+fn sample_groups(pieces: &[Piece]) -> Result<Vec<Group>> {
     let mut by_range: BTreeMap<(u64, u64), Vec<usize>> = BTreeMap::new();
     for (i, p) in pieces.iter().enumerate() {
         by_range
@@ -301,12 +352,15 @@ fn plan(pieces: &[Piece], crop: Option<[u32; 4]>) -> Result<Plan> {
             );
         }
     }
+    Ok(groups)
+}
 
-    // Every sample range must cover every pixel of the window exactly once.
+/// Every sample range must cover every pixel of the window exactly once.
+fn check_coverage(pieces: &[Piece], window: [u32; 4], groups: &[Group]) -> Result<()> {
     let [wx0, wy0, wx1, wy1] = window;
     let ww = (wx1 - wx0) as usize;
     let mut owner = vec![usize::MAX; ww * (wy1 - wy0) as usize];
-    for g in &groups {
+    for g in groups {
         owner.fill(usize::MAX);
         for &i in &g.pieces {
             let [x0, y0, x1, y1] = pieces[i].window;
@@ -344,10 +398,5 @@ fn plan(pieces: &[Piece], crop: Option<[u32; 4]>) -> Result<Plan> {
             );
         }
     }
-    let samples = groups[0].samples.start..groups[groups.len() - 1].samples.end;
-    Ok(Plan {
-        window,
-        samples,
-        groups,
-    })
+    Ok(())
 }

@@ -5,20 +5,23 @@
 //! Between waves the render can stop at a time limit, write a partial image, or, after Ctrl-C,
 //! stop and write the samples finished so far.
 
-use crate::integrators::IntegratorDesc;
+use crate::args::RunArgs;
 use crate::interrupt::Interrupt;
+use crate::logging::Log;
+use crate::progress::progress_bar;
 use crate::render_file::{self, parse_crop, Identity, PreviewArgs};
-use crate::scene_desc::{self, SceneDesc};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use tress_core::film::{Aov, Outputs};
 use tress_core::image_io::Attribute;
 use tress_core::render::{self, RenderStats, SampleSums};
 use tress_core::Integrator;
+use tress_scene::integrators::IntegratorDesc;
+use tress_scene::placeholders;
+use tress_scene::scene_desc::{self, SceneDesc};
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
@@ -44,9 +47,6 @@ pub struct RenderArgs {
     /// Random seed; overrides the scene's film.seed.
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Worker threads (default: all cores). The image does not depend on it.
-    #[arg(long, value_parser = crate::parse_threads)]
-    pub threads: Option<usize>,
     /// Render only the pixel window x0,y0,x1,y1 (x1, y1 exclusive). The image equals the same
     /// window of the full render bit for bit.
     #[arg(long, value_parser = parse_crop)]
@@ -64,7 +64,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub partial: bool,
     /// Values for the scene's `${name}` placeholders: `-D spp=64 -D groom=curly`.
-    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = scene_desc::parse_define)]
+    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = placeholders::parse_define)]
     pub defines: Vec<(String, String)>,
     /// Also write the exact sample sums into the EXR, so that `tress merge` can join it with
     /// other tiles and sample ranges bit for bit (larger files; `tress farm` jobs use it).
@@ -82,9 +82,8 @@ pub struct RenderArgs {
     pub aov: Vec<Aov>,
     #[command(flatten)]
     pub preview: PreviewArgs,
-    /// No progress bar and no summary.
-    #[arg(long)]
-    pub quiet: bool,
+    #[command(flatten)]
+    pub run: RunArgs,
 }
 
 fn parse_aov(s: &str) -> Result<Aov, String> {
@@ -113,7 +112,7 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
 
 /// The scene file with command-line overrides applied.
 fn load_with_overrides(args: &RenderArgs) -> Result<SceneDesc> {
-    let defines = scene_desc::defines(&args.defines)?;
+    let defines = placeholders::defines(&args.defines)?;
     let mut desc = scene_desc::load_with(&args.scene, &defines)?;
     if let Some(name) = &args.integrator {
         desc.integrator = IntegratorDesc::parse_arg(name).map_err(anyhow::Error::msg)?;
@@ -251,8 +250,88 @@ impl OutputFiles<'_> {
     }
 }
 
-pub fn render(args: RenderArgs) -> Result<()> {
+pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
     let desc = load_with_overrides(&args)?;
+    let out = output_path(&args)?;
+    let pool = args.run.thread_pool()?;
+    let verbose = !args.run.quiet;
+
+    let built =
+        pool.install(|| scene_desc::build(&desc, &args.scene, &crate::limits_from_env()))?;
+    if verbose {
+        eprintln!("{}", built.summary);
+    }
+    let prep = tress_core::prepare::Preparation::with_limits(crate::limits_from_env());
+    let integrator = build_integrator(&args, &desc, &built.scene, &pool, &prep, verbose)?;
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("creating output folder {}", dir.display()))?;
+    }
+    let files = OutputFiles {
+        args: &args,
+        desc: &desc,
+        out: out.clone(),
+        identity: Identity {
+            seed: desc.film.seed,
+            scene_hash: scene_hash(&desc, &args.scene)?,
+        },
+        camera: &built.scene.camera,
+    };
+
+    let interrupt = Interrupt::install()?;
+    // The integrator's per-film precomputation (a radiance cache), with its own bar; it counts
+    // as render time.
+    let t_prepare = Instant::now();
+    let prepare_bar = progress_bar(1000, verbose, "precomputing ");
+    let prepared = pool.install(|| {
+        integrator.for_film(&built.scene, &desc.film, &|done| {
+            prepare_bar.set_position((done * 1000.0) as u64)
+        })
+    });
+    prepare_bar.finish_and_clear();
+    let prepare_time = t_prepare.elapsed();
+    let stats = RenderStats {
+        wall: prepare_time,
+        precompute: prepare_time,
+        precompute_note: prepared.as_ref().map(|p| p.note.clone()),
+        ..Default::default()
+    };
+    let integrator: &dyn Integrator = match &prepared {
+        Some(p) => {
+            if verbose {
+                eprintln!("{}", p.note);
+            }
+            p.integrator.as_ref()
+        }
+        None => integrator.as_ref(),
+    };
+
+    let render = Waves {
+        args: &args,
+        desc: &desc,
+        scene: &built.scene,
+        integrator,
+        pool: &pool,
+        files: &files,
+    };
+    let rendered = render.run(interrupt.cancel_flag(), stats, verbose)?;
+    if rendered.reached == 0 {
+        eprintln!(
+            "interrupted before the first sample of every pixel was finished: nothing written"
+        );
+        return Err(interrupt.interrupted().into());
+    }
+    files.write(&rendered.sums, &rendered.stats, rendered.status)?;
+    report(&args, &desc, &out, &rendered, log);
+    if rendered.status == Status::Interrupted {
+        return Err(interrupt.interrupted().into());
+    }
+    Ok(())
+}
+
+/// The EXR to write: `--out`, by default `<scene name>.exr`; refused unless an `.exr`, or when
+/// a directory is in the way of it or its PNG.
+fn output_path(args: &RenderArgs) -> Result<PathBuf> {
     let out = match &args.out {
         Some(p) => p.clone(),
         None => PathBuf::from(format!("{}.exr", scene_stem(&args.scene))),
@@ -273,22 +352,22 @@ pub fn render(args: RenderArgs) -> Result<()> {
             bail!("--out {}: {} is a directory", out.display(), path.display());
         }
     }
-    let threads = args.threads.unwrap_or(0);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .context("creating the thread pool")?;
-    let verbose = !args.quiet;
+    Ok(out)
+}
 
-    let built =
-        pool.install(|| scene_desc::build(&desc, &args.scene, &crate::limits_from_env()))?;
-    if verbose {
-        eprintln!("{}", built.summary);
-    }
+/// Builds the scene's integrator; tells what it precomputed, and how long that took when it is
+/// worth a line (dual-scattering tables).
+fn build_integrator(
+    args: &RenderArgs,
+    desc: &SceneDesc,
+    scene: &tress_core::Scene,
+    pool: &rayon::ThreadPool,
+    prep: &tress_core::prepare::Preparation,
+    verbose: bool,
+) -> Result<Box<dyn Integrator>> {
     let t_integrator = Instant::now();
-    let prep = tress_core::prepare::Preparation::with_limits(crate::limits_from_env());
     let integrator = pool
-        .install(|| desc.integrator.build(&built.scene, &prep))
+        .install(|| desc.integrator.build(scene, prep))
         .map_err(|e| {
             anyhow::anyhow!(
                 "{}: integrator {}: {e:#}",
@@ -296,7 +375,6 @@ pub fn render(args: RenderArgs) -> Result<()> {
                 desc.integrator.name()
             )
         })?;
-    // Worth a line when the integrator precomputed something (dual-scattering tables).
     let setup = t_integrator.elapsed();
     if verbose {
         prep.take_notes()
@@ -310,127 +388,124 @@ pub fn render(args: RenderArgs) -> Result<()> {
             setup.as_secs_f64()
         );
     }
-    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("creating output folder {}", dir.display()))?;
-    }
-    let files = OutputFiles {
-        args: &args,
-        desc: &desc,
-        out: out.clone(),
-        identity: Identity {
-            seed: desc.film.seed,
-            scene_hash: scene_hash(&desc, &args.scene)?,
-        },
-        camera: &built.scene.camera,
-    };
-    let outputs = args.outputs();
+    Ok(integrator)
+}
 
-    let interrupt = Interrupt::install()?;
-    let cancel = interrupt.cancel_flag();
+/// The render loop: waves of samples until the target spp, a time limit or an interrupt.
+struct Waves<'a> {
+    args: &'a RenderArgs,
+    desc: &'a SceneDesc,
+    scene: &'a tress_core::Scene,
+    integrator: &'a dyn Integrator,
+    pool: &'a rayon::ThreadPool,
+    files: &'a OutputFiles<'a>,
+}
 
-    // The integrator's per-film precomputation (a radiance cache), with its own bar; it counts
-    // as render time.
-    let t_prepare = Instant::now();
-    let prepare_bar = progress_bar(1000, verbose, "precomputing ");
-    let prepared = pool.install(|| {
-        integrator.for_film(&built.scene, &desc.film, &|done| {
-            prepare_bar.set_position((done * 1000.0) as u64)
-        })
-    });
-    prepare_bar.finish_and_clear();
-    let prepare_time = t_prepare.elapsed();
-    let integrator: &dyn Integrator = match &prepared {
-        Some(p) => {
-            if verbose {
-                eprintln!("{}", p.note);
+/// What the render loop finished.
+struct Rendered {
+    sums: SampleSums,
+    stats: RenderStats,
+    /// Samples per pixel finished.
+    reached: u64,
+    status: Status,
+}
+
+impl Waves<'_> {
+    /// Renders waves of cumulative 1, 2, 4, … spp, writing the partial image after each with
+    /// `--partial`; `stats` holds the precomputation's time.
+    fn run(&self, cancel: &AtomicBool, mut stats: RenderStats, verbose: bool) -> Result<Rendered> {
+        let (args, film) = (self.args, &self.desc.film);
+        let outputs = args.outputs();
+        let [x0, y0, x1, y1] = film.window();
+        let target = film.spp as u64;
+        let first = args.spp_offset;
+        let bar = progress_bar((x1 - x0) as u64 * (y1 - y0) as u64 * target, verbose, "");
+        let progress = |n: u64| bar.inc(n);
+        let limit = args.time_limit.map(Duration::from_secs_f64);
+        let start = Instant::now();
+        let mut sums = SampleSums::empty(
+            film.window(),
+            film.width,
+            film.height,
+            first,
+            outputs.clone(),
+        );
+        let mut reached = 0u64;
+        let mut status = Status::Complete;
+        while reached < target {
+            let next = (2 * reached).clamp(1, target);
+            let wave = self.pool.install(|| {
+                render::render_outputs(
+                    self.scene,
+                    self.integrator,
+                    film,
+                    &outputs,
+                    first + reached..first + next,
+                    cancel,
+                    &progress,
+                )
+            });
+            let Some(wave) = wave else {
+                status = Status::Interrupted;
+                break;
+            };
+            sums.append(&wave.sums).map_err(anyhow::Error::msg)?;
+            stats.add(&wave.stats);
+            reached = next;
+            if reached < target {
+                if limit.is_some_and(|l| start.elapsed() >= l) {
+                    status = Status::TimeLimit;
+                    break;
+                }
+                if args.partial {
+                    self.files.write(&sums, &stats, Status::Partial)?;
+                }
             }
-            p.integrator.as_ref()
         }
-        None => integrator.as_ref(),
-    };
+        bar.finish_and_clear();
+        Ok(Rendered {
+            sums,
+            stats,
+            reached,
+            status,
+        })
+    }
+}
 
-    let [x0, y0, x1, y1] = desc.film.window();
+/// The closing lines for people, the fields of the JSON summary, and a warning when samples
+/// were dropped.
+fn report(args: &RenderArgs, desc: &SceneDesc, out: &Path, rendered: &Rendered, log: &mut Log) {
+    let Rendered {
+        stats,
+        reached,
+        status,
+        ..
+    } = rendered;
+    let (reached, status) = (*reached, *status);
     let target = desc.film.spp as u64;
     let first = args.spp_offset;
-    let bar = progress_bar((x1 - x0) as u64 * (y1 - y0) as u64 * target, verbose, "");
-    let progress = |n: u64| bar.inc(n);
-    let limit = args.time_limit.map(Duration::from_secs_f64);
-    let start = Instant::now();
-    let mut done = SampleSums::empty(
-        desc.film.window(),
-        desc.film.width,
-        desc.film.height,
-        first,
-        outputs.clone(),
-    );
-    let mut stats = RenderStats {
-        wall: prepare_time,
-        precompute: prepare_time,
-        precompute_note: prepared.as_ref().map(|p| p.note.clone()),
-        ..Default::default()
-    };
-    let mut reached = 0u64;
-    let mut status = Status::Complete;
-    while reached < target {
-        let next = (2 * reached).clamp(1, target);
-        let wave = pool.install(|| {
-            render::render_outputs(
-                &built.scene,
-                integrator,
-                &desc.film,
-                &outputs,
-                first + reached..first + next,
-                cancel,
-                &progress,
-            )
-        });
-        let Some(wave) = wave else {
-            status = Status::Interrupted;
-            break;
-        };
-        done.append(&wave.sums).map_err(anyhow::Error::msg)?;
-        stats.add(&wave.stats);
-        reached = next;
-        if reached < target {
-            if limit.is_some_and(|l| start.elapsed() >= l) {
-                status = Status::TimeLimit;
-                break;
-            }
-            if args.partial {
-                files.write(&done, &stats, Status::Partial)?;
-            }
-        }
-    }
-    bar.finish_and_clear();
-
-    if reached == 0 {
-        eprintln!(
-            "interrupted before the first sample of every pixel was finished: nothing written"
-        );
-        return Err(interrupt.interrupted().into());
-    }
-    files.write(&done, &stats, status)?;
+    let verbose = !args.run.quiet;
     let png = out.with_extension("png");
-    let wrote = if args.preview.no_preview {
-        out.display().to_string()
-    } else {
-        format!("{} and {}", out.display(), png.display())
-    };
-    let spp_text = match status {
-        Status::Complete => format!("{reached} spp"),
-        Status::TimeLimit => format!(
-            "{reached} of {target} spp (time limit of {} s reached)",
-            args.time_limit.unwrap_or_default()
-        ),
-        _ => format!("{reached} of {target} spp (interrupted)"),
-    };
     if verbose || status == Status::Interrupted {
+        let wrote = if args.preview.no_preview {
+            out.display().to_string()
+        } else {
+            format!("{} and {}", out.display(), png.display())
+        };
+        let spp_text = match status {
+            Status::Complete => format!("{reached} spp"),
+            Status::TimeLimit => format!(
+                "{reached} of {target} spp (time limit of {} s reached)",
+                args.time_limit.unwrap_or_default()
+            ),
+            _ => format!("{reached} of {target} spp (interrupted)"),
+        };
         let range = if first > 0 {
             format!(" (samples {first}..{})", first + reached)
         } else {
             String::new()
         };
+        let [x0, y0, x1, y1] = desc.film.window();
         eprintln!(
             "rendered {}x{} at {spp_text}{range} with {} in {:.2} s: {:.3} Msamples/s, {:.3} Mrays/s",
             x1 - x0,
@@ -444,20 +519,20 @@ pub fn render(args: RenderArgs) -> Result<()> {
     }
     // The summary line of `--log-format json`.
     let outputs = if args.preview.no_preview {
-        vec![out.clone()]
+        vec![out.to_path_buf()]
     } else {
-        vec![out.clone(), png.clone()]
+        vec![out.to_path_buf(), png.clone()]
     };
-    crate::logging::record("outputs", outputs);
-    crate::logging::record("integrator", desc.integrator.name());
-    crate::logging::record("spp", reached);
-    crate::logging::record("spp_requested", target);
-    crate::logging::record("render_status", status.label());
-    crate::logging::record("time_s", stats.wall.as_secs_f64());
-    crate::logging::record("precompute_s", stats.precompute.as_secs_f64());
-    crate::logging::record("rays", stats.rays);
-    crate::logging::record("mrays_per_s", stats.rays_per_second() / 1e6);
-    crate::logging::record("nonfinite_samples", stats.nonfinite_samples);
+    log.record("outputs", outputs);
+    log.record("integrator", desc.integrator.name());
+    log.record("spp", reached);
+    log.record("spp_requested", target);
+    log.record("render_status", status.label());
+    log.record("time_s", stats.wall.as_secs_f64());
+    log.record("precompute_s", stats.precompute.as_secs_f64());
+    log.record("rays", stats.rays);
+    log.record("mrays_per_s", stats.rays_per_second() / 1e6);
+    log.record("nonfinite_samples", stats.nonfinite_samples);
     if stats.nonfinite_samples > 0 {
         let share = stats.nonfinite_samples as f64 / stats.samples.max(1) as f64;
         // A few dropped samples are noise; more than one in 10⁴ biases the image visibly.
@@ -474,14 +549,10 @@ pub fn render(args: RenderArgs) -> Result<()> {
             100.0 * share
         );
     }
-    if status == Status::Interrupted {
-        return Err(interrupt.interrupted().into());
-    }
-    Ok(())
 }
 
 pub fn info(scene: &Path, defines: &[(String, String)]) -> Result<()> {
-    let desc = scene_desc::load_with(scene, &scene_desc::defines(defines)?)?;
+    let desc = scene_desc::load_with(scene, &placeholders::defines(defines)?)?;
     desc.film
         .validate()
         .map_err(|e| anyhow::anyhow!("{}: film: {e}", scene.display()))?;
@@ -502,20 +573,4 @@ fn scene_stem(path: &Path) -> String {
     path.file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| "render".into())
-}
-
-/// A progress bar with ETA on stderr, labelled `label`; hidden when `verbose` is off or stderr is
-/// not a terminal.
-pub(crate) fn progress_bar(total: u64, verbose: bool, label: &str) -> ProgressBar {
-    if !verbose || !std::io::stderr().is_terminal() {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
-    bar.set_style(
-        ProgressStyle::with_template(&format!(
-            "{{spinner}} {label}[{{elapsed_precise}}] {{wide_bar}} {{percent}}% ETA {{eta}}"
-        ))
-        .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    bar
 }

@@ -424,7 +424,7 @@ pub struct PreviewArgs {
 
 impl PreviewArgs {
     /// Writes the EXR at `exr` with `write_exr` and the preview of `image` beside it (same
-    /// name, `.png`) unless disabled: both or neither ([`crate::write_together`]), as an EXR
+    /// name, `.png`) unless disabled: both or neither ([`tress_scene::output::write_together`]), as an EXR
     /// without its preview would look like a success.
     pub fn write_with(
         &self,
@@ -433,7 +433,8 @@ impl PreviewArgs {
         image: &tress_core::Image,
     ) -> Result<()> {
         let png = exr.with_extension("png");
-        let mut outputs: Vec<(&Path, crate::OutputWriter)> = vec![(exr, Box::new(write_exr))];
+        let mut outputs: Vec<(&Path, tress_scene::output::OutputWriter)> =
+            vec![(exr, Box::new(write_exr))];
         if !self.no_preview {
             outputs.push((
                 &png,
@@ -443,7 +444,7 @@ impl PreviewArgs {
                 }),
             ));
         }
-        crate::write_together(outputs)
+        tress_scene::output::write_together(outputs)
     }
 }
 

@@ -217,7 +217,7 @@ impl HairModel {
     #[new]
     fn new(model: &str) -> PyResult<Self> {
         let parsed: tress_materials::HairModel =
-            tress_cli::ron_options().from_str(model).map_err(|e| {
+            tress_scene::ron_options().from_str(model).map_err(|e| {
                 PyValueError::new_err(format!(
                     "hair model '{model}': {e} (models: {})",
                     tress_materials::HairModel::names().join(", ")
@@ -233,7 +233,7 @@ impl HairModel {
     }
 
     fn __repr__(&self) -> String {
-        let text = tress_cli::ron_options()
+        let text = tress_scene::ron_options()
             .to_string(&self.model)
             .unwrap_or_else(|_| format!("{:?}", self.model));
         format!("tress.HairModel({text:?})")

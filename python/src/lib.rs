@@ -1,9 +1,9 @@
 //! `tress._tress`: the Python extension module behind the `tress` package (`python/tress/`).
 //!
 //! It reaches the same code paths as the `tress` binary — scene files through
-//! `tress_cli::scene_desc`, integrators through the registry in `tress_cli::integrators`, the
+//! `tress_scene::scene_desc`, integrators through the registry in `tress_scene::integrators`, the
 //! render loop of `tress_core::render`, hair models through `tress_materials::HairModel` and
-//! studies through [`tress_cli::run_study`] — so a scene renders to the same pixels from Python
+//! studies through [`tress_scene::study`] — so a scene renders to the same pixels from Python
 //! as from the command line.
 
 mod convert;
@@ -47,7 +47,7 @@ fn _tress(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add(
         "INTEGRATORS",
-        tress_cli::integrators::IntegratorDesc::NAMES.to_vec(),
+        tress_scene::integrators::IntegratorDesc::NAMES.to_vec(),
     )?;
     m.add("HAIR_MODELS", tress_materials::HairModel::names().to_vec())?;
     m.add_class::<scene::Scene>()?;
@@ -55,4 +55,15 @@ fn _tress(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(scene::load_scene, m)?)?;
     m.add_function(wrap_pyfunction!(study::run_study, m)?)?;
     Ok(())
+}
+
+/// The run's limits as the environment sets them (`TRESS_MEMORY_LIMIT_GIB`,
+/// `TRESS_ALLOW_SLOW_TABLES`): the module reads them here and hands them to the libraries, as
+/// the `tress` command does.
+fn limits_from_env() -> tress_core::limits::Limits {
+    use tress_core::limits::{Limits, ALLOW_SLOW_TABLES_VAR, MEMORY_LIMIT_VAR};
+    Limits::from_environment_values(
+        std::env::var(MEMORY_LIMIT_VAR).ok().as_deref(),
+        std::env::var_os(ALLOW_SLOW_TABLES_VAR).is_some(),
+    )
 }

@@ -12,10 +12,10 @@ use std::ffi::CString;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
-use tress_cli::integrators::IntegratorDesc;
-use tress_cli::scene_desc::{self, BuiltScene, SceneDesc};
 use tress_core::prepare::Preparation;
 use tress_core::render::{render_samples, SampleRender};
+use tress_scene::integrators::IntegratorDesc;
+use tress_scene::scene_desc::{self, BuiltScene, SceneDesc};
 
 /// A scene, built and ready to render: its geometry, materials and lights, and the film and
 /// integrator it was written with (which `render` can override).
@@ -45,7 +45,7 @@ pub fn load_scene(py: Python<'_>, path: PathBuf) -> PyResult<Scene> {
 
 impl Scene {
     fn build(py: Python<'_>, desc: SceneDesc, path: PathBuf) -> PyResult<Scene> {
-        let limits = tress_cli::limits_from_env();
+        let limits = crate::limits_from_env();
         let built = py
             .detach(|| scene_desc::build(&desc, &path, &limits))
             .map_err(to_py_err)?;
@@ -115,7 +115,7 @@ impl Scene {
 
     /// The scene description as RON, as a scene file would hold it.
     fn to_ron(&self) -> PyResult<String> {
-        tress_cli::ron_options()
+        tress_scene::ron_options()
             .to_string_pretty(&self.desc, ron::ser::PrettyConfig::default())
             .map_err(|e| PyValueError::new_err(e.to_string()))
     }
@@ -147,7 +147,7 @@ impl Scene {
     /// The scene's integrator, as RON (`Path(max_depth: 100, ...)`).
     #[getter]
     fn integrator(&self) -> PyResult<String> {
-        tress_cli::ron_options()
+        tress_scene::ron_options()
             .to_string(&self.desc.integrator)
             .map_err(|e| PyValueError::new_err(e.to_string()))
     }
@@ -202,7 +202,7 @@ impl Scene {
         if crop.is_some() {
             film.crop = crop;
         }
-        film.validate_for_render(&tress_cli::limits_from_env())
+        film.validate_for_render(&crate::limits_from_env())
             .map_err(|e| PyValueError::new_err(format!("{here}: film: {e}")))?;
         let integrator_desc = match integrator {
             Some(arg) => IntegratorDesc::parse_arg(arg).map_err(PyValueError::new_err)?,
@@ -210,7 +210,7 @@ impl Scene {
         };
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(
-                tress_cli::check_threads(threads.unwrap_or(0)).map_err(PyValueError::new_err)?,
+                tress_scene::check_threads(threads.unwrap_or(0)).map_err(PyValueError::new_err)?,
             )
             .build()
             .map_err(|e| PyRuntimeError::new_err(format!("creating the thread pool: {e}")))?;

@@ -1,15 +1,15 @@
-//! `tress.study` (its Rust half): runs a study as `tress study` does.
+//! `tress.study` (its Rust half): runs a study as `tress study` does, without the figures.
 
 use crate::to_py_err;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
-use tress_cli::StudyArgs;
+use tress_scene::study::{self, NotesOnStderr, StudySettings};
 
-/// Runs the study file `path` as `tress study` does and returns a dict: `folder`, `report`,
-/// `results_csv`, `summary_csv` (paths) and the counts `rendered` and `reused`. The
-/// `tress.study` wrapper adds the summary rows.
+/// Runs the study file `path` as `tress study` does, without drawing figures (the module links
+/// no plotting), and returns a dict: `folder`, `report`, `results_csv`, `summary_csv` (paths)
+/// and the counts `rendered` and `reused`. The `tress.study` wrapper adds the summary rows.
 #[pyfunction]
 #[pyo3(signature = (path, quick=false, out=None, threads=None, verbose=false))]
 pub fn run_study<'py>(
@@ -20,18 +20,19 @@ pub fn run_study<'py>(
     threads: Option<usize>,
     verbose: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let args = StudyArgs {
+    let settings = StudySettings {
         study: path,
         quick,
         out,
         threads: threads
-            .map(tress_cli::check_threads)
+            .map(tress_scene::check_threads)
             .transpose()
             .map_err(PyValueError::new_err)?,
-        quiet: !verbose,
+        verbose,
+        limits: crate::limits_from_env(),
     };
     let outputs = py
-        .detach(|| tress_cli::run_study(args))
+        .detach(|| study::run(&settings, &NotesOnStderr, None))
         .map_err(to_py_err)?;
     let dict = PyDict::new(py);
     dict.set_item("folder", outputs.folder)?;

@@ -8,7 +8,8 @@ dict; renders come back as NumPy arrays of linear radiance::
     image = scene.render(spp=16, seed=1, integrator="dual-mis")   # float32, (height, width, 3)
 
 Hair scattering models can be evaluated and sampled over arrays of directions
-(:class:`HairModel`), and comparative studies run as ``tress study`` does (:func:`study`).
+(:class:`HairModel`), and comparative studies run as ``tress study`` does, without its figures
+(:func:`study`).
 """
 
 from __future__ import annotations
@@ -39,9 +40,10 @@ class StudyResult:
     """Where a study wrote its results (see ``tress study``), and its summary table."""
 
     folder: Path
-    """The output folder: CSVs, report, plots, heat maps, crop sheets, renders."""
+    """The output folder: the CSVs, the report and the renders (EXR and PNG preview each)."""
     report: Path
-    """``report.md``."""
+    """``report.md``: the settings and every table of ``tress study``'s report, without its
+    figures (plots, error heat maps, crop sheets)."""
     results_csv: Path
     """``results.csv``: one row per render."""
     summary_csv: Path
@@ -72,14 +74,21 @@ def study(
     threads: Optional[int] = None,
     verbose: bool = False,
 ) -> StudyResult:
-    """Runs the study file ``path`` as ``tress study`` does.
+    """Runs the study file ``path`` as ``tress study`` does, but draws no figures.
+
+    It renders (or reads back), measures and tabulates exactly as the command does, writing
+    ``results.csv``, ``summary.csv`` and ``report.md`` into the output folder; the report has
+    every table but no plots, error heat maps or crop sheets, since this module links no
+    plotting library. To add them, run ``tress study`` on the same study file and output folder
+    (with ``--quick`` if ``quick`` was set): it reads these renders back and renders nothing
+    again. Or plot ``results.csv`` / :attr:`StudyResult.summary` yourself.
 
     ``quick`` is ``--quick`` (the study's scaled-down settings), ``out`` the output folder
     (default: the study's ``output``, else ``<study name>_study`` in the current folder),
-    ``threads`` the worker threads (default: all cores); ``verbose`` prints the progress and
-    summary lines the command prints. Finished renders in the output folder are reused, as on
-    the command line. Raises ``ValueError`` for a malformed study and ``OSError`` for files
-    that cannot be read or written.
+    ``threads`` the worker threads (default: all cores); ``verbose`` prints the summary lines
+    the command prints and notes on renders redone (warnings are printed either way). Finished
+    renders in the output folder are reused, as on the command line. Raises ``ValueError`` for
+    a malformed study and ``OSError`` for files that cannot be read or written.
     """
     outputs = _run_study(path, quick=quick, out=out, threads=threads, verbose=verbose)
     with open(outputs["summary_csv"], newline="", encoding="utf-8") as f:

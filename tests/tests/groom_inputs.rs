@@ -6,7 +6,6 @@ use std::path::{Path, PathBuf};
 use tress_accel::{
     ChildStrands, HairGeometry, HairOptions, HairSource, PbrtFile, PlyFile, SceneBuilder,
 };
-use tress_core::limits::Limits;
 use tress_core::math::Vec3;
 
 /// A fresh scratch folder for one test.
@@ -94,7 +93,7 @@ fn ply_round_trips_exactly_in_every_encoding() {
         let path = dir.join(name);
         std::fs::write(&path, ply_bytes(encoding)).unwrap();
         let g = HairSource::File(path.clone())
-            .load(&Limits::default())
+            .load(&Default::default())
             .unwrap();
         assert_eq!(g.strand_count(), 3, "{name}");
         let mut at = 0;
@@ -112,7 +111,7 @@ fn ply_round_trips_exactly_in_every_encoding() {
             z_up: true,
             ..PlyFile::new(&path)
         })
-        .load(&Limits::default())
+        .load(&Default::default())
         .unwrap();
         assert!(o.radii.iter().all(|&r| r == 0.5));
         let [x, y, z] = expect[0][1].0;
@@ -134,7 +133,7 @@ fn truncated_and_corrupt_ply_files_are_errors_naming_the_file() {
         let header_end = good.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
         for len in (0..header_end).step_by(7).chain(header_end..good.len()) {
             std::fs::write(&path, &good[..len]).unwrap();
-            match HairSource::File(path.clone()).load(&Limits::default()) {
+            match HairSource::File(path.clone()).load(&Default::default()) {
                 Err(e) => assert!(e.to_string().contains(name), "{len}: {e}"),
                 // An ascii file cut after a number's first digits can still read (a shorter
                 // number): what reads must be valid.
@@ -155,7 +154,7 @@ fn truncated_and_corrupt_ply_files_are_errors_naming_the_file() {
     text.replace_range(last + 1.., "9\n");
     std::fs::write(&path, &text).unwrap();
     let e = HairSource::File(path)
-        .load(&Limits::default())
+        .load(&Default::default())
         .unwrap_err()
         .to_string();
     assert!(
@@ -171,7 +170,7 @@ fn truncated_and_corrupt_ply_files_are_errors_naming_the_file() {
     )
     .unwrap();
     let e = HairSource::File(path)
-        .load(&Limits::default())
+        .load(&Default::default())
         .unwrap_err()
         .to_string();
     assert!(
@@ -197,7 +196,7 @@ fn assert_near(got: Vec3, want: Vec3, what: &str) {
 #[test]
 fn the_pbrt_fixture_reads_into_the_expected_strands() {
     let g = HairSource::File(fixture())
-        .load(&Limits::default())
+        .load(&Default::default())
         .unwrap();
     // Four strands: the sphere and the camera-side Translate play no part.
     assert_eq!(g.strand_count(), 4);
@@ -281,7 +280,7 @@ fn the_pbrt_fixture_reads_into_the_expected_strands() {
         z_up: true,
         ..PbrtFile::new(fixture())
     })
-    .load(&Limits::default())
+    .load(&Default::default())
     .unwrap();
     assert_near(z_up.points[2], Vec3::new(0.0, 0.0, -6.0), "z-up");
 }
@@ -295,7 +294,7 @@ fn bad_pbrt_files_name_the_file_and_place() {
     let path = dir.join("bad.pbrt");
     std::fs::write(&path, bad).unwrap();
     let e = HairSource::File(path)
-        .load(&Limits::default())
+        .load(&Default::default())
         .unwrap_err()
         .to_string();
     assert!(
@@ -306,7 +305,7 @@ fn bad_pbrt_files_name_the_file_and_place() {
     let path = dir.join("alone.pbrt");
     std::fs::write(&path, &fixture).unwrap();
     let e = HairSource::File(path)
-        .load(&Limits::default())
+        .load(&Default::default())
         .unwrap_err()
         .to_string();
     assert!(e.contains("curves_include.pbrt"), "{e}");
@@ -318,7 +317,7 @@ fn bad_pbrt_files_name_the_file_and_place() {
             continue;
         }
         std::fs::write(&path, &fixture[..len]).unwrap();
-        if let Err(e) = HairSource::File(path.clone()).load(&Limits::default()) {
+        if let Err(e) = HairSource::File(path.clone()).load(&Default::default()) {
             assert!(e.to_string().contains("cut.pbrt"), "{len}: {e}");
         }
     }
@@ -352,10 +351,10 @@ fn child_strands_are_added_deterministically_around_kept_guides() {
         thinning: 0.0,
         radius_jitter: 0.0,
     };
-    let grown = children.grow(&g, 1.0, &Limits::default()).unwrap();
+    let grown = children.grow(&g, 1.0, &Default::default()).unwrap();
     assert_eq!(grown.strand_count(), 16 * 7);
     assert_eq!(grown.points[..g.point_count()], g.points[..]);
-    assert_eq!(grown, children.grow(&g, 1.0, &Limits::default()).unwrap());
+    assert_eq!(grown, children.grow(&g, 1.0, &Default::default()).unwrap());
     // Without clumping a child keeps its root's distance to the guide all along.
     for c in 0..16 * 6 {
         let guide = &g.points[g.strand(c / 6)];
@@ -441,8 +440,8 @@ fn sintel_guides_with_children_cover_far_more_of_the_image() {
     let measure = |children: &str| {
         let path = dir.join("scene.ron");
         std::fs::write(&path, scene(children)).unwrap();
-        let desc = tress_cli::scene_desc::load(&path).unwrap();
-        let built = tress_cli::scene_desc::build(&desc, &path, &Limits::default()).unwrap();
+        let desc = tress_scene::scene_desc::load(&path).unwrap();
+        let built = tress_scene::scene_desc::build(&desc, &path, &Default::default()).unwrap();
         (coverage(&built.scene, 48), built.summary)
     };
     let (guides_only, summary) = measure("");

@@ -5,12 +5,12 @@
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use tress_cli::integrators::IntegratorDesc;
 use tress_core::film::{Aov, FilmSettings, Outputs};
 use tress_core::light::{EnvironmentMap, Light};
 use tress_core::render::{camera_sample, render, render_outputs, SampleSums};
 use tress_core::Scene;
 use tress_materials::HairModel;
+use tress_scene::integrators::IntegratorDesc;
 use tress_tests::{film, hair_ball_scene, on_threads, shared_data};
 
 fn scene() -> Scene {
@@ -163,8 +163,8 @@ fn measure_the_cost_of_the_alpha_query() {
     };
     let scene_file =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/straight_venice.ron");
-    let desc = tress_cli::scene_desc::load(&scene_file).unwrap();
-    let built = tress_cli::scene_desc::build(&desc, &scene_file, &Default::default()).unwrap();
+    let desc = tress_scene::scene_desc::load(&scene_file).unwrap();
+    let built = tress_scene::scene_desc::build(&desc, &scene_file, &Default::default()).unwrap();
     let scene = &built.scene;
     let (width, height) = (desc.film.width, desc.film.height);
     for name in ["path", "dual-mis"] {

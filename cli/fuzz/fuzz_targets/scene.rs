@@ -4,7 +4,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use tress_cli::scene_desc::{self, MaterialDesc};
+use tress_scene::materials::MaterialDesc;
+use tress_scene::scene_desc;
 
 fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {

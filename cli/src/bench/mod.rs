@@ -26,39 +26,35 @@
 //! `--quick`) and the fastest run counts, as other processes can only slow a run down. Rows
 //! carrying a target of the performance issue say whether it is met.
 
-use crate::cost::{timed, Cost};
-use crate::integrators::IntegratorDesc;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
-use rayon::prelude::*;
 use rayon::ThreadPool;
-use std::cell::{Cell, RefCell};
-use std::fmt::Write as _;
 use std::hint::black_box;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-use std::time::Instant;
-use tress_accel::raw::{Exclusion, RawRay, PACKET};
+use std::time::{Duration, Instant};
 use tress_accel::{
     CurveShape, DensityGrid, DensitySettings, EmbreeAccel, HairFile, HairGeometry, HairOptions,
     HairStyle, ProceduralHair, SceneBuilder,
 };
-use tress_core::accel::BuildError;
 use tress_core::film::FilmSettings;
 use tress_core::light::{EnvironmentMap, Light};
-use tress_core::limits::Limits;
-use tress_core::math::{Aabb, Ray, Vec2, Vec3};
+use tress_core::math::{Aabb, Vec2, Vec3};
 use tress_core::prepare::Preparation;
 use tress_core::rng::Pcg32;
 use tress_core::sampling::sample_uniform_sphere;
-use tress_core::{Accel, Bcsdf, Camera, FiberDensity, Hit, Integrator, Material, Scene};
-use tress_materials::dual_scattering::{fingerprint, DualScatteringSettings, DualScatteringTables};
+use tress_core::{Bcsdf, Camera, Integrator, Material, Scene};
+use tress_materials::dual_scattering::{fingerprint, DualScatteringTables};
 use tress_materials::HairModel;
+use tress_scene::integrators::IntegratorDesc;
 
+mod plan;
 mod raw;
 mod renders;
 mod table;
+
+use plan::*;
 use raw::*;
 use renders::*;
 use table::*;
@@ -83,122 +79,50 @@ pub struct BenchArgs {
     pub hair_file: PathBuf,
 }
 
-/// Sizes of one run.
-struct Plan {
-    /// Procedural strand counts: the scaling pair (small, large).
-    strands: [u32; 2],
-    /// Rays per kind in the raw measurements.
-    rays: usize,
-    /// Film of the integrator renders: width = height, spp.
-    film: (u32, u32),
-    /// BCSDF calls per timing.
-    bcsdf_calls: usize,
-    /// Timed repetitions of every integrator render and replay; the fastest counts, since
-    /// interference from other processes only ever slows a run down.
-    runs: usize,
-    /// Resolution of the dual-scattering tables whose build time is measured.
-    tables: DualScatteringSettings,
-    /// Every registered integrator: with test settings for `--quick`, defaults otherwise.
-    integrators: Vec<IntegratorDesc>,
-}
-
-impl Plan {
-    fn new(quick: bool) -> Plan {
-        if quick {
-            Plan {
-                strands: [1_000, 10_000],
-                rays: 1 << 12,
-                film: (32, 2),
-                bcsdf_calls: 20_000,
-                runs: 1,
-                tables: DualScatteringSettings {
-                    theta_nodes: 16,
-                    h_nodes: 8,
-                    theta_quad: 16,
-                    phi_quad: 24,
-                    walks: 1024,
-                    ..Default::default()
-                },
-                integrators: IntegratorDesc::all_for_tests(),
-            }
-        } else {
-            Plan {
-                strands: [10_000, 100_000],
-                rays: 1 << 18,
-                film: (128, 8),
-                bcsdf_calls: 400_000,
-                runs: 3,
-                tables: DualScatteringSettings::default(),
-                integrators: IntegratorDesc::all(),
-            }
-        }
-    }
-}
-
-/// Segments per procedural strand.
-const SEGMENTS: u32 = 32;
-/// Strands of the `--huge` model.
-const HUGE_STRANDS: u32 = 1_000_000;
-/// Raw queries handed to a worker at a time (a multiple of the packet width).
-const CHUNK: usize = 1024;
-
-/// Where a model's hair comes from.
-#[derive(Clone)]
-enum Source {
-    /// Procedural wavy hair: strands, fiber radius.
-    Procedural(u32, f32),
-    File(PathBuf),
-}
-
-/// Whether the path tracer's ray-rate target applies: the large procedural model (100k strands
-/// at the common radius) and the hair file.
-fn ray_target(source: &Source, plan: &Plan) -> bool {
-    match *source {
-        Source::Procedural(n, r) => n == plan.strands[1] && n == 100_000 && r == RADIUS,
-        Source::File(_) => true,
-    }
-}
-
-/// Fiber radius of the procedural models (the procedural default).
-const RADIUS: f32 = 0.004;
-
-/// Radius of `strands` fibers covering as much as `reference` fibers of [`RADIUS`] do (equal
-/// total cross-section, so equal optical thickness and the same picture).
-fn equal_coverage_radius(strands: u32, reference: u32) -> f32 {
-    RADIUS * (reference as f32 / strands as f32).sqrt()
-}
-
-/// Label of the large procedural model thinned to the small one's coverage.
-fn thin_label(strands: u32) -> String {
-    format!("{}-thin", strand_label(strands))
-}
-
-struct ModelSpec {
-    name: String,
-    source: Source,
-    /// Raw measurements and the integrators' renders; otherwise (the huge model) the path
-    /// tracer on a small film only.
-    full: bool,
-    /// Every integrator, or only the path tracer (the round-curve variants).
-    all_integrators: bool,
-    curve: CurveShape,
-}
-
-fn strand_label(n: u32) -> String {
-    if n >= 1_000_000 && n.is_multiple_of(1_000_000) {
-        format!("{}M", n / 1_000_000)
-    } else if n >= 1000 && n.is_multiple_of(1000) {
-        format!("{}k", n / 1000)
-    } else {
-        n.to_string()
-    }
-}
-
 pub fn run(args: BenchArgs) -> Result<()> {
     let plan = Plan::new(args.quick);
-    let threads = args
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let pools = thread_pools(args.threads)?;
+    let mut table = Table::default();
+    let material = HairModel::Chiang(Default::default());
+    let bcsdf = material
+        .build()
+        .map_err(|e| anyhow!("hair material: {e}"))?;
+    eprintln!("bench: BCSDF costs and dual-scattering tables");
+    bench_bcsdfs(&mut table, plan.bcsdf_calls)?;
+    // One preparation context for the whole run. The tables are built here, through it, to
+    // time the build apart from any render; the integrators of every model then find them in
+    // it (the same model and settings) instead of building them again per model.
+    let prep = Preparation::with_limits(crate::limits_from_env());
+    bench_tables(&mut table, &plan, &bcsdf, &prep)?;
+    let models = models(&args, &plan, &mut table);
+    let mut per_sample: Vec<Timing> = Vec::new();
+    for spec in &models {
+        bench_model(
+            spec,
+            &plan,
+            &pools,
+            &bcsdf,
+            &prep,
+            &mut table,
+            &mut per_sample,
+        )
+        .with_context(|| format!("model {}", spec.name))?;
+    }
+    scaling(&mut table, &plan, &per_sample, &pools);
+
+    let text = table.text();
+    print!("{text}");
+    if let Some(path) = &args.csv {
+        tress_scene::output::atomic_write(path, table.csv().as_bytes())?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// The pools of the measurements: one thread, and `threads` (default: all cores) when more.
+fn thread_pools(threads: Option<usize>) -> Result<Vec<(usize, ThreadPool)>> {
+    let threads =
+        threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     if threads == 0 {
         bail!("--threads must be at least 1");
     }
@@ -212,18 +136,16 @@ pub fn run(args: BenchArgs) -> Result<()> {
     if threads > 1 {
         pools.push((threads, pool(threads)?));
     }
+    Ok(pools)
+}
 
-    let mut table = Table::default();
-    let material = HairModel::Chiang(Default::default());
-    let bcsdf = material
-        .build()
-        .map_err(|e| anyhow!("hair material: {e}"))?;
-    eprintln!("bench: BCSDF costs and dual-scattering tables");
-    bench_bcsdfs(&mut table, plan.bcsdf_calls)?;
-    // One preparation context for the whole run. The tables are built here, through it, to
-    // time the build apart from any render; the integrators of every model then find them in
-    // it (the same model and settings) instead of building them again per model.
-    let prep = Preparation::with_limits(crate::limits_from_env());
+/// Builds the dual-scattering tables of `bcsdf` into `prep`, timed.
+fn bench_tables(
+    table: &mut Table,
+    plan: &Plan,
+    bcsdf: &Arc<dyn Bcsdf>,
+    prep: &Preparation,
+) -> Result<()> {
     let tables = prep
         .get_or_build((fingerprint(bcsdf.as_ref()), plan.tables.clone()), || {
             DualScatteringTables::new(bcsdf.as_ref(), &plan.tables, prep.limits())
@@ -243,7 +165,13 @@ pub fn run(args: BenchArgs) -> Result<()> {
             plan.tables.phi_quad
         ),
     );
+    Ok(())
+}
 
+/// The models of the run: the procedural pair, the large one thinned, the hair file when
+/// present (else a note in the table), the huge one with `--huge`, and the ray-rate target's
+/// models again with round curves.
+fn models(args: &BenchArgs, plan: &Plan, table: &mut Table) -> Vec<ModelSpec> {
     let mut models: Vec<ModelSpec> = plan
         .strands
         .iter()
@@ -296,7 +224,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     // The models of the ray-rate target again as tubes, for the path tracer.
     let round: Vec<ModelSpec> = models
         .iter()
-        .filter(|m| ray_target(&m.source, &plan))
+        .filter(|m| ray_target(&m.source, plan))
         .map(|m| ModelSpec {
             name: format!("{} round", m.name),
             source: m.source.clone(),
@@ -306,29 +234,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         })
         .collect();
     models.extend(round);
-
-    let mut per_sample: Vec<Timing> = Vec::new();
-    for spec in &models {
-        bench_model(
-            spec,
-            &plan,
-            &pools,
-            &bcsdf,
-            &prep,
-            &mut table,
-            &mut per_sample,
-        )
-        .with_context(|| format!("model {}", spec.name))?;
-    }
-    scaling(&mut table, &plan, &per_sample, &pools);
-
-    let text = table.text();
-    print!("{text}");
-    if let Some(path) = &args.csv {
-        crate::atomic_write(path, table.csv().as_bytes())?;
-        eprintln!("wrote {}", path.display());
-    }
-    Ok(())
+    models
 }
 
 /// eval, sample and pdf cost of one instance of every registered hair model (the first
@@ -446,6 +352,133 @@ fn load(spec: &ModelSpec) -> Result<HairGeometry> {
     })
 }
 
+/// A model built as `tress render` builds it, with the cost of each step.
+struct BuiltModel {
+    accel: EmbreeAccel,
+    /// The density grid the dual-scattering integrators read at their default resolution.
+    grid: DensityGrid,
+    /// The baseline: the same curves with no filter support (full models only).
+    plain: Option<EmbreeAccel>,
+    load: Duration,
+    bvh: Duration,
+    grid_time: Duration,
+    /// Peak memory after the build, before the baseline's.
+    peak: Option<u64>,
+}
+
+/// Loads and builds `spec` in `pool` (the builds run in the render's thread pool, as in
+/// `tress render`).
+fn build_model(spec: &ModelSpec, pool: &ThreadPool) -> Result<BuiltModel> {
+    let t0 = Instant::now();
+    let hair = load(spec)?;
+    let load_time = t0.elapsed();
+    let t1 = Instant::now();
+    let options = HairOptions {
+        curve: spec.curve,
+        ..Default::default()
+    };
+    let accel = pool.install(|| SceneBuilder::new()?.add_hair(&hair, &options, 0)?.build())?;
+    let bvh_time = t1.elapsed();
+    drop(hair);
+    // Its cost is part of the build; the scene hands the grid to the integrators.
+    let t2 = Instant::now();
+    let grid = pool
+        .install(|| accel.density_grid(&DensitySettings::default(), &crate::limits_from_env()))?;
+    let grid_time = t2.elapsed();
+    let peak = peak_rss();
+    // The baseline's build quality and basis are tress's; built after the peak above so that
+    // it measures tress's own build.
+    let plain = spec
+        .full
+        .then(|| -> Result<EmbreeAccel> {
+            let hair = load(spec)?;
+            Ok(pool.install(|| {
+                SceneBuilder::new()?
+                    .without_filters()
+                    .add_hair(&hair, &options, 0)?
+                    .build()
+            })?)
+        })
+        .transpose()?;
+    Ok(BuiltModel {
+        accel,
+        grid,
+        plain,
+        load: load_time,
+        bvh: bvh_time,
+        grid_time,
+        peak,
+    })
+}
+
+/// The build rows of model `name`; `scope` says what the peak memory covers.
+fn report_build(
+    table: &mut Table,
+    name: &str,
+    plan: &Plan,
+    built: &BuiltModel,
+    max_threads: usize,
+    scope: &str,
+) {
+    let info = built.accel.info();
+    let segments = info.segments as f64;
+    let mut build = |metric: &str, value: f64, unit: &'static str, note: String| {
+        table.push((name, "build"), metric, None, value, unit, note)
+    };
+    build("strands", info.strands as f64, "", String::new());
+    build("segments", segments, "", String::new());
+    build("load", built.load.as_secs_f64(), "s", String::new());
+    build(
+        "bvh",
+        built.bvh.as_secs_f64(),
+        "s",
+        format!("{max_threads} threads"),
+    );
+    build(
+        "grid",
+        built.grid_time.as_secs_f64(),
+        "s",
+        built.grid.info().to_string(),
+    );
+    let total = (built.load + built.bvh + built.grid_time).as_secs_f64();
+    let large = name == strand_label(plan.strands[1]) && plan.strands[1] == 100_000;
+    build(
+        "load+bvh+grid",
+        total,
+        "s",
+        if large {
+            target("≤ 3 s", total <= 3.0)
+        } else {
+            String::new()
+        },
+    );
+    build(
+        "accel_bytes_per_segment",
+        info.memory_bytes as f64 / segments,
+        "B",
+        "Embree (BVH, buffers) + hit/filter data".into(),
+    );
+    build(
+        "grid_bytes_per_segment",
+        built.grid.info().memory_bytes as f64 / segments,
+        "B",
+        String::new(),
+    );
+    if let Some(peak) = built.peak {
+        let peak_mib = peak as f64 / MIB;
+        build(
+            "peak_rss_build",
+            peak_mib,
+            "MiB",
+            if large {
+                format!("{scope}; {}", target("≤ 1024 MiB", peak_mib <= 1024.0))
+            } else {
+                scope.into()
+            },
+        );
+    }
+}
+
 fn bench_model(
     spec: &ModelSpec,
     plan: &Plan,
@@ -459,112 +492,16 @@ fn bench_model(
     eprintln!("bench: {name}: building");
     let peak_is_per_model = reset_peak_rss();
     let (max_threads, big_pool) = pools.last().map(|(n, p)| (*n, p)).expect("a pool");
-
-    // As `tress render` does: the builds run in the render's thread pool.
-    let t0 = Instant::now();
-    let hair = load(spec)?;
-    let load_time = t0.elapsed();
-    let t1 = Instant::now();
-    let options = HairOptions {
-        curve: spec.curve,
-        ..Default::default()
-    };
-    let accel = big_pool.install(|| SceneBuilder::new()?.add_hair(&hair, &options, 0)?.build())?;
-    let bvh_time = t1.elapsed();
-    drop(hair);
-    // The grid the dual-scattering integrators read at their default resolution (its cost is
-    // part of the build); the scene below hands it to them.
-    let t2 = Instant::now();
-    let grid = big_pool
-        .install(|| accel.density_grid(&DensitySettings::default(), &crate::limits_from_env()))?;
-    let grid_time = t2.elapsed();
-    let build_peak = peak_rss();
-    // The baseline: the same curves, basis and build quality with no filter support, built
-    // after the peak above so that it measures tress's own build.
-    let plain = spec
-        .full
-        .then(|| -> Result<EmbreeAccel> {
-            let hair = load(spec)?;
-            Ok(big_pool.install(|| {
-                SceneBuilder::new()?
-                    .without_filters()
-                    .add_hair(&hair, &options, 0)?
-                    .build()
-            })?)
-        })
-        .transpose()?;
-
-    let info = accel.info().clone();
-    let segments = info.segments as f64;
-    let build = |t: &mut Table, metric: &str, value: f64, unit: &'static str, note: String| {
-        t.push((name, "build"), metric, None, value, unit, note)
-    };
-    build(table, "strands", info.strands as f64, "", String::new());
-    build(table, "segments", segments, "", String::new());
-    build(table, "load", load_time.as_secs_f64(), "s", String::new());
-    build(
-        table,
-        "bvh",
-        bvh_time.as_secs_f64(),
-        "s",
-        format!("{max_threads} threads"),
-    );
-    build(
-        table,
-        "grid",
-        grid_time.as_secs_f64(),
-        "s",
-        grid.info().to_string(),
-    );
-    let total = (load_time + bvh_time + grid_time).as_secs_f64();
-    let large = name == strand_label(plan.strands[1]) && plan.strands[1] == 100_000;
-    build(
-        table,
-        "load+bvh+grid",
-        total,
-        "s",
-        if large {
-            target("≤ 3 s", total <= 3.0)
-        } else {
-            String::new()
-        },
-    );
-    build(
-        table,
-        "accel_bytes_per_segment",
-        info.memory_bytes as f64 / segments,
-        "B",
-        "Embree (BVH, buffers) + hit/filter data".into(),
-    );
-    build(
-        table,
-        "grid_bytes_per_segment",
-        grid.info().memory_bytes as f64 / segments,
-        "B",
-        String::new(),
-    );
+    let built = build_model(spec, big_pool)?;
     let scope = if peak_is_per_model {
         "peak since this model started"
     } else {
         "process peak (VmHWM reset unsupported)"
     };
-    if let Some(peak) = build_peak {
-        let peak_mib = peak as f64 / MIB;
-        build(
-            table,
-            "peak_rss_build",
-            peak_mib,
-            "MiB",
-            if large {
-                format!("{scope}; {}", target("≤ 1024 MiB", peak_mib <= 1024.0))
-            } else {
-                scope.into()
-            },
-        );
-    }
+    report_build(table, name, plan, &built, max_threads, scope);
 
     let (film_side, spp) = if spec.full { plan.film } else { (64, 1) };
-    let camera = framing(&info.bounds);
+    let camera = framing(&built.accel.info().bounds);
     let film = FilmSettings {
         width: film_side,
         height: film_side,
@@ -572,6 +509,9 @@ fn bench_model(
         seed: 1,
         crop: None,
     };
+    let BuiltModel {
+        accel, grid, plain, ..
+    } = built;
     let accel = Arc::new(accel);
     let accels = plain.map(|plain| Accels {
         tress: Arc::clone(&accel),
@@ -597,72 +537,26 @@ fn bench_model(
         vec![Material::Hair(Arc::clone(bcsdf))],
         vec![Light::Environment(EnvironmentMap::builtin_sky(0.0, 1.0)?)].into(),
     );
+    let renders = ModelRenders {
+        spec,
+        plan,
+        scene: &scene,
+        film: &film,
+        pools,
+        recording: &recording,
+        accels: accels.as_ref(),
+        raw: raw.as_ref(),
+    };
     // The ray-rate target and the huge and round models concern the path tracer.
-    let descs: Vec<IntegratorDesc> = if spec.all_integrators {
-        plan.integrators.clone()
-    } else {
-        plan.integrators
-            .iter()
-            .filter(|d| d.name() == "path")
-            .cloned()
-            .collect()
-    };
-    let render_pools: Vec<&(usize, ThreadPool)> = if spec.full {
-        pools.iter().collect()
-    } else {
-        pools.iter().rev().take(1).collect()
-    };
-    for desc in &descs {
+    for desc in plan
+        .integrators
+        .iter()
+        .filter(|d| spec.all_integrators || d.name() == "path")
+    {
         let integrator = desc
             .build(&scene, prep)
             .map_err(|e| anyhow!("integrator {}: {e:#}", desc.name()))?;
-        // An untimed pass records every ray the integrator traces (it also warms up); the
-        // timed renders below repeat exactly that work (the image depends only on the seed).
-        let recorded = if spec.full {
-            eprintln!("bench: {name}: {}: recording its rays", desc.name());
-            Some(record_rays(
-                &scene,
-                integrator.as_ref(),
-                &film,
-                big_pool,
-                &recording,
-            ))
-        } else {
-            None
-        };
-        for (n, pool) in render_pools.iter().map(|(n, p)| (*n, p)) {
-            eprintln!("bench: {name}: {} on {n} thread(s)", desc.name());
-            let r = (0..plan.runs)
-                .map(|_| render(&scene, integrator.as_ref(), &film, pool))
-                .min_by(|a, b| a.cost.wall.total_cmp(&b.cost.wall))
-                .expect("at least one run");
-            let traced = r.traced.iter().sum::<u64>().max(1) as f64;
-            per_sample.push(Timing {
-                model: name.to_string(),
-                integrator: desc.name(),
-                threads: n,
-                per_sample: r.cost.wall / r.samples as f64,
-                per_ray: r.cost.wall / traced,
-                cpu_per_sample: r.cost.cpu.map(|c| c / r.samples as f64),
-                waiting: r.cost.waiting(),
-            });
-            let replay = recorded
-                .as_ref()
-                .zip(accels.as_ref())
-                .map(|(rays, accels)| replay(accels, rays, pool, desc.name(), plan.runs));
-            report_render(
-                table,
-                RenderReport {
-                    model: name,
-                    integrator: desc.name(),
-                    threads: n,
-                    ray_target: ray_target(&spec.source, plan),
-                },
-                &r,
-                raw.as_ref(),
-                replay.as_deref(),
-            );
-        }
+        renders.bench(desc, integrator.as_ref(), table, per_sample);
     }
     if let Some(peak) = peak_rss() {
         let peak_mib = peak as f64 / MIB;
@@ -679,6 +573,85 @@ fn bench_model(
     Ok(())
 }
 
-fn target(what: &str, met: bool) -> String {
-    format!("target {what}: {}", if met { "met" } else { "MISSED" })
+/// The integrators' renders of one model: its scene (queries counted) and film, and what they
+/// are compared with.
+struct ModelRenders<'a> {
+    spec: &'a ModelSpec,
+    plan: &'a Plan,
+    scene: &'a Scene,
+    film: &'a FilmSettings,
+    pools: &'a [(usize, ThreadPool)],
+    /// Set while the rays traced are recorded.
+    recording: &'a AtomicBool,
+    /// tress's accelerator and the baseline, for replays (full models only).
+    accels: Option<&'a Accels>,
+    /// Raw Embree rates (full models only).
+    raw: Option<&'a RawRates>,
+}
+
+impl ModelRenders<'_> {
+    /// Times `integrator`'s render on each pool (all of them for full models, else the largest)
+    /// and its recorded rays replayed raw.
+    fn bench(
+        &self,
+        desc: &IntegratorDesc,
+        integrator: &dyn Integrator,
+        table: &mut Table,
+        per_sample: &mut Vec<Timing>,
+    ) {
+        let (spec, plan, name) = (self.spec, self.plan, self.spec.name.as_str());
+        let (_, big_pool) = self.pools.last().expect("a pool");
+        // An untimed pass records every ray the integrator traces (it also warms up); the
+        // timed renders below repeat exactly that work (the image depends only on the seed).
+        let recorded = if spec.full {
+            eprintln!("bench: {name}: {}: recording its rays", desc.name());
+            Some(record_rays(
+                self.scene,
+                integrator,
+                self.film,
+                big_pool,
+                self.recording,
+            ))
+        } else {
+            None
+        };
+        let render_pools: Vec<&(usize, ThreadPool)> = if spec.full {
+            self.pools.iter().collect()
+        } else {
+            self.pools.iter().rev().take(1).collect()
+        };
+        for (n, pool) in render_pools.iter().map(|(n, p)| (*n, p)) {
+            eprintln!("bench: {name}: {} on {n} thread(s)", desc.name());
+            let r = (0..plan.runs)
+                .map(|_| render(self.scene, integrator, self.film, pool))
+                .min_by(|a, b| a.cost.wall.total_cmp(&b.cost.wall))
+                .expect("at least one run");
+            let traced = r.traced.iter().sum::<u64>().max(1) as f64;
+            per_sample.push(Timing {
+                model: name.to_string(),
+                integrator: desc.name(),
+                threads: n,
+                per_sample: r.cost.wall / r.samples as f64,
+                per_ray: r.cost.wall / traced,
+                cpu_per_sample: r.cost.cpu.map(|c| c / r.samples as f64),
+                waiting: r.cost.waiting(),
+            });
+            let replay = recorded
+                .as_ref()
+                .zip(self.accels)
+                .map(|(rays, accels)| replay(accels, rays, pool, desc.name(), plan.runs));
+            report_render(
+                table,
+                RenderReport {
+                    model: name,
+                    integrator: desc.name(),
+                    threads: n,
+                    ray_target: ray_target(&spec.source, plan),
+                },
+                &r,
+                self.raw,
+                replay.as_deref(),
+            );
+        }
+    }
 }

@@ -1,6 +1,20 @@
 //! Raw Embree measurements: the synthetic ray sets, the query modes and their rates.
 
-use super::*;
+use super::plan::CHUNK;
+use super::table::{cost_note, Table};
+use anyhow::{bail, Result};
+use rayon::prelude::*;
+use rayon::ThreadPool;
+use std::hint::black_box;
+use std::sync::Arc;
+use tress_accel::raw::{Exclusion, RawRay, PACKET};
+use tress_accel::EmbreeAccel;
+use tress_core::film::FilmSettings;
+use tress_core::math::{Ray, Vec2};
+use tress_core::rng::Pcg32;
+use tress_core::sampling::sample_uniform_sphere;
+use tress_core::{Accel, Camera, Hit};
+use tress_scene::cost::timed;
 
 /// The three kinds of ray, as in a render: camera rays through the film, and rays leaving hair
 /// hit points (found by random walks from the camera) in uniformly random directions — as

@@ -1,6 +1,25 @@
 //! The integrators' renders: counted and recorded queries, timing, replays and their report.
 
-use super::*;
+use super::plan::{strand_label, thin_label, Plan, CHUNK};
+use super::raw::{Accels, Kind, Mode, RawRates};
+use super::table::{cost_note, target, Table};
+use anyhow::Result;
+use rayon::prelude::*;
+use rayon::ThreadPool;
+use std::cell::{Cell, RefCell};
+use std::fmt::Write as _;
+use std::hint::black_box;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use tress_accel::raw::{Exclusion, RawRay};
+use tress_accel::{DensityGrid, EmbreeAccel};
+use tress_core::accel::BuildError;
+use tress_core::film::FilmSettings;
+use tress_core::limits::Limits;
+use tress_core::math::{Aabb, Ray};
+use tress_core::{Accel, FiberDensity, Hit, Integrator, Scene};
+use tress_scene::cost::{timed, Cost};
+use tress_scene::integrators::IntegratorDesc;
 
 /// Query kinds counted and recorded by [`CountingAccel`].
 pub(super) const CAMERA: usize = 0;
@@ -85,18 +104,6 @@ pub(super) fn queries(pool: &ThreadPool) -> [u64; 3] {
     pool.broadcast(|_| QUERIES.with(Cell::get))
         .into_iter()
         .fold([0; 3], |a, b| std::array::from_fn(|i| a[i] + b[i]))
-}
-
-/// "hit 59.0%, 1.234 M/CPU-s, 12% waiting"-style note of a raw measurement.
-pub(super) fn cost_note(rays: usize, cost: &Cost) -> String {
-    let mut note = String::new();
-    if let Some(cpu) = cost.cpu.filter(|&c| c > 0.0) {
-        let _ = write!(note, "{:.3} M per CPU-s", rays as f64 / cpu / 1e6);
-    }
-    if let Some(w) = cost.waiting() {
-        let _ = write!(note, ", {:.0}% waiting for a core", 100.0 * w);
-    }
-    note
 }
 
 /// Seconds per sample and per traced ray of one render.

@@ -1,6 +1,7 @@
 //! The bench table: rows, text and CSV.
 
-use super::*;
+use std::fmt::Write as _;
+use tress_scene::cost::Cost;
 
 /// The table's columns, in order.
 pub const COLUMNS: [&str; 7] = [
@@ -129,4 +130,21 @@ pub(super) fn format_value(v: f64) -> String {
     }
     let digits = (3 - v.abs().log10().floor() as i32).clamp(0, 6) as usize;
     format!("{v:.digits$}")
+}
+
+/// "hit 59.0%, 1.234 M/CPU-s, 12% waiting"-style note of a raw measurement.
+pub(super) fn cost_note(rays: usize, cost: &Cost) -> String {
+    let mut note = String::new();
+    if let Some(cpu) = cost.cpu.filter(|&c| c > 0.0) {
+        let _ = write!(note, "{:.3} M per CPU-s", rays as f64 / cpu / 1e6);
+    }
+    if let Some(w) = cost.waiting() {
+        let _ = write!(note, ", {:.0}% waiting for a core", 100.0 * w);
+    }
+    note
+}
+
+/// The note of a row carrying a target of the performance issue.
+pub(super) fn target(what: &str, met: bool) -> String {
+    format!("target {what}: {}", if met { "met" } else { "MISSED" })
 }

@@ -1,7 +1,13 @@
 //! Line charts: series on linear or log axes, with optional shaded intervals, in panels side by
 //! side; the legend goes under each panel, so it never hides a curve.
 
-use super::*;
+use super::canvas::write_bitmap;
+use super::text::{self, Typeset};
+use anyhow::{anyhow, bail, Context, Result};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::text_anchor;
+use std::path::Path;
 
 /// One curve of a chart.
 pub struct Series {
@@ -51,7 +57,7 @@ pub fn write_charts(stem: &Path, charts: &[Chart], panel_width: u32, height: u32
             .map_err(|e| anyhow!("drawing {}: {e}", svg.display()))?;
     }
     // Both or neither: a PNG left without its SVG looked like a finished plot.
-    crate::write_together(vec![
+    tress_scene::output::write_together(vec![
         (
             &png,
             Box::new(|p: &Path| write_bitmap(p, size, |root| draw(root, charts))),
@@ -653,4 +659,166 @@ pub(super) fn clip_polyline(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reference_lines_are_clipped_to_the_axes() {
+        // 1/N from (1, 1) to (1000, 1e-3), clipped to y ≥ 1e-2 in log-log: ends at x = 100.
+        let c = clip_polyline(
+            &[(1.0, 1.0), (1000.0, 1e-3)],
+            (1.0, 1000.0),
+            (1e-2, 10.0),
+            true,
+            true,
+        );
+        assert_eq!(c.len(), 2);
+        assert!((c[0].0 - 1.0).abs() < 1e-9 && (c[0].1 - 1.0).abs() < 1e-9);
+        assert!((c[1].0 - 100.0).abs() < 1e-6 && (c[1].1 - 1e-2).abs() < 1e-9);
+        // Entirely outside: nothing is drawn.
+        assert!(clip_polyline(
+            &[(1.0, 100.0), (10.0, 50.0)],
+            (1.0, 10.0),
+            (0.1, 1.0),
+            true,
+            true
+        )
+        .is_empty());
+    }
+
+    #[test]
+    fn log_ticks_cover_partial_decades() {
+        let (bold, light) = log_ticks((0.015, 0.3));
+        assert_eq!(bold, [0.02, 0.05, 0.1, 0.2]);
+        assert_eq!(light.len(), 8 + 3);
+        // Over more than 3.5 decades only the powers of ten are labelled.
+        let (bold, light) = log_ticks((1e-7, 1.0));
+        assert_eq!(bold.len(), 8);
+        assert_eq!(light.len(), 8 + 2 * 7);
+        assert_eq!(
+            log_ticks((1.0, 512.0)).0,
+            [1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0]
+        );
+        // Less than a factor 2.5: every integer multiple gets a label.
+        assert_eq!(log_ticks((0.31, 0.58)).0, [0.4, 0.5]);
+    }
+
+    #[test]
+    fn tick_labels_use_one_notation_per_axis() {
+        assert_eq!(decimal(0.30000000000000004), "0.3");
+        assert_eq!(decimal(1234.0), "1234");
+        assert_eq!(decimal(0.001234), "0.001234");
+        assert_eq!(decimal(-0.5), "−0.5");
+        assert_eq!(decimal(0.0), "0");
+        assert_eq!(scientific(5.27e-4, 3), "5.27×10⁻⁴");
+        assert_eq!(scientific(1e-3, 3), "10⁻³");
+        assert_eq!(scientific(2.5e-12, 3), "2.5×10⁻¹²");
+        assert_eq!(scientific(9.9996e-5, 3), "10⁻⁴");
+        assert_eq!(scientific(-3e5, 3), "−3×10⁵");
+        assert_eq!(scientific(20.0, 3), "2×10¹");
+
+        // spp from 1 to 512: decimals, 1-2-5 multiples labelled, others not.
+        let spp = Ticks::new((0.67, 768.0), true);
+        assert_eq!(spp.label(1.0), "1");
+        assert_eq!(spp.label(200.0), "200");
+        assert_eq!(spp.label(300.0), "");
+        // MSE over four decades: powers of ten only, all as powers.
+        let mse = Ticks::new((3e-5, 0.2), true);
+        assert_eq!(mse.label(1e-4), "10⁻⁴");
+        assert_eq!(mse.label(0.1), "10⁻¹");
+        assert_eq!(mse.label(5e-4), "");
+        // A short log axis reaching below 10⁻³: 1-2-5 multiples as powers of ten.
+        let short = Ticks::new((3e-4, 0.03), true);
+        assert_eq!(short.label(5e-4), "5×10⁻⁴");
+        assert_eq!(short.label(0.02), "2×10⁻²");
+        // Linear axes: decimals unless the values are tiny or huge.
+        assert_eq!(Ticks::new((0.0, 2.5), false).label(0.5), "0.5");
+        assert_eq!(Ticks::new((0.0, 2.5e-4), false).label(1.5e-4), "1.5×10⁻⁴");
+        assert_eq!(Ticks::new((-1e6, 1e6), false).label(-5e5), "−5×10⁵");
+    }
+
+    #[test]
+    fn bands_are_clamped_to_the_axis_in_axis_space() {
+        // Log y over [1e-3, 1]: a band from 1e-4 to 1e-1 at x = 1 and from 1e-2 to 10 at x = 10.
+        let poly = band_polygon(
+            &[(1.0, 1e-2), (10.0, 1.0)],
+            &[(1e-4, 1e-1), (1e-2, 10.0)],
+            (1e-3, 1.0),
+            true,
+            true,
+        );
+        let log: Vec<(f64, f64)> = poly.iter().map(|p| (p.0.log10(), p.1.log10())).collect();
+        let want = [
+            (0.0, -1.0), // upper edge at x = 1
+            (0.5, 0.0),  // it crosses the top of the axis half-way
+            (1.0, 0.0),  // and stays pressed against it
+            (1.0, -2.0), // lower edge back from x = 10
+            (0.5, -3.0), // it crosses the bottom of the axis half-way
+            (0.0, -3.0), // and stays pressed against it
+        ];
+        assert_eq!(log.len(), want.len(), "{log:?}");
+        for (g, w) in log.iter().zip(want) {
+            assert!(
+                (g.0 - w.0).abs() < 1e-9 && (g.1 - w.1).abs() < 1e-9,
+                "{log:?}"
+            );
+        }
+        // A low end at or below zero shades down to the bottom of a log axis.
+        let poly = band_polygon(
+            &[(1.0, 0.1), (2.0, 0.1)],
+            &[(-0.2, 0.2), (0.0, 0.2)],
+            (1e-3, 1.0),
+            false,
+            true,
+        );
+        assert!(
+            poly.iter()
+                .rev()
+                .take(2)
+                .all(|p| (p.1 - 1e-3).abs() < 1e-15),
+            "{poly:?}"
+        );
+    }
+
+    #[test]
+    fn bands_must_match_their_series() {
+        let chart = |band: Option<Vec<(f64, f64)>>, label: Option<&str>| Chart {
+            title: "t".into(),
+            x_label: "x".into(),
+            y_label: "y".into(),
+            series: vec![Series {
+                name: "s".into(),
+                points: vec![(1.0, 1.0), (2.0, 0.5)],
+                band,
+                reference: false,
+            }],
+            log_x: true,
+            log_y: true,
+            band_label: label.map(str::to_string),
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let stem = dir.path().join("c");
+        let e = write_charts(
+            &stem,
+            &[chart(Some(vec![(0.5, 2.0)]), Some("CI"))],
+            300,
+            200,
+        )
+        .unwrap_err();
+        assert!(format!("{e:#}").contains("2 points but 1 band"), "{e:#}");
+        let e =
+            write_charts(&stem, &[chart(Some(vec![(0.5, 2.0); 2]), None)], 300, 200).unwrap_err();
+        assert!(format!("{e:#}").contains("no legend label"), "{e:#}");
+        write_charts(
+            &stem,
+            &[chart(Some(vec![(0.5, 2.0); 2]), Some("CI"))],
+            300,
+            200,
+        )
+        .unwrap();
+        assert!(stem.with_extension("png").exists() && stem.with_extension("svg").exists());
+    }
 }

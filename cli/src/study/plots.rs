@@ -1,9 +1,31 @@
-//! Plots of the convergence curves and the figure sheets.
+//! The study's figures: plots of the convergence curves, error heat maps and crop sheets.
 
-use super::*;
+use crate::plot::{self, Chart, HeatPanel, Series};
+use anyhow::Result;
+use tress_scene::metrics::MapKind;
+use tress_scene::picture::Picture;
+use tress_scene::study::{
+    curve, sheet_regions, FigureFiles, Figures, Plan, Point, RefKind, Results, Stat,
+};
+
+/// Draws the figures with plotters.
+pub(super) struct Plots;
+
+impl Figures for Plots {
+    fn draw(&self, plan: &Plan, results: &Results, scene: usize) -> Result<FigureFiles> {
+        let plots = write_plots(plan, results, scene)?;
+        let (heat_map, scale, sheets) = write_figures(plan, results, scene)?;
+        Ok(FigureFiles {
+            plots,
+            heat_map,
+            heat_scale: (scale.lo, scale.hi),
+            sheets,
+        })
+    }
+}
 
 /// The 1/N (or 1/t) slope through the first point of the first series, as a reference line.
-pub(super) fn slope_line(series: &[Series], name: &str) -> Option<Series> {
+fn slope_line(series: &[Series], name: &str) -> Option<Series> {
     let (x0, y0) = *series.first()?.points.first()?;
     let xs = series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
     let (lo, hi) = xs.fold((f64::INFINITY, 0.0f64), |(a, b), x| (a.min(x), b.max(x)));
@@ -15,7 +37,7 @@ pub(super) fn slope_line(series: &[Series], name: &str) -> Option<Series> {
     })
 }
 
-pub(super) fn chart(
+fn chart(
     title: String,
     x_label: &str,
     y_label: &str,
@@ -40,7 +62,7 @@ pub(super) fn chart(
 
 /// Per-integrator series of the mean `y(point)` against spp or time, shaded with its 95 %
 /// confidence interval when there are repetitions.
-pub(super) fn series_of(
+fn series_of(
     plan: &Plan,
     curves: &[Vec<Point>],
     x: impl Fn(&Point) -> f64,
@@ -70,11 +92,11 @@ fn mse_x_spp(p: &Point) -> Stat {
     }
 }
 
-pub(super) const PANEL_W: u32 = 430;
-pub(super) const PANEL_H: u32 = 360;
+const PANEL_W: u32 = 430;
+const PANEL_H: u32 = 360;
 
 /// Convergence charts of one scene; returns the files written (stems relative to the output).
-pub(super) fn write_plots(plan: &Plan, res: &Results, si: usize) -> Result<Vec<String>> {
+fn write_plots(plan: &Plan, res: &Results, si: usize) -> Result<Vec<String>> {
     let scene = &plan.scenes[si];
     let mut written = Vec::new();
     let spp_x = |p: &Point| p.spp as f64;
@@ -178,7 +200,7 @@ pub(super) fn write_plots(plan: &Plan, res: &Results, si: usize) -> Result<Vec<S
 }
 
 /// Heat maps and crop sheets of one scene; returns (heat map file, its scale, sheet files).
-pub(super) fn write_figures(
+fn write_figures(
     plan: &Plan,
     res: &Results,
     si: usize,
@@ -205,12 +227,7 @@ pub(super) fn write_figures(
         .collect();
     let scale = plot::LogScale::fit(&all);
     let heat = format!("plots/{}_heatmap_{}spp.png", scene.name, plan.heatmap_spp);
-    plot::write_heat_maps(
-        &plan.out.join(&heat),
-        &panels,
-        scale,
-        diff::MapKind::Rel.label(),
-    )?;
+    plot::write_heat_maps(&plan.out.join(&heat), &panels, scale, MapKind::Rel.label())?;
 
     let mut sheets = Vec::new();
     for (g, (region, rect)) in sheet_regions(plan, scene).iter().enumerate() {

@@ -9,8 +9,11 @@ use std::time::Instant;
 /// processes' load), in seconds.
 #[derive(Clone, Copy, Debug)]
 pub struct Cost {
+    /// Wall seconds.
     pub wall: f64,
+    /// CPU seconds of all the process's threads.
     pub cpu: Option<f64>,
+    /// Seconds the process's threads were runnable but waiting for a core.
     pub wait: Option<f64>,
 }
 
@@ -34,6 +37,7 @@ fn schedstat() -> Option<(u64, u64)> {
     Some((run, wait))
 }
 
+/// Runs `f` and says what it cost.
 pub fn timed<R>(f: impl FnOnce() -> R) -> (R, Cost) {
     let before = schedstat();
     let start = Instant::now();

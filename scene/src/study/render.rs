@@ -1,6 +1,17 @@
 //! Rendering the jobs, with the cache of EXRs in the output folder.
 
-use super::*;
+use super::plan::{pixels_hash, str_hash, PlanIntegrator, PlanScene};
+use super::progress::Progress;
+use crate::cost::timed;
+use crate::scene_desc::{self, BuiltScene};
+use anyhow::{Context, Result};
+use std::collections::hash_map::Entry;
+use std::collections::HashMap;
+use std::path::PathBuf;
+use tress_core::film::FilmSettings;
+use tress_core::image_io;
+use tress_core::rng::hash_words;
+use tress_core::{Image, Integrator};
 
 /// One image to obtain.
 pub(super) struct Job<'a> {
@@ -39,20 +50,11 @@ pub(super) struct SceneRunner<'a> {
     /// The study's preparation context (tables shared by all its integrators).
     pub(super) prep: &'a tress_core::prepare::Preparation,
     pub(super) pool: &'a rayon::ThreadPool,
-    pub(super) bar: &'a ProgressBar,
+    pub(super) progress: &'a dyn Progress,
     pub(super) verbose: bool,
     pub(super) rendered: usize,
     pub(super) reused: usize,
     pub(super) render_seconds: f64,
-}
-
-/// A message on stderr that does not garble the progress bar (which drops messages when hidden).
-pub(super) fn note(bar: &ProgressBar, msg: String) {
-    if bar.is_hidden() {
-        eprintln!("{msg}");
-    } else {
-        bar.println(msg);
-    }
 }
 
 pub(super) fn attribute<'a>(attrs: &'a [(String, String)], key: &str) -> Option<&'a str> {
@@ -129,14 +131,12 @@ impl SceneRunner<'_> {
         match self.cached(job, &key) {
             Cached::Hit(r) => {
                 self.reused += 1;
-                self.bar.inc(samples);
+                self.progress.advance(samples);
                 return Ok(r);
             }
             Cached::Stale(why) if self.verbose => {
-                note(
-                    self.bar,
-                    format!("re-rendering {}: {why}", job.exr.display()),
-                );
+                self.progress
+                    .note(&format!("re-rendering {}: {why}", job.exr.display()));
             }
             _ => {}
         }
@@ -145,9 +145,9 @@ impl SceneRunner<'_> {
         let pool = self.pool;
         let built = match &mut self.built {
             Some(built) => built,
-            slot => slot.insert(pool.install(|| {
-                scene_desc::build(&scene.desc, &scene.base, &crate::limits_from_env())
-            })?),
+            slot => slot.insert(
+                pool.install(|| scene_desc::build(&scene.desc, &scene.base, self.prep.limits()))?,
+            ),
         };
         let integrator = match self.integrators.entry(job.integrator.ron.clone()) {
             Entry::Occupied(e) => e.into_mut(),
@@ -156,7 +156,7 @@ impl SceneRunner<'_> {
                     .inspect(|_| {
                         let built_now = self.prep.take_notes();
                         if self.verbose {
-                            built_now.into_iter().for_each(|line| note(self.bar, line));
+                            built_now.iter().for_each(|line| self.progress.note(line));
                         }
                     })
                     .with_context(|| {
@@ -164,8 +164,8 @@ impl SceneRunner<'_> {
                     })?,
             ),
         };
-        let bar = self.bar;
-        let progress = |n: u64| bar.inc(n);
+        let reporter = self.progress;
+        let progress = |n: u64| reporter.advance(n);
         let (output, cost) = timed(|| {
             pool.install(|| {
                 tress_core::render::render(&built.scene, integrator.as_ref(), &film, &progress)
@@ -173,14 +173,11 @@ impl SceneRunner<'_> {
         });
         let stats = &output.stats;
         if stats.nonfinite_samples > 0 {
-            note(
-                bar,
-                format!(
-                    "warning: {}: {} samples were NaN or infinite and were dropped",
-                    job.exr.display(),
-                    stats.nonfinite_samples
-                ),
-            );
+            reporter.note(&format!(
+                "warning: {}: {} samples were NaN or infinite and were dropped",
+                job.exr.display(),
+                stats.nonfinite_samples
+            ));
         }
         let wall_s = stats.wall.as_secs_f64();
         let time_s = cost.cpu.unwrap_or(wall_s);

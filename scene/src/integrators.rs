@@ -83,7 +83,7 @@ impl IntegratorDesc {
         if let Some(d) = Self::from_name(arg.trim()) {
             return Ok(d);
         }
-        crate::ron_options().from_str(arg).map_err(|e| {
+        crate::ron_format::options().from_str(arg).map_err(|e| {
             format!("unknown integrator '{arg}': expected one of {} or a RON value such as 'Path(max_depth: 8)' ({e})", Self::NAMES.join(", "))
         })
     }
@@ -113,7 +113,7 @@ mod tests {
             assert_eq!(d.name(), *name);
             assert_eq!(d, desc);
             // The RON form round-trips.
-            let text = crate::ron_options().to_string(&d).unwrap();
+            let text = crate::ron_format::options().to_string(&d).unwrap();
             assert_eq!(IntegratorDesc::parse_arg(&text).unwrap(), d, "{text}");
         }
         assert_eq!(

@@ -1,6 +1,14 @@
-//! Outputs: the CSV, the summary and the report.
+//! Outputs: `results.csv`, `summary.csv` and `report.md`.
 
-use super::*;
+use super::figures::FigureFiles;
+use super::plan::{Plan, PlanReference};
+use super::results::{RefKind, Results};
+use super::stats::{curve, extrapolated_reach, loglog_at, reach, verdict, Point, Reach, Stat};
+use crate::metrics::REL_EPSILON;
+use crate::output::atomic_write;
+use anyhow::Result;
+use std::fmt::Write as _;
+use std::path::PathBuf;
 
 pub(super) fn write_csv(plan: &Plan, res: &Results) -> Result<PathBuf> {
     let mut s = String::from(
@@ -37,7 +45,7 @@ pub(super) fn write_csv(plan: &Plan, res: &Results) -> Result<PathBuf> {
         s.push('\n');
     }
     let path = plan.out.join("results.csv");
-    crate::atomic_write(&path, s.as_bytes())?;
+    atomic_write(&path, s.as_bytes())?;
     Ok(path)
 }
 
@@ -200,7 +208,7 @@ pub(super) fn write_summary(plan: &Plan, res: &Results) -> Result<PathBuf> {
         }
     }
     let path = plan.out.join("summary.csv");
-    crate::atomic_write(&path, s.as_bytes())?;
+    atomic_write(&path, s.as_bytes())?;
     Ok(path)
 }
 
@@ -291,12 +299,36 @@ pub(super) fn summary_section(s: &mut String, plan: &Plan, res: &Results) {
     s.push('\n');
 }
 
+/// `report.md`, with the figures of each scene when they were drawn.
 pub(super) fn write_report(
     plan: &Plan,
     res: &Results,
-    figures: &[SceneOutputs],
+    figures: Option<&[FigureFiles]>,
 ) -> Result<PathBuf> {
     let mut s = String::new();
+    settings_section(&mut s, plan, res);
+    if figures.is_none() {
+        let _ = writeln!(
+            s,
+            "No figures: this run drew none. `{}` (with `--out {}`) draws the plots, heat maps \
+             and crop sheets, reading these renders back.\n",
+            plan.command,
+            plan.out.display()
+        );
+    }
+    if plan.integrators.len() > 1 {
+        summary_section(&mut s, plan, res);
+    }
+    for si in 0..plan.scenes.len() {
+        scene_section(&mut s, plan, res, si, figures.map(|f| &f[si]));
+    }
+    let path = plan.out.join("report.md");
+    atomic_write(&path, s.as_bytes())?;
+    Ok(path)
+}
+
+/// The title, the settings and the definitions of the metrics.
+fn settings_section(s: &mut String, plan: &Plan, res: &Results) {
     let _ = writeln!(s, "# Study: {}\n", plan.title);
     let _ = writeln!(
         s,
@@ -376,178 +408,194 @@ pub(super) fn write_report(
          range). Every render's numbers are in `results.csv`, these tables' in `summary.csv`.\n",
         plan.integrators[0].label
     );
+}
 
+/// One scene's section: its plots, tables, verdicts and figures.
+fn scene_section(s: &mut String, plan: &Plan, res: &Results, si: usize, out: Option<&FigureFiles>) {
+    let sc = &plan.scenes[si];
     let n = plan.integrators.len();
-    if n > 1 {
-        summary_section(&mut s, plan, res);
+    let _ = writeln!(s, "## Scene `{}`\n", sc.name);
+    for p in out.iter().flat_map(|o| &o.plots) {
+        let _ = writeln!(s, "![{p}]({p}.png)\n");
     }
-    for (si, sc) in plan.scenes.iter().enumerate() {
-        let out = &figures[si];
-        let _ = writeln!(s, "## Scene `{}`\n", sc.name);
-        for p in &out.plots {
-            let _ = writeln!(s, "![{p}]({p}.png)\n");
-        }
-        let common: Vec<Vec<Point>> = (0..n)
-            .map(|i| curve(res, plan, si, i, RefKind::Common, None))
-            .collect();
-        let _ = writeln!(s, "### Error against the common reference\n");
-        error_table(&mut s, plan, &common);
-        let own: Option<Vec<Vec<Point>>> = plan.own_spp.map(|_| {
-            (0..n)
-                .map(|i| curve(res, plan, si, i, RefKind::Own, None))
-                .collect()
-        });
-        if let Some(own) = &own {
-            let _ = writeln!(s, "### Error against each integrator's own reference\n");
-            error_table(&mut s, plan, own);
-        }
+    let common: Vec<Vec<Point>> = (0..n)
+        .map(|i| curve(res, plan, si, i, RefKind::Common, None))
+        .collect();
+    let _ = writeln!(s, "### Error against the common reference\n");
+    error_table(s, plan, &common);
+    let own: Option<Vec<Vec<Point>>> = plan.own_spp.map(|_| {
+        (0..n)
+            .map(|i| curve(res, plan, si, i, RefKind::Own, None))
+            .collect()
+    });
+    if let Some(own) = &own {
+        let _ = writeln!(s, "### Error against each integrator's own reference\n");
+        error_table(s, plan, own);
+    }
+    if n > 1 {
+        ratio_tables(s, plan, &common);
+    }
+    reach_table(s, plan, &common);
+    if let Some(own) = &own {
+        own_reach_table(s, plan, own);
+    }
+    verdicts(s, plan, res, si, &common, own.as_deref());
+    if !plan.region_names.is_empty() {
+        regions_table(s, plan, res, si);
+    }
+    if let Some(out) = out {
+        figures_section(s, plan, out);
+    }
+}
 
-        if n > 1 {
-            let base = &common[0];
-            let others: Vec<&str> = plan.integrators[1..]
-                .iter()
-                .map(|i| i.label.as_str())
-                .collect();
-            let _ = writeln!(
-                s,
-                "### MSE ratio at equal spp (X / `{}`)\n",
-                plan.integrators[0].label
-            );
-            let mut cols = vec!["spp"];
-            cols.extend(&others);
-            table_header(&mut s, &cols);
-            let by_spp: Vec<Vec<f64>> = common[1..]
-                .iter()
-                .map(|c| ratios_at_equal_spp(base, c))
-                .collect();
-            for (k, b) in base.iter().enumerate() {
-                let _ = write!(s, "| {} |", b.spp);
-                for r in &by_spp {
-                    let _ = write!(s, " {:.3} |", r[k]);
+/// MSE ratios of each integrator over the baseline, at equal spp and at equal time.
+fn ratio_tables(s: &mut String, plan: &Plan, common: &[Vec<Point>]) {
+    let base = &common[0];
+    let others: Vec<&str> = plan.integrators[1..]
+        .iter()
+        .map(|i| i.label.as_str())
+        .collect();
+    let _ = writeln!(
+        s,
+        "### MSE ratio at equal spp (X / `{}`)\n",
+        plan.integrators[0].label
+    );
+    let mut cols = vec!["spp"];
+    cols.extend(&others);
+    table_header(s, &cols);
+    let by_spp: Vec<Vec<f64>> = common[1..]
+        .iter()
+        .map(|c| ratios_at_equal_spp(base, c))
+        .collect();
+    for (k, b) in base.iter().enumerate() {
+        let _ = write!(s, "| {} |", b.spp);
+        for r in &by_spp {
+            let _ = write!(s, " {:.3} |", r[k]);
+        }
+        s.push('\n');
+    }
+    let _ = writeln!(
+        s,
+        "\n### MSE ratio at equal time (X / `{}`)\n",
+        plan.integrators[0].label
+    );
+    let mut cols = vec!["CPU time (s)"];
+    cols.extend(&others);
+    table_header(s, &cols);
+    let by_time: Vec<Vec<Option<f64>>> = common[1..]
+        .iter()
+        .map(|c| ratios_at_equal_time(base, c))
+        .collect();
+    for (k, b) in base.iter().enumerate() {
+        let _ = write!(s, "| {:.4} |", b.time_s);
+        for r in &by_time {
+            match r[k] {
+                Some(r) => {
+                    let _ = write!(s, " {r:.3} |");
                 }
-                s.push('\n');
-            }
-            let _ = writeln!(
-                s,
-                "\n### MSE ratio at equal time (X / `{}`)\n",
-                plan.integrators[0].label
-            );
-            let mut cols = vec!["CPU time (s)"];
-            cols.extend(&others);
-            table_header(&mut s, &cols);
-            let by_time: Vec<Vec<Option<f64>>> = common[1..]
-                .iter()
-                .map(|c| ratios_at_equal_time(base, c))
-                .collect();
-            for (k, b) in base.iter().enumerate() {
-                let _ = write!(s, "| {:.4} |", b.time_s);
-                for r in &by_time {
-                    match r[k] {
-                        Some(r) => {
-                            let _ = write!(s, " {r:.3} |");
-                        }
-                        None => s.push_str("  |"),
-                    }
-                }
-                s.push('\n');
-            }
-            s.push('\n');
-        }
-
-        let _ = writeln!(s, "### Time to relMSE = {:.1e}\n", plan.target_relmse);
-        table_header(&mut s, &["integrator", "spp", "CPU time (s)"]);
-        for (i, c) in plan.integrators.iter().zip(&common) {
-            let _ = match reach(c, plan.target_relmse) {
-                Reach::AtOnce(spp, t) => writeln!(s, "| {} | ≤ {spp} | ≤ {t:.4} |", i.label),
-                Reach::At(spp, t) => writeln!(s, "| {} | {spp:.1} | {t:.4} |", i.label),
-                Reach::Never(best) => writeln!(
-                    s,
-                    "| {} | not reached (best relMSE {best:.3e}) | |",
-                    i.label
-                ),
-            };
-        }
-
-        if let Some(own) = &own {
-            own_reach_table(&mut s, plan, own);
-        }
-
-        let _ = writeln!(s, "\n### Convergence verdicts (MSE·spp)\n");
-        let noise = common_noise(plan, res, si);
-        if let Some(nz) = noise {
-            let _ = writeln!(
-                s,
-                "Common reference noise ≈ {nz:.3e} (MSE·spp of its integrator at the lowest spp / \
-                 reference spp), subtracted before judging.\n"
-            );
-        }
-        for (i, c) in plan.integrators.iter().enumerate() {
-            let _ = writeln!(
-                s,
-                "- `{}` vs common reference: {}",
-                plan.integrators[i].label,
-                verdict(&common[i], noise)
-            );
-            if let Some(own) = &own {
-                let _ = writeln!(
-                    s,
-                    "- `{}` vs own reference: {}",
-                    c.label,
-                    verdict(&own[i], own_noise(plan, res, si, i))
-                );
+                None => s.push_str("  |"),
             }
         }
         s.push('\n');
+    }
+    s.push('\n');
+}
 
-        if !plan.region_names.is_empty() {
-            let _ = writeln!(s, "### Regions: relMSE against the common reference\n");
-            let mut cols = vec!["region".to_string(), "integrator".to_string()];
-            cols.extend(plan.spp.iter().map(|x| format!("{x} spp")));
-            let cols: Vec<&str> = cols.iter().map(String::as_str).collect();
-            table_header(&mut s, &cols);
-            for (g, region) in plan.region_names.iter().enumerate() {
-                let rect = sc.regions[g];
-                for (i, integ) in plan.integrators.iter().enumerate() {
-                    let c = curve(res, plan, si, i, RefKind::Common, Some(g));
-                    let _ = write!(s, "| {region} ({rect}) | {} |", integ.label);
-                    for p in &c {
-                        let _ = write!(s, " {} |", fmt_stat(p.relmse));
-                    }
-                    s.push('\n');
-                }
+/// Time to the target relMSE against the common reference.
+fn reach_table(s: &mut String, plan: &Plan, common: &[Vec<Point>]) {
+    let _ = writeln!(s, "### Time to relMSE = {:.1e}\n", plan.target_relmse);
+    table_header(s, &["integrator", "spp", "CPU time (s)"]);
+    for (i, c) in plan.integrators.iter().zip(common) {
+        let _ = match reach(c, plan.target_relmse) {
+            Reach::AtOnce(spp, t) => writeln!(s, "| {} | ≤ {spp} | ≤ {t:.4} |", i.label),
+            Reach::At(spp, t) => writeln!(s, "| {} | {spp:.1} | {t:.4} |", i.label),
+            Reach::Never(best) => writeln!(
+                s,
+                "| {} | not reached (best relMSE {best:.3e}) | |",
+                i.label
+            ),
+        };
+    }
+}
+
+/// The convergence verdicts against the common reference and, when there are, the own ones.
+fn verdicts(
+    s: &mut String,
+    plan: &Plan,
+    res: &Results,
+    si: usize,
+    common: &[Vec<Point>],
+    own: Option<&[Vec<Point>]>,
+) {
+    let _ = writeln!(s, "\n### Convergence verdicts (MSE·spp)\n");
+    let noise = common_noise(plan, res, si);
+    if let Some(nz) = noise {
+        let _ = writeln!(
+            s,
+            "Common reference noise ≈ {nz:.3e} (MSE·spp of its integrator at the lowest spp / \
+             reference spp), subtracted before judging.\n"
+        );
+    }
+    for (i, c) in plan.integrators.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "- `{}` vs common reference: {}",
+            plan.integrators[i].label,
+            verdict(&common[i], noise)
+        );
+        if let Some(own) = &own {
+            let _ = writeln!(
+                s,
+                "- `{}` vs own reference: {}",
+                c.label,
+                verdict(&own[i], own_noise(plan, res, si, i))
+            );
+        }
+    }
+    s.push('\n');
+}
+
+/// relMSE per region, integrator and spp, against the common reference.
+fn regions_table(s: &mut String, plan: &Plan, res: &Results, si: usize) {
+    let sc = &plan.scenes[si];
+    let _ = writeln!(s, "### Regions: relMSE against the common reference\n");
+    let mut cols = vec!["region".to_string(), "integrator".to_string()];
+    cols.extend(plan.spp.iter().map(|x| format!("{x} spp")));
+    let cols: Vec<&str> = cols.iter().map(String::as_str).collect();
+    table_header(s, &cols);
+    for (g, region) in plan.region_names.iter().enumerate() {
+        let rect = sc.regions[g];
+        for (i, integ) in plan.integrators.iter().enumerate() {
+            let c = curve(res, plan, si, i, RefKind::Common, Some(g));
+            let _ = write!(s, "| {region} ({rect}) | {} |", integ.label);
+            for p in &c {
+                let _ = write!(s, " {} |", fmt_stat(p.relmse));
             }
             s.push('\n');
         }
-
-        let _ = writeln!(
-            s,
-            "### Per-pixel error at {} spp (repetition 0)\n\n![heat map]({})\n\nColour: \
-             per-pixel sqrt(mean over RGB of (I − R)² / (R² + {REL_EPSILON})), log scale from \
-             {:.2e} (black) to {:.2e} (pale yellow), shared by the panels.\n",
-            plan.heatmap_spp, out.heat, out.scale.lo, out.scale.hi
-        );
-        let _ = writeln!(
-            s,
-            "### Crops (rows: integrators; columns: spp, then the reference{})\n",
-            if plan.own_spp.is_some() {
-                " and the integrator's own reference"
-            } else {
-                ""
-            }
-        );
-        for sheet in &out.sheets {
-            let _ = writeln!(s, "![{sheet}]({sheet})\n");
-        }
     }
-    let path = plan.out.join("report.md");
-    crate::atomic_write(&path, s.as_bytes())?;
-    Ok(path)
+    s.push('\n');
 }
 
-/// Figure files of one scene, for the report.
-pub(super) struct SceneOutputs {
-    pub(super) plots: Vec<String>,
-    pub(super) heat: String,
-    pub(super) scale: plot::LogScale,
-    pub(super) sheets: Vec<String>,
+/// The heat map and the crop sheets.
+fn figures_section(s: &mut String, plan: &Plan, out: &FigureFiles) {
+    let _ = writeln!(
+        s,
+        "### Per-pixel error at {} spp (repetition 0)\n\n![heat map]({})\n\nColour: \
+         per-pixel sqrt(mean over RGB of (I − R)² / (R² + {REL_EPSILON})), log scale from \
+         {:.2e} (black) to {:.2e} (pale yellow), shared by the panels.\n",
+        plan.heatmap_spp, out.heat_map, out.heat_scale.0, out.heat_scale.1
+    );
+    let _ = writeln!(
+        s,
+        "### Crops (rows: integrators; columns: spp, then the reference{})\n",
+        if plan.own_spp.is_some() {
+            " and the integrator's own reference"
+        } else {
+            ""
+        }
+    );
+    for sheet in &out.sheets {
+        let _ = writeln!(s, "![{sheet}]({sheet})\n");
+    }
 }

@@ -1,12 +1,15 @@
 //! Statistics over repetitions: means, confidence intervals, convergence curves and verdicts.
 
-use super::*;
+use super::plan::Plan;
+use super::results::{RefKind, Results, Row};
 
 /// Mean and the half-width of its 95 % confidence interval (Student t; none for one value).
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Stat {
-    pub(super) mean: f64,
-    pub(super) ci: Option<f64>,
+pub struct Stat {
+    /// The mean.
+    pub mean: f64,
+    /// Half-width of the 95 % confidence interval of the mean; none for a single value.
+    pub ci: Option<f64>,
 }
 
 /// The 97.5 % quantile of Student's t with `df` degrees of freedom.
@@ -29,20 +32,24 @@ pub(super) fn stat(v: &[f64]) -> Stat {
 
 /// Averages over the repetitions of one (integrator, spp) setting.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Point {
-    pub(super) spp: u32,
-    pub(super) mse: Stat,
-    pub(super) relmse: Stat,
-    pub(super) time_s: f64,
+pub struct Point {
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Mean squared error.
+    pub mse: Stat,
+    /// Relative mean squared error.
+    pub relmse: Stat,
+    /// Mean CPU seconds of a render.
+    pub time_s: f64,
     /// Mean squared bias over the pixels and channels, (K·MSE(mean image) − mean MSE)/(K − 1)
     /// for K ≥ 2 repetitions: unbiased, since the mean of K independent renders has the same
     /// bias and 1/K of the variance. It includes the reference's own squared error.
-    pub(super) bias2: Option<f64>,
+    pub bias2: Option<f64>,
 }
 
 /// The convergence curve of one integrator in one scene, against one reference, over the whole
 /// image (`region` None) or a region.
-pub(super) fn curve(
+pub fn curve(
     res: &Results,
     plan: &Plan,
     scene: usize,
@@ -231,5 +238,103 @@ pub(super) fn verdict(points: &[Point], noise: Option<f64>) -> String {
             }
             None => trend,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn student_t_quantiles() {
+        // Tabulated values (to the table's three decimals).
+        for (df, want) in [
+            (1, 12.706),
+            (2, 4.303),
+            (30, 2.042),
+            (40, 2.021),
+            (120, 1.980),
+        ] {
+            assert!((t975(df) - want).abs() < 1e-3, "t975({df}) = {}", t975(df));
+        }
+        let s = stat(&[1.0, 2.0, 3.0]);
+        assert_eq!(s.mean, 2.0);
+        assert!((s.ci.unwrap() - 4.303 / 3f64.sqrt()).abs() < 1e-3);
+        assert!(stat(&[5.0]).ci.is_none());
+    }
+
+    #[test]
+    fn log_log_interpolation() {
+        let pts = [(1.0, 1.0), (100.0, 1e-2), (10.0, 1e-1)];
+        assert!(
+            (loglog_at(&pts, 31.622_776_601_683_793).unwrap() - 10f64.powf(-1.5)).abs() < 1e-12
+        );
+        assert_eq!(loglog_at(&pts, 0.5), None);
+        assert_eq!(loglog_at(&pts, 100.0), Some(1e-2));
+    }
+
+    fn pt(spp: u32, mse: f64, time_s: f64) -> Point {
+        let s = Stat {
+            mean: mse,
+            ci: None,
+        };
+        Point {
+            spp,
+            mse: s,
+            relmse: s,
+            time_s,
+            bias2: None,
+        }
+    }
+
+    #[test]
+    fn verdicts_and_time_to_target() {
+        let unbiased: Vec<Point> = [1, 4, 16, 64]
+            .iter()
+            .map(|&n| pt(n, 1.0 / n as f64, n as f64))
+            .collect();
+        assert!(verdict(&unbiased, None).starts_with("flat"));
+        let biased: Vec<Point> = [1, 4, 16, 64]
+            .iter()
+            .map(|&n| pt(n, 1.0 / n as f64 + 0.1, n as f64))
+            .collect();
+        assert!(verdict(&biased, None).contains("error floor"));
+        // Reference noise alone is not taken for bias once subtracted.
+        let noisy: Vec<Point> = [1, 4, 16, 64]
+            .iter()
+            .map(|&n| pt(n, 1.0 / n as f64 + 0.02, n as f64))
+            .collect();
+        assert!(verdict(&noisy, None).contains("error floor"));
+        assert!(verdict(&noisy, Some(0.02)).starts_with("flat"));
+        // With a bias estimate the floor is attributed: to bias when bias² dominates the MSE…
+        let mut split = biased.clone();
+        split[3].bias2 = Some(0.1);
+        assert!(verdict(&split, None).starts_with("**bias**"));
+        // …and to heavy-tailed variance when the mean image is as close as 1/K predicts.
+        split[3].bias2 = Some(0.001);
+        assert!(verdict(&split, None).starts_with("**excess variance**"));
+        // A bias that dominates at the highest spp is reported even before MSE·spp rises.
+        let mut early = unbiased.clone();
+        early[3].bias2 = Some(0.6 / 64.0);
+        assert!(verdict(&early, None).starts_with("**bias**"));
+        early[3].bias2 = Some(0.3 / 64.0);
+        assert!(verdict(&early, None).starts_with("flat"));
+        // relMSE 1/N reaches 0.1 at 10 spp and 10 s.
+        match reach(&unbiased, 0.1) {
+            Reach::At(spp, t) => {
+                assert!((spp - 10.0).abs() < 1e-9 && (t - 10.0).abs() < 1e-9);
+            }
+            _ => panic!("target not found"),
+        }
+        assert!(matches!(reach(&unbiased, 2.0), Reach::AtOnce(1, _)));
+        assert!(matches!(reach(&unbiased, 1e-3), Reach::Never(_)));
+        // Short of it, 1/N from the last setting (relMSE 1/64 at 64 spp and 64 s) gets there at
+        // 1000 spp and 1000 s; a reached target is not extrapolated.
+        let (spp, t) = extrapolated_reach(&unbiased, 1e-3).unwrap();
+        assert!(
+            (spp - 1000.0).abs() < 1e-6 && (t - 1000.0).abs() < 1e-6,
+            "{spp} {t}"
+        );
+        assert!(extrapolated_reach(&unbiased, 0.1).is_none());
     }
 }

@@ -14,9 +14,9 @@ pub fn scene_reference() -> String {
     let defs = schema["$defs"].as_object().unwrap_or(&empty);
     let mut out = String::from(
         "# Scene file reference\n\n\
-         <!-- Generated from the scene types by `tress_cli::reference`; do not edit. After \
+         <!-- Generated from the scene types by `tress_scene::reference`; do not edit. After \
          changing a scene type, regenerate it with \
-         `TRESS_BLESS=1 cargo test --release -p tress-cli --lib reference`. -->\n\n\
+         `TRESS_BLESS=1 cargo test --release -p tress-scene --lib reference`. -->\n\n\
          Scene files are [RON](https://github.com/ron-rs/ron). A struct is written \
          `(field: value, …)`; an enum is written `Variant(field: value, …)`, or `Variant` when \
          it has no fields; an optional value is `Some(value)` or `None`; a list is \
@@ -286,7 +286,7 @@ mod tests {
         assert!(
             committed == fresh,
             "{} is out of date: regenerate it with \
-             `TRESS_BLESS=1 cargo test --release -p tress-cli --lib reference`",
+             `TRESS_BLESS=1 cargo test --release -p tress-scene --lib reference`",
             path.display()
         );
     }

@@ -1,4 +1,6 @@
-//! `tress_cli::run_study`, the library's way to run a study (the Python bindings use it).
+//! `tress_scene::study::run` without figures, as the Python bindings run studies.
+
+use tress_scene::study::{self, NotesOnStderr, StudySettings};
 
 #[test]
 fn run_study_says_where_the_study_wrote_and_what_it_rendered() {
@@ -22,14 +24,15 @@ fn run_study_says_where_the_study_wrote_and_what_it_rendered() {
     )
     .unwrap();
     let out = dir.path().join("out");
-    let args = || tress_cli::StudyArgs {
+    let settings = StudySettings {
         study: study.clone(),
         quick: false,
         out: Some(out.clone()),
         threads: Some(1),
-        quiet: true,
+        verbose: false,
+        limits: Default::default(),
     };
-    let first = tress_cli::run_study(args()).unwrap();
+    let first = study::run(&settings, &NotesOnStderr, None).unwrap();
     assert_eq!(first.folder, out);
     assert_eq!(first.report, out.join("report.md"));
     assert_eq!(first.results_csv, out.join("results.csv"));
@@ -38,6 +41,11 @@ fn run_study_says_where_the_study_wrote_and_what_it_rendered() {
     }
     // Two spp x two repetitions, and the reference; then all of it read back.
     assert_eq!((first.rendered, first.reused), (5, 0));
-    let again = tress_cli::run_study(args()).unwrap();
+    let report = std::fs::read_to_string(&first.report).unwrap();
+    assert!(
+        report.contains("No figures") && !report.contains(".png"),
+        "{report}"
+    );
+    let again = study::run(&settings, &NotesOnStderr, None).unwrap();
     assert_eq!((again.rendered, again.reused), (0, 5));
 }

@@ -1,0 +1,293 @@
+//! Scene files: RON descriptions deserialised with serde, then built into a renderable
+//! [`tress_core::Scene`].
+//!
+//! All enums are externally tagged (RON's native `Variant(...)` syntax), every struct denies
+//! unknown fields, and relative paths resolve against the scene file's folder.
+
+use crate::geometry::{self, ObjectDesc};
+use crate::integrators::IntegratorDesc;
+use crate::lights::{build_light, LightDesc};
+use crate::materials::MaterialDesc;
+use crate::paths::resolve;
+use crate::placeholders::{substitute, Defines};
+use anyhow::{anyhow, bail, Context, Result};
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use tress_core::film::FilmSettings;
+use tress_core::limits::Limits;
+use tress_core::{Camera, Material, Scene};
+
+/// A whole scene file.
+#[derive(Clone, Debug, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SceneDesc {
+    /// The view the image is taken from.
+    pub camera: CameraDesc,
+    /// Resolution, samples per pixel, seed and crop window.
+    pub film: FilmSettings,
+    /// How light transport is computed (default `Path` with its default settings).
+    #[serde(default)]
+    pub integrator: IntegratorDesc,
+    /// Named materials, referred to by objects; a name given twice is an error.
+    #[serde(deserialize_with = "unique_names")]
+    pub materials: BTreeMap<String, MaterialDesc>,
+    /// Hair, meshes and spheres, each naming its material.
+    pub objects: Vec<ObjectDesc>,
+    /// The light sources.
+    pub lights: Vec<LightDesc>,
+}
+
+impl SceneDesc {
+    /// Every file the scene reads (hair and the files a pbrt groom includes, meshes,
+    /// environment maps), resolved against `scene_path` as [`build`] resolves them.
+    pub fn referenced_files(&self, scene_path: &Path) -> Result<Vec<PathBuf>> {
+        let mut files = Vec::new();
+        for object in &self.objects {
+            match object {
+                ObjectDesc::Hair { source, .. } => {
+                    let mut source = source.clone();
+                    if let Some(p) = source.path_mut() {
+                        *p = resolve(scene_path, p);
+                    }
+                    files.extend(
+                        source
+                            .files()
+                            .map_err(|e| anyhow!("{}: {e}", scene_path.display()))?,
+                    );
+                }
+                ObjectDesc::Mesh { file, .. } => {
+                    files.push(resolve(scene_path, file));
+                }
+                ObjectDesc::Sphere { .. } => {}
+            }
+        }
+        for light in &self.lights {
+            if let LightDesc::Environment { file, .. } = light {
+                files.push(resolve(scene_path, file));
+            }
+        }
+        Ok(files)
+    }
+
+    /// A hash of the contents of every file the scene reads
+    /// ([`referenced_files`](Self::referenced_files)): part of the keys of study caches and of
+    /// the scene hash that merged pieces must share, so that renders of a file's old contents
+    /// are not taken for renders of its new ones.
+    pub fn files_hash(&self, scene_path: &Path) -> Result<u64> {
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for f in self.referenced_files(scene_path)? {
+            let bytes = tress_core::files::read_regular(&f)
+                .map_err(|e| anyhow!("{}: {}: {e}", scene_path.display(), f.display()))?;
+            for b in bytes.iter().chain(b"|") {
+                h = (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3);
+            }
+        }
+        Ok(h)
+    }
+}
+
+/// A map that refuses a key given twice (serde's own keeps the last silently).
+fn unique_names<'de, D, V>(d: D) -> std::result::Result<BTreeMap<String, V>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    V: Deserialize<'de>,
+{
+    struct Unique<V>(std::marker::PhantomData<V>);
+    impl<'de, V: Deserialize<'de>> serde::de::Visitor<'de> for Unique<V> {
+        type Value = BTreeMap<String, V>;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("a map of names")
+        }
+        fn visit_map<A: serde::de::MapAccess<'de>>(
+            self,
+            mut map: A,
+        ) -> std::result::Result<Self::Value, A::Error> {
+            let mut out = BTreeMap::new();
+            while let Some((name, value)) = map.next_entry::<String, V>()? {
+                if out.contains_key(&name) {
+                    return Err(serde::de::Error::custom(format!(
+                        "material \"{name}\" is defined twice"
+                    )));
+                }
+                out.insert(name, value);
+            }
+            Ok(out)
+        }
+    }
+    d.deserialize_map(Unique(std::marker::PhantomData))
+}
+
+/// Perspective camera.
+#[derive(Clone, Debug, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CameraDesc {
+    /// Camera position, in world space.
+    #[schemars(with = "[f32; 3]")]
+    pub look_from: Vec3,
+    /// Point the camera looks at (the image centre).
+    #[schemars(with = "[f32; 3]")]
+    pub look_at: Vec3,
+    /// Direction that appears upwards in the image (default +y).
+    #[serde(default = "default_up")]
+    #[schemars(with = "[f32; 3]")]
+    pub up: Vec3,
+    /// Vertical field of view in degrees, in (0, 180).
+    #[serde(default = "default_fov")]
+    pub fov: f32,
+    /// Thin-lens aperture radius in scene units; 0 is a pinhole.
+    #[serde(default)]
+    pub lens_radius: f32,
+    /// Distance to the plane in focus; default: the distance to `look_at`.
+    #[serde(default)]
+    pub focus_distance: Option<f32>,
+}
+
+fn default_up() -> Vec3 {
+    Vec3::Y
+}
+
+fn default_fov() -> f32 {
+    40.0
+}
+
+/// A scene built from its description, with a human-readable summary of what it holds.
+pub struct BuiltScene {
+    /// The renderable scene.
+    pub scene: Scene,
+    /// What was built and how long it took, printed by `tress info` and by verbose renders.
+    pub summary: String,
+}
+
+/// Reads and parses a scene file; errors name the file, line and column.
+pub fn load(path: &Path) -> Result<SceneDesc> {
+    load_with(path, &Defines::new())
+}
+
+/// Reads a scene file, replaces its placeholders with `defines` ([`substitute`]) and parses it;
+/// errors name the file, line and column.
+pub fn load_with(path: &Path, defines: &Defines) -> Result<SceneDesc> {
+    let text = tress_core::files::read_regular_text(path)
+        .with_context(|| format!("cannot read scene file {}", path.display()))?;
+    let text = substitute(&text, defines).map_err(|e| anyhow!("{}:{e}", path.display()))?;
+    parse(&text).map_err(|e| anyhow!("{}:{e}", path.display()))
+}
+
+/// Parses scene text; the error is `line:column: message`, followed by the offending line with a
+/// caret under the column.
+pub fn parse(text: &str) -> std::result::Result<SceneDesc, String> {
+    crate::ron_format::options()
+        .from_str::<SceneDesc>(text)
+        .map_err(|e| {
+            let p = e.span.start;
+            let mut msg = format!("{}:{}: {}", p.line, p.col, e.code);
+            if let Some(line) = text.lines().nth(p.line.saturating_sub(1)) {
+                let (shown, caret) = excerpt(line, p.col.saturating_sub(1));
+                msg.push_str(&format!("\n    {shown}\n    {}^", " ".repeat(caret)));
+            }
+            msg
+        })
+}
+
+/// At most [`EXCERPT_CHARS`] characters of `line` around character `col`, with `…` where it
+/// is cut, and the caret's column in that excerpt: a one-line file of 400 KB printed whole.
+fn excerpt(line: &str, col: usize) -> (String, usize) {
+    let chars: Vec<char> = line.chars().collect();
+    if chars.len() <= EXCERPT_CHARS {
+        return (line.to_owned(), col.min(chars.len()));
+    }
+    let col = col.min(chars.len());
+    let start = col.saturating_sub(EXCERPT_CHARS / 2);
+    let end = (start + EXCERPT_CHARS).min(chars.len());
+    let start = end.saturating_sub(EXCERPT_CHARS);
+    let mut shown: String = chars[start..end].iter().collect();
+    let mut caret = col - start;
+    if start > 0 {
+        shown.insert(0, '…');
+        caret += 1;
+    }
+    if end < chars.len() {
+        shown.push('…');
+    }
+    (shown, caret)
+}
+
+/// Longest excerpt of a scene line shown under a parse error.
+const EXCERPT_CHARS: usize = 120;
+
+/// Builds the renderable scene, its hair within `limits`.
+pub fn build(desc: &SceneDesc, scene_path: &Path, limits: &Limits) -> Result<BuiltScene> {
+    let here = |what: &str| format!("{}: {what}", scene_path.display());
+    let c = &desc.camera;
+    let camera = Camera::new(
+        c.look_from,
+        c.look_at,
+        c.up,
+        c.fov,
+        c.lens_radius,
+        c.focus_distance,
+    )
+    .map_err(|e| anyhow!("{}", here(&e.to_string())))?;
+
+    // Materials, in a stable order; objects refer to them by index.
+    let t0 = Instant::now();
+    let mut material_index = BTreeMap::new();
+    let mut materials = Vec::new();
+    for (name, m) in &desc.materials {
+        let built = match m {
+            MaterialDesc::Hair(model) => Material::Hair(
+                model
+                    .build()
+                    .map_err(|e| anyhow!("{}", here(&format!("material '{name}': {e}"))))?,
+            ),
+            MaterialDesc::Diffuse { albedo } => {
+                if !(albedo.min_element() >= 0.0 && albedo.max_element() <= 1.0) {
+                    bail!(
+                        "{}",
+                        here(&format!(
+                            "material '{name}': albedo {albedo} must lie in [0, 1]"
+                        ))
+                    );
+                }
+                Material::Diffuse { albedo: *albedo }
+            }
+        };
+        material_index.insert(name.clone(), materials.len() as u32);
+        materials.push(built);
+    }
+    let material_time = t0.elapsed();
+
+    let lights = desc
+        .lights
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            build_light(l, scene_path)
+                .map_err(|e| anyhow!("{}", here(&format!("lights[{i}]: {e:#}"))))
+        })
+        .collect::<Result<Vec<_>>>()?;
+
+    let t1 = Instant::now();
+    let (accel, geometry_summary) = geometry::build_accel(
+        &desc.objects,
+        scene_path,
+        &desc.materials,
+        &material_index,
+        &mut materials,
+        limits,
+    )?;
+    let geometry_time = t1.elapsed();
+    let summary = format!(
+        "{geometry_summary}\nmaterials: {} built in {:.1} ms; lights: {}; geometry built in {:.2} s",
+        materials.len(),
+        material_time.as_secs_f64() * 1e3,
+        lights.len(),
+        geometry_time.as_secs_f64()
+    );
+    Ok(BuiltScene {
+        scene: Scene::new(camera, Box::new(accel), materials, lights.into()),
+        summary,
+    })
+}
