@@ -15,6 +15,7 @@ venv=$target/peer-venv
 llvm=$(ls /usr/lib/*-linux-gnu/libLLVM.so.19* /usr/lib/*-linux-gnu/libLLVM-19.so 2>/dev/null | head -n 1 || true)
 if [ -z "$llvm" ]; then
     if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+        apt-get update -qq
         DEBIAN_FRONTEND=noninteractive apt-get install -y -q libllvm19 >/dev/null
         llvm=$(ls /usr/lib/*-linux-gnu/libLLVM.so.19* | head -n 1)
     else
