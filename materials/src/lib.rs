@@ -2,10 +2,11 @@
 //!
 //! [`HairModel`] is THE registry of models. Adding a model is one new file (a `Params` struct
 //! with serde defaults implementing [`ModelParams`], a type implementing `Bcsdf` with
-//! `new(&Params) -> Result<_, ParamError>`, and `test_instances()`) plus one line in the
-//! `hair_models!` invocation below; nothing else names the models one by one. The statistical
-//! test suite (`tests/bcsdf_statistics.rs`: white furnace, sampling, χ², …), the registry's own
-//! tests below and the dual-scattering tables' tests then cover the new model automatically.
+//! `new(&Params) -> Result<_, ParamError>`, and `test_instances()`), its `pub mod` line and one
+//! line in the `hair_models!` invocation below; nothing else names the models one by one. The
+//! statistical test suite (`tests/bcsdf_statistics.rs`: white furnace, sampling, χ², …), the
+//! registry's own tests below and the dual-scattering tables' tests then cover the new model
+//! automatically.
 
 #![warn(missing_docs)]
 

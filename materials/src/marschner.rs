@@ -130,7 +130,8 @@ impl Default for Params {
 }
 
 impl ModelParams for Params {
-    /// The pigment, converted at [`COLOR_BETA_N`] (the model has no azimuthal roughness).
+    /// The pigment, converted at β_n = 0.3 (`COLOR_BETA_N`: the model has no azimuthal
+    /// roughness).
     fn pigment(&self) -> Option<(&Pigment, f32)> {
         Some((&self.pigment, COLOR_BETA_N))
     }
