@@ -129,22 +129,7 @@ hair_models! {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn chiang(pigment: Pigment) -> HairModel {
-        HairModel::Chiang(crate::chiang::Params {
-            beta_n: 0.4,
-            pigment,
-            ..Default::default()
-        })
-    }
-
-    fn brown() -> Pigment {
-        Pigment::Melanin {
-            eumelanin: 1.3,
-            pheomelanin: 0.2,
-            tint: pigment::NO_TINT,
-        }
-    }
+    use crate::test_util::{brown, chiang};
 
     #[test]
     fn models_expose_and_replace_their_pigment() {

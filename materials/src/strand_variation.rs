@@ -536,22 +536,7 @@ fn split_by_variance(x: &[[f64; 4]], w: &[f64], k: usize) -> Vec<Vec<u32>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn chiang(pigment: Pigment) -> HairModel {
-        HairModel::Chiang(crate::chiang::Params {
-            beta_n: 0.4,
-            pigment,
-            ..Default::default()
-        })
-    }
-
-    fn brown() -> Pigment {
-        Pigment::Melanin {
-            eumelanin: 1.3,
-            pheomelanin: 0.2,
-            tint: crate::pigment::NO_TINT,
-        }
-    }
+    use crate::test_util::{brown, chiang};
 
     /// [`quantise_variants`] of absorptions alone (roughness scale 1).
     fn quantise_absorption(sigma: &[Rgb], k: usize) -> (Vec<Rgb>, Vec<u32>) {

@@ -1,6 +1,7 @@
 //! Helpers shared by the unit tests of several models.
 
-use crate::ParamError;
+use crate::pigment::{Pigment, NO_TINT};
+use crate::{HairModel, ParamError};
 use std::fmt::Debug;
 
 /// An edit of a model's default parameters, and the field the model must name in refusing it.
@@ -33,4 +34,23 @@ pub(crate) fn shared_tables(
             DualScatteringTables::new(b, s, &tress_core::limits::Limits::default())
         })
         .unwrap()
+}
+
+/// A Chiang model with β_n 0.4 and `pigment`: the registry's and per-strand variation's tests
+/// vary the pigment of one model.
+pub(crate) fn chiang(pigment: Pigment) -> HairModel {
+    HairModel::Chiang(crate::chiang::Params {
+        beta_n: 0.4,
+        pigment,
+        ..Default::default()
+    })
+}
+
+/// Brown hair: eumelanin 1.3, pheomelanin 0.2, no tint.
+pub(crate) fn brown() -> Pigment {
+    Pigment::Melanin {
+        eumelanin: 1.3,
+        pheomelanin: 0.2,
+        tint: NO_TINT,
+    }
 }
