@@ -148,3 +148,61 @@ fn zero_threads_is_an_error() {
     assert!(!out.status.success());
     assert!(stderr(&out).contains("--threads"));
 }
+
+#[test]
+fn a_scene_is_benchmarked_against_embree_alone_on_its_own_rays() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/demo.ron");
+    let out = tress(
+        &[
+            "bench",
+            "--quick",
+            "--threads",
+            "2",
+            "--scene",
+            scene.to_str().unwrap(),
+            "--spp",
+            "1",
+            "--csv",
+            "scene.csv",
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let csv = std::fs::read_to_string(dir.path().join("scene.csv")).unwrap();
+    let rows: Vec<Vec<String>> = csv.lines().skip(1).map(csv_fields).collect();
+    let value = |metric: &str, threads: &str| -> f64 {
+        let row = rows
+            .iter()
+            .find(|r| {
+                r[0] == "demo.ron" && r[1] == "integrator" && r[2] == metric && r[3] == threads
+            })
+            .unwrap_or_else(|| panic!("no {metric} on {threads} thread(s) in\n{csv}"));
+        row[4].parse().unwrap()
+    };
+    for threads in ["1", "2"] {
+        // The scene's own integrator: the demo's path tracer.
+        assert!(value("path/samples_per_s", threads) > 0.0);
+        for mode in ["plain", "embree1", "embree1-excl", "accel"] {
+            let ratio = value(&format!("path/ratio_vs_replay_{mode}"), threads);
+            assert!(ratio.is_finite() && ratio > 0.0, "{mode}: {ratio}");
+        }
+        // The demo's sky is sampled by next-event estimation: shadow rays are in the mix.
+        let mix: Vec<f64> = ["camera", "bounce", "shadow"]
+            .iter()
+            .map(|k| value(&format!("path/mix_{k}"), threads))
+            .collect();
+        assert!((mix.iter().sum::<f64>() - 1.0).abs() < 1e-3, "{mix:?}");
+        assert!(mix.iter().all(|&m| m > 0.0), "{mix:?}");
+    }
+    // Only the scene is measured: no built-in model, no BCSDF table.
+    assert!(rows.iter().all(|r| r[0] == "demo.ron"), "{csv}");
+
+    let missing = tress(&["bench", "--scene", "no-such.ron"], dir.path());
+    assert!(!missing.status.success());
+    assert!(
+        stderr(&missing).contains("no-such.ron"),
+        "{}",
+        stderr(&missing)
+    );
+}

@@ -67,8 +67,9 @@ impl ObjectDesc {
     }
 }
 
-/// Builds the accelerator for the scene's objects, their hair within `limits`; returns it with a
-/// summary (`tress info`).
+/// Builds the accelerator for the scene's objects with `builder` (which holds the limits the
+/// hair is built within; `limits` are the same, for loading files); returns it with a summary
+/// (`tress info`).
 /// `materials` holds the built materials of `descriptions` (in `material_index` order); hair
 /// objects with a `variation` append their variants to it.
 pub fn build_accel(
@@ -77,10 +78,10 @@ pub fn build_accel(
     descriptions: &BTreeMap<String, MaterialDesc>,
     material_index: &BTreeMap<String, u32>,
     materials: &mut Vec<Material>,
+    mut builder: SceneBuilder,
     limits: &Limits,
 ) -> Result<(EmbreeAccel, String)> {
     let here = |i: usize, what: String| anyhow!("{}: objects[{i}]: {what}", scene_path.display());
-    let mut builder = SceneBuilder::new()?.with_limits(*limits);
     let mut notes = Vec::new();
     for (i, object) in objects.iter().enumerate() {
         let name = object.material();

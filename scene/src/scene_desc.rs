@@ -16,9 +16,10 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use tress_accel::{EmbreeAccel, SceneBuilder};
 use tress_core::film::FilmSettings;
 use tress_core::limits::Limits;
-use tress_core::{Camera, Material, Scene};
+use tress_core::{Accel, Camera, Material, Scene};
 
 /// A whole scene file.
 #[derive(Clone, Debug, Serialize, Deserialize, schemars::JsonSchema)]
@@ -219,20 +220,38 @@ const EXCERPT_CHARS: usize = 120;
 
 /// Builds the renderable scene, its hair within `limits`.
 pub fn build(desc: &SceneDesc, scene_path: &Path, limits: &Limits) -> Result<BuiltScene> {
-    let here = |what: &str| format!("{}: {what}", scene_path.display());
-    let c = &desc.camera;
-    let camera = Camera::new(
-        c.look_from,
-        c.look_at,
-        c.up,
-        c.fov,
-        c.lens_radius,
-        c.focus_distance,
-    )
-    .map_err(|e| anyhow!("{}", here(&e.to_string())))?;
+    build_wrapped(desc, scene_path, limits, |accel| Box::new(accel))
+}
 
-    // Materials, in a stable order; objects refer to them by index.
-    let t0 = Instant::now();
+/// The scene's geometry alone, built without Embree's filter support: Embree's own speed on the
+/// scene's curves, without tress's self-intersection rule (`tress bench --scene` traces the
+/// rays of a render again on it).
+pub fn build_plain_accel(
+    desc: &SceneDesc,
+    scene_path: &Path,
+    limits: &Limits,
+) -> Result<EmbreeAccel> {
+    let (mut materials, material_index) = build_materials(desc, scene_path)?;
+    let builder = SceneBuilder::new()?.with_limits(*limits).without_filters();
+    let (accel, _) = geometry::build_accel(
+        &desc.objects,
+        scene_path,
+        &desc.materials,
+        &material_index,
+        &mut materials,
+        builder,
+        limits,
+    )?;
+    Ok(accel)
+}
+
+/// The scene's materials, in a stable order (objects refer to them by index), and the index of
+/// each name.
+fn build_materials(
+    desc: &SceneDesc,
+    scene_path: &Path,
+) -> Result<(Vec<Material>, BTreeMap<String, u32>)> {
+    let here = |what: &str| format!("{}: {what}", scene_path.display());
     let mut material_index = BTreeMap::new();
     let mut materials = Vec::new();
     for (name, m) in &desc.materials {
@@ -257,6 +276,31 @@ pub fn build(desc: &SceneDesc, scene_path: &Path, limits: &Limits) -> Result<Bui
         material_index.insert(name.clone(), materials.len() as u32);
         materials.push(built);
     }
+    Ok((materials, material_index))
+}
+
+/// [`build`], with the accelerator handed to `wrap` to become the scene's (benchmarks wrap it
+/// to count and record queries).
+pub fn build_wrapped(
+    desc: &SceneDesc,
+    scene_path: &Path,
+    limits: &Limits,
+    wrap: impl FnOnce(EmbreeAccel) -> Box<dyn Accel>,
+) -> Result<BuiltScene> {
+    let here = |what: &str| format!("{}: {what}", scene_path.display());
+    let c = &desc.camera;
+    let camera = Camera::new(
+        c.look_from,
+        c.look_at,
+        c.up,
+        c.fov,
+        c.lens_radius,
+        c.focus_distance,
+    )
+    .map_err(|e| anyhow!("{}", here(&e.to_string())))?;
+
+    let t0 = Instant::now();
+    let (mut materials, material_index) = build_materials(desc, scene_path)?;
     let material_time = t0.elapsed();
 
     let lights = desc
@@ -276,6 +320,7 @@ pub fn build(desc: &SceneDesc, scene_path: &Path, limits: &Limits) -> Result<Bui
         &desc.materials,
         &material_index,
         &mut materials,
+        SceneBuilder::new()?.with_limits(*limits),
         limits,
     )?;
     let geometry_time = t1.elapsed();
@@ -287,7 +332,7 @@ pub fn build(desc: &SceneDesc, scene_path: &Path, limits: &Limits) -> Result<Bui
         geometry_time.as_secs_f64()
     );
     Ok(BuiltScene {
-        scene: Scene::new(camera, Box::new(accel), materials, lights.into()),
+        scene: Scene::new(camera, wrap(accel), materials, lights.into()),
         summary,
     })
 }

@@ -21,6 +21,9 @@
 //! - bcsdf: eval, sample, pdf and fused eval+pdf cost of every registered hair model,
 //!   dual-scattering table build time.
 //!
+//! `--scene FILE` measures a scene file instead (`scene.rs`): its integrator rendering it, and
+//! the rays of that render traced again by Embree alone and by tress's accelerator.
+//!
 //! Absolute figures follow the machine and its load; the ratios compare figures taken minutes
 //! apart in one process. Every integrator render and ray replay is timed three times (once with
 //! `--quick`) and the fastest run counts, as other processes can only slow a run down. Rows
@@ -52,6 +55,7 @@ use tress_scene::integrators::IntegratorDesc;
 mod plan;
 mod raw;
 mod renders;
+mod scene;
 mod table;
 
 use plan::*;
@@ -77,12 +81,23 @@ pub struct BenchArgs {
     /// when absent.
     #[arg(long, default_value = "../shared/data/hair/straight.hair")]
     pub hair_file: PathBuf,
+    /// Instead of the built-in models: render this scene with its integrator, and trace the
+    /// rays it traced again with Embree alone (how close the render comes to Embree's speed).
+    #[arg(long, conflicts_with_all = ["huge", "hair_file"])]
+    pub scene: Option<PathBuf>,
+    /// Samples per pixel of the `--scene` renders; overrides the scene's film.spp.
+    #[arg(long, requires = "scene")]
+    pub spp: Option<u32>,
 }
 
 pub fn run(args: BenchArgs) -> Result<()> {
     let plan = Plan::new(args.quick);
     let pools = thread_pools(args.threads)?;
     let mut table = Table::default();
+    if let Some(path) = &args.scene {
+        scene::bench_scene(path, args.spp, &plan, &pools, &mut table)?;
+        return finish(&table, args.csv.as_deref());
+    }
     let material = HairModel::Chiang(Default::default());
     let bcsdf = material
         .build()
@@ -109,10 +124,13 @@ pub fn run(args: BenchArgs) -> Result<()> {
         .with_context(|| format!("model {}", spec.name))?;
     }
     scaling(&mut table, &plan, &per_sample, &pools);
+    finish(&table, args.csv.as_deref())
+}
 
-    let text = table.text();
-    print!("{text}");
-    if let Some(path) = &args.csv {
+/// Prints the table, and writes it to `csv` when given.
+fn finish(table: &Table, csv: Option<&std::path::Path>) -> Result<()> {
+    print!("{}", table.text());
+    if let Some(path) = csv {
         tress_scene::output::atomic_write(path, table.csv().as_bytes())?;
         eprintln!("wrote {}", path.display());
     }
@@ -532,13 +550,15 @@ fn bench_model(
         Box::new(CountingAccel {
             inner: Arc::clone(&accel),
             record: Arc::clone(&recording),
-            grid: Arc::new(grid),
+            grid: Some(Arc::new(grid)),
         }),
         vec![Material::Hair(Arc::clone(bcsdf))],
         vec![Light::Environment(EnvironmentMap::builtin_sky(0.0, 1.0)?)].into(),
     );
     let renders = ModelRenders {
-        spec,
+        name,
+        full: spec.full,
+        ray_target: ray_target(&spec.source, plan),
         plan,
         scene: &scene,
         film: &film,
@@ -576,7 +596,12 @@ fn bench_model(
 /// The integrators' renders of one model: its scene (queries counted) and film, and what they
 /// are compared with.
 struct ModelRenders<'a> {
-    spec: &'a ModelSpec,
+    /// The model's label in the table.
+    name: &'a str,
+    /// Whether its rays are recorded and replayed, and rendered on every pool.
+    full: bool,
+    /// Whether the path tracer's ray-rate target applies to it.
+    ray_target: bool,
     plan: &'a Plan,
     scene: &'a Scene,
     film: &'a FilmSettings,
@@ -599,11 +624,11 @@ impl ModelRenders<'_> {
         table: &mut Table,
         per_sample: &mut Vec<Timing>,
     ) {
-        let (spec, plan, name) = (self.spec, self.plan, self.spec.name.as_str());
+        let (plan, name) = (self.plan, self.name);
         let (_, big_pool) = self.pools.last().expect("a pool");
         // An untimed pass records every ray the integrator traces (it also warms up); the
         // timed renders below repeat exactly that work (the image depends only on the seed).
-        let recorded = if spec.full {
+        let recorded = if self.full {
             eprintln!("bench: {name}: {}: recording its rays", desc.name());
             Some(record_rays(
                 self.scene,
@@ -615,7 +640,7 @@ impl ModelRenders<'_> {
         } else {
             None
         };
-        let render_pools: Vec<&(usize, ThreadPool)> = if spec.full {
+        let render_pools: Vec<&(usize, ThreadPool)> = if self.full {
             self.pools.iter().collect()
         } else {
             self.pools.iter().rev().take(1).collect()
@@ -646,7 +671,7 @@ impl ModelRenders<'_> {
                     model: name,
                     integrator: desc.name(),
                     threads: n,
-                    ray_target: ray_target(&spec.source, plan),
+                    ray_target: self.ray_target,
                 },
                 &r,
                 self.raw,

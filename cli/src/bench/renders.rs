@@ -39,8 +39,9 @@ thread_local! {
 pub(super) struct CountingAccel {
     pub(super) inner: Arc<EmbreeAccel>,
     pub(super) record: Arc<AtomicBool>,
-    /// The density grid at the default resolution, built (and timed) with the BVH.
-    pub(super) grid: Arc<DensityGrid>,
+    /// The density grid at the default resolution, built (and timed) with the BVH; `None`:
+    /// built by the accelerator on request.
+    pub(super) grid: Option<Arc<DensityGrid>>,
 }
 
 impl CountingAccel {
@@ -92,9 +93,9 @@ impl Accel for CountingAccel {
         resolution: Option<u32>,
         limits: &Limits,
     ) -> Result<Option<Arc<dyn FiberDensity>>, BuildError> {
-        match resolution {
-            None => Ok(Some(Arc::clone(&self.grid) as Arc<dyn FiberDensity>)),
-            Some(_) => self.inner.fiber_density(resolution, limits),
+        match (resolution, &self.grid) {
+            (None, Some(grid)) => Ok(Some(Arc::clone(grid) as Arc<dyn FiberDensity>)),
+            _ => self.inner.fiber_density(resolution, limits),
         }
     }
 }
