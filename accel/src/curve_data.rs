@@ -130,6 +130,35 @@ impl CurveData {
         !self.inside_fiber_until(s, k, org, dir)
     }
 
+    /// Where a ray from `org` along `dir` leaving primitive `from` of this geometry leaves the
+    /// fiber: the far end of the run of the strand's capsules around `from` (walking both ways
+    /// along the strand) that the ray passes through from its origin without a gap, padded as
+    /// [`Self::keep`] pads them. Hits on the strand before it are the fiber seen from inside.
+    pub(crate) fn fiber_exit(&self, from: u32, org: Vec3, dir: Vec3) -> f32 {
+        let s = from as usize;
+        let (Some(seg), Some(cap)) = (self.segs.get(s), self.capsules.get(s)) else {
+            return 0.0;
+        };
+        let strand = &self.strands[seg.strand as usize];
+        let round = 8.0 * f32::EPSILON * org.abs().max_element();
+        let pad = |c: &Capsule| 1e-3 * c.r + round;
+        let mut reach = cap
+            .line_interval(org, dir, pad(cap))
+            .map_or(0.0, |(_, out)| out.max(0.0));
+        let mut walk = |prims: &mut dyn Iterator<Item = u32>| {
+            for j in prims {
+                let cap = &self.capsules[j as usize];
+                match cap.line_interval(org, dir, pad(cap)) {
+                    Some((t_in, t_out)) if t_in <= reach + pad(cap) => reach = reach.max(t_out),
+                    _ => break,
+                }
+            }
+        };
+        walk(&mut (from + 1..strand.end_prim));
+        walk(&mut (strand.first_prim..from).rev());
+        reach + pad(cap)
+    }
+
     /// Whether the ray stays inside the union of the capsules of segments `s..=k` (walking
     /// along the strand) from its origin until it enters capsule `k`: then a hit on `k` is the
     /// ray-facing ribbon seen from inside the fiber, not a fiber reached through free space.

@@ -70,6 +70,18 @@ fn packet(accel: &EmbreeAccel, rays: &[RawRay]) -> (Ray8, Valid8) {
 }
 
 impl EmbreeAccel {
+    /// Where `ray`, leaving a fiber, leaves that fiber (the far end of the strand's capsules it
+    /// starts in); 0 for rays leaving nothing or another primitive. A raw query started there
+    /// needs no rule to skip the fiber it leaves: Embree alone, asked the question the rule
+    /// answers, without the callbacks.
+    pub fn fiber_exit(&self, ray: &Ray) -> f32 {
+        ray.exclude
+            .map_or(0.0, |ex| match self.geoms.get(ex.geom as usize) {
+                Some(super::GeomData::Hair(c)) => c.fiber_exit(ex.prim, ray.origin, ray.dir),
+                _ => 0.0,
+            })
+    }
+
     /// One `rtcIntersect1`: the primitive hit and its distance.
     pub fn raw_intersect(&self, r: &RawRay, exclusion: Exclusion) -> Option<(PrimId, f32)> {
         let mut ctx = context(self, &r.ray, exclusion);
@@ -227,6 +239,69 @@ mod tests {
         }
         // Some rays leaving a fiber hit it (or its neighbours from inside) without the rule.
         assert!(differ > 0 && differ < leaving, "{differ} of {leaving}");
+    }
+
+    #[test]
+    fn started_past_their_fiber_rays_find_what_the_rule_keeps() {
+        let accel = ball();
+        let (mut same, mut leaving, mut moved) = (0, 0, 0);
+        for r in rays(&accel) {
+            let exit = accel.fiber_exit(&r.ray);
+            if r.ray.exclude.is_none() {
+                assert_eq!(exit, 0.0);
+                continue;
+            }
+            leaving += 1;
+            // Past the wall opposite (0.01 is the fibers' radius), not just off the surface.
+            moved += usize::from(exit > 0.01);
+            let free = RawRay {
+                ray: Ray {
+                    exclude: None,
+                    ..r.ray
+                },
+                t_near: exit,
+            };
+            let past = accel.raw_intersect(&free, Exclusion::Off).map(|h| h.0);
+            same += usize::from(past == accel.raw_intersect(&r, Exclusion::Tress).map(|h| h.0));
+        }
+        // Every ray leaves its fiber's surface, half of them into it; the rule and the start
+        // past the fiber differ only where another fiber crosses the one left.
+        assert!(
+            (0.3..0.7).contains(&(moved as f64 / leaving as f64)),
+            "{moved} of {leaving} cross their fiber"
+        );
+        assert!(same as f64 >= 0.98 * leaving as f64, "{same} of {leaving}");
+    }
+
+    #[test]
+    fn a_ray_leaves_a_straight_fiber_at_its_far_wall() {
+        let (r, len) = (0.05, 1.0);
+        let mut hair = crate::HairGeometry::empty("line");
+        let points: Vec<Vec3> = (0..=4)
+            .map(|i| Vec3::new(len * i as f32, 0.0, 0.0))
+            .collect();
+        hair.push_strand(&points, r);
+        let options = HairOptions {
+            curve: crate::CurveShape::Round,
+            ..Default::default()
+        };
+        let accel = SceneBuilder::new()
+            .unwrap()
+            .add_hair(&hair, &options, 0)
+            .unwrap()
+            .build()
+            .unwrap();
+        let prim = |p: u32| tress_core::accel::PrimId { geom: 0, prim: p };
+        let slack = 1e-3 * r + 1e-5;
+        // Into the fiber, across it: the far wall, a diameter away.
+        let down = Ray::leaving(Vec3::new(1.5, r, 0.0), -Vec3::Y, prim(1));
+        assert!((accel.fiber_exit(&down) - 2.0 * r).abs() <= 2.0 * slack);
+        // Out of it: at once.
+        let up = Ray::leaving(Vec3::new(1.5, r, 0.0), Vec3::Y, prim(1));
+        assert!(accel.fiber_exit(&up) <= 2.0 * slack);
+        // Along it, from segment 1: through segments 2 and 3 to the strand's round end.
+        let along = Ray::leaving(Vec3::new(1.5, 0.0, 0.0), Vec3::X, prim(1));
+        assert!((accel.fiber_exit(&along) - (2.5 + r)).abs() <= 2.0 * slack);
     }
 
     #[test]

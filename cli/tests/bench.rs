@@ -183,7 +183,13 @@ fn a_scene_is_benchmarked_against_embree_alone_on_its_own_rays() {
     for threads in ["1", "2"] {
         // The scene's own integrator: the demo's path tracer.
         assert!(value("path/samples_per_s", threads) > 0.0);
-        for mode in ["plain", "embree1", "embree1-excl", "accel"] {
+        for mode in [
+            "plain",
+            "plain-past-fiber",
+            "embree1",
+            "embree1-excl",
+            "accel",
+        ] {
             let ratio = value(&format!("path/ratio_vs_replay_{mode}"), threads);
             assert!(ratio.is_finite() && ratio > 0.0, "{mode}: {ratio}");
         }
