@@ -183,8 +183,18 @@ struct Geometry {
     cos_o: f32x4,
     /// Exit azimuth Φ(p, h) of lobes 0..2 (lane 3 unused).
     phi_exit: f32x4,
-    ap: [Rgb; 4],
-    lobe_pdf: [f32; 4],
+    /// A_p of the red, green and blue channel, lobe p in lane p.
+    ap: [f32x4; 3],
+    /// Probability of sampling lobe p, in lane p.
+    lobe_pdf: f32x4,
+}
+
+impl Geometry {
+    /// A_p as RGB, p = 0..3.
+    fn attenuations(&self) -> [Rgb; 4] {
+        let [r, g, b] = self.ap.map(f32x4::to_array);
+        std::array::from_fn(|p| Rgb::new(r[p], g[p], b[p]))
+    }
 }
 
 impl Chiang {
@@ -250,25 +260,27 @@ impl Chiang {
             .to_array();
         let sin_theta_t = sin_o / eta;
         let cos_theta_t = safe_sqrt(1.0 - sin_theta_t * sin_theta_t);
-        // The three channels' transmittance in one vector exp.
-        let [tr, tg, tb, _] = (self.sigma_a * f32x4::splat(-2.0 * cos_gamma_t / cos_theta_t))
-            .exp()
-            .to_array();
-        let t = Rgb::new(tr, tg, tb);
+        // The three channels' transmittance in one vector exp (lane 3 spare).
+        let t = (self.sigma_a * f32x4::splat(-2.0 * cos_gamma_t / cos_theta_t)).exp();
 
         let f = fresnel_dielectric(cos_o * safe_sqrt(1.0 - h * h), eta);
-        let a1 = (1.0 - f) * (1.0 - f) * t;
-        let a2 = a1 * t * f;
+        let a1 = f32x4::splat((1.0 - f) * (1.0 - f)) * t;
+        let a2 = a1 * t * f32x4::splat(f);
+        let ft = f32x4::splat(f) * t;
         // 1 − fT = 0 only when f = 1 (h = ±1), where a2 = 0: the floor turns 0/0 into 0.
-        let a3 = a2 * (f * t) / (Rgb::ONE - f * t).max(Rgb::splat(f32::MIN_POSITIVE));
-        let ap = [Rgb::splat(f), a1, a2, a3];
+        let a3 = a2 * ft / (f32x4::ONE - ft).max(f32x4::splat(f32::MIN_POSITIVE));
+        // From lanes = channels to lanes = lobes.
+        let [r, g, b, _] = f32x4::transpose([f32x4::splat(f), a1, a2, a3]);
 
-        let lum = ap.map(luminance);
-        let total: f32 = lum.iter().sum();
+        let lum = r * f32x4::splat(luminance(Rgb::X))
+            + g * f32x4::splat(luminance(Rgb::Y))
+            + b * f32x4::splat(luminance(Rgb::Z));
+        let [l0, l1, l2, l3] = lum.to_array();
+        let total = l0 + l1 + l2 + l3;
         let lobe_pdf = if total > 0.0 {
-            lum.map(|l| l / total)
+            lum / f32x4::splat(total)
         } else {
-            [0.0; 4]
+            f32x4::ZERO
         };
 
         // Lane 3's rotation by 0 (sin 0, cos 1) leaves θ_o exactly as it is.
@@ -284,7 +296,7 @@ impl Chiang {
             sin_o: sin_o * self.tilt_cos + cos_o * self.tilt_sin,
             cos_o: (cos_o * self.tilt_cos - sin_o * self.tilt_sin).abs(),
             phi_exit: f32x4::new([phi_r, phi_tt, phi_trt, 0.0]),
-            ap,
+            ap: [r, g, b],
             lobe_pdf,
         }
     }
@@ -299,14 +311,13 @@ impl Chiang {
     /// difference: a sampled direction is evaluated at the angles it was drawn from, without
     /// taking them back from its vector.
     fn eval_pdf_angles(&self, g: &Geometry, sin_i: f32, cos_i: f32, phi: f32) -> (Rgb, f32) {
-        let mn = self.lobes(g, sin_i, cos_i, phi).to_array();
-        let mut f = Rgb::ZERO;
-        let mut pdf = 0.0;
-        for ((&ap, prob), mn) in g.ap.iter().zip(g.lobe_pdf).zip(mn) {
-            f += ap * mn;
-            pdf += prob * mn;
-        }
-        (f, pdf)
+        let mn = self.lobes(g, sin_i, cos_i, phi);
+        let [r, gr, b] = g.ap;
+        // Lane p of each product is lobe p's term; transposed, lane c of row p is its term in
+        // channel c (3: the pdf), so the sum of rows is (f, pdf).
+        let [t0, t1, t2, t3] = f32x4::transpose([r * mn, gr * mn, b * mn, g.lobe_pdf * mn]);
+        let [fr, fg, fb, pdf] = (t0 + t1 + t2 + t3).to_array();
+        (Rgb::new(fr, fg, fb), pdf)
     }
 
     /// (sin θ_i, cos θ_i, φ_i − φ_o), the azimuth difference from one atan2 of the normal-plane
@@ -383,14 +394,15 @@ impl Bcsdf for Chiang {
         // if rounding leaves u[0] above the total, take the last lobe that can occur.
         let mut cdf = 0.0;
         let mut lobe = None;
-        for (p, &prob) in g.lobe_pdf.iter().enumerate() {
+        let lobe_pdf = g.lobe_pdf.to_array();
+        for (p, &prob) in lobe_pdf.iter().enumerate() {
             cdf += prob;
             if u[0] < cdf {
                 lobe = Some(p);
                 break;
             }
         }
-        let p = lobe.or_else(|| g.lobe_pdf.iter().rposition(|&q| q > 0.0))?;
+        let p = lobe.or_else(|| lobe_pdf.iter().rposition(|&q| q > 0.0))?;
 
         // θ_i: vMF about the mirror direction (−sin θ_o', cos θ_o') at angle θ* (1 − cos θ* = w),
         // then a uniform azimuth 2π u[2] about that axis. Δφ: the trimmed logistic about Φ(p, h),
@@ -442,18 +454,19 @@ impl Bcsdf for Chiang {
         }
         let g = self.geometry(wo, h);
         let (sin_i, cos_i, phi) = self.angles_i(&g, wi);
-        g.ap[p] * self.lobes(&g, sin_i, cos_i, phi).as_array()[p]
+        g.attenuations()[p] * self.lobes(&g, sin_i, cos_i, phi).as_array()[p]
     }
 
     // The geometry (Fresnel, attenuations, exit azimuths) once for all directions, and the
     // angles of each direction once for all lobes: the same operations as `eval_lobe`.
     fn eval_lobes_batch(&self, wo: Vec3, h: f32, wis: &[Vec3], out: &mut [Rgb]) {
         let g = self.geometry(wo, h);
+        let ap = g.attenuations();
         for (&wi, row) in wis.iter().zip(out.chunks_exact_mut(P_MAX + 1)) {
             let (sin_i, cos_i, phi) = self.angles_i(&g, wi);
             let mn = self.lobes(&g, sin_i, cos_i, phi).to_array();
-            for (p, v) in row.iter_mut().enumerate() {
-                *v = g.ap[p] * mn[p];
+            for ((v, &ap), mn) in row.iter_mut().zip(&ap).zip(mn) {
+                *v = ap * mn;
             }
         }
     }
@@ -650,12 +663,12 @@ mod tests {
                 let theta_o = (-90.0 + 5.0 * j as f32).to_radians();
                 let wo = fiber_direction(theta_o.sin(), theta_o.cos(), FRAC_PI_2);
                 let g = c.geometry(wo, h);
-                let sum: Rgb = g.ap.iter().sum();
+                let sum: Rgb = g.attenuations().iter().sum();
                 assert!(
                     (sum - Rgb::ONE).abs().max_element() < 1e-6,
                     "h {h} θ_o {theta_o}: {sum}"
                 );
-                let absorbing: Rgb = brown.geometry(wo, h).ap.iter().sum();
+                let absorbing: Rgb = brown.geometry(wo, h).attenuations().iter().sum();
                 assert!(absorbing.max_element() <= 1.0 && absorbing.min_element() >= 0.0);
             }
         }
