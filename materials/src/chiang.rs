@@ -249,19 +249,19 @@ impl Chiang {
         let cos_o = safe_sqrt((1.0 - sin_o) * (1.0 + sin_o));
 
         // Refraction in the normal plane (Bravais index η' = √(η² − sin²θ_o)/cos θ_o), written
-        // without dividing by cos θ_o, which vanishes along the fiber.
+        // without dividing by cos θ_o, which vanishes along the fiber. The same root is η cos θ_t.
         let eta = self.eta;
-        let sin_gamma_t = h * cos_o / (eta * eta - sin_o * sin_o).sqrt();
+        let inv_root = 1.0 / (eta * eta - sin_o * sin_o).sqrt();
+        let sin_gamma_t = h * cos_o * inv_root;
         let cos_gamma_t = safe_sqrt(1.0 - sin_gamma_t * sin_gamma_t);
         // γ_t and γ_o in two lanes of one vector asin.
         let [gamma_t, gamma_o, _, _] = f32x4::new([sin_gamma_t, h, 0.0, 0.0])
             .clamp(f32x4::splat(-1.0), f32x4::ONE)
             .asin()
             .to_array();
-        let sin_theta_t = sin_o / eta;
-        let cos_theta_t = safe_sqrt(1.0 - sin_theta_t * sin_theta_t);
-        // The three channels' transmittance in one vector exp (lane 3 spare).
-        let t = (self.sigma_a * f32x4::splat(-2.0 * cos_gamma_t / cos_theta_t)).exp();
+        // The three channels' transmittance over the path 2 cos γ_t / cos θ_t in one vector exp
+        // (lane 3 spare).
+        let t = (self.sigma_a * f32x4::splat(-2.0 * eta * cos_gamma_t * inv_root)).exp();
 
         let f = fresnel_dielectric(cos_o * safe_sqrt(1.0 - h * h), eta);
         let a1 = f32x4::splat((1.0 - f) * (1.0 - f)) * t;
@@ -515,21 +515,20 @@ fn longitudinal(
 fn i0_scaled_split(x: f32x4) -> (f32x4, f32x4) {
     let c = f32x4::splat;
     let small = x.simd_le(c(3.75));
-    let t = (x / c(3.75)) * (x / c(3.75));
-    let p_small = c(1.0)
-        + t * (c(3.515_622_9)
-            + t * (c(3.089_942_4)
-                + t * (c(1.206_749_2)
-                    + t * (c(0.265_973_2) + t * (c(0.036_076_8) + t * c(0.004_581_3))))));
+    // Estrin's scheme: pairs of terms in parallel rather than one long Horner chain.
+    let t = (x * c(1.0 / 3.75)) * (x * c(1.0 / 3.75));
+    let t2 = t * t;
+    let p_small = (c(1.0) + t * c(3.515_622_9))
+        + t2 * (c(3.089_942_4) + t * c(1.206_749_2))
+        + t2 * t2 * ((c(0.265_973_2) + t * c(0.036_076_8)) + t2 * c(0.004_581_3));
     let t = c(3.75) / x;
-    let p_large = c(0.398_942_28)
-        + t * (c(0.013_285_92)
-            + t * (c(0.002_253_19)
-                + t * (c(-0.001_575_65)
-                    + t * (c(0.009_162_81)
-                        + t * (c(-0.020_577_06)
-                            + t * (c(0.026_355_37)
-                                + t * (c(-0.016_476_33) + t * c(0.003_923_77))))))));
+    let t2 = t * t;
+    let t4 = t2 * t2;
+    let p_large = (c(0.398_942_28) + t * c(0.013_285_92))
+        + t2 * (c(0.002_253_19) + t * c(-0.001_575_65))
+        + t4 * ((c(0.009_162_81) + t * c(-0.020_577_06))
+            + t2 * (c(0.026_355_37) + t * c(-0.016_476_33)))
+        + t4 * t4 * c(0.003_923_77);
     (
         small.select(-x, f32x4::ZERO),
         small.select(p_small, p_large / x.sqrt()),
@@ -538,7 +537,7 @@ fn i0_scaled_split(x: f32x4) -> (f32x4, f32x4) {
 
 /// Wraps angles to [−π, π].
 fn wrap_pi(x: f32x4) -> f32x4 {
-    x - f32x4::splat(TAU) * (x / f32x4::splat(TAU)).round_ties_even()
+    x - f32x4::splat(TAU) * (x * f32x4::splat(1.0 / TAU)).round_ties_even()
 }
 
 /// Unpolarised Fresnel reflectance entering a dielectric of index `eta` > 1 from outside.
