@@ -152,14 +152,14 @@ pub struct Chiang {
     eta: f32,
     /// σ_a in lanes 0..2 (RGB), 0 in lane 3.
     sigma_a: f32x4,
-    /// Longitudinal variance of lobe p.
-    v: [f32; 4],
+    /// Longitudinal variance of lobe p, in lane p.
+    v: f32x4,
     /// `1 / v` of lobe p in lane p.
     inv_v: f32x4,
     /// `−ln v − ln(1 − e^{−2/v})`: the log of the vMF normalisation without its e^{−1/v} factor.
     ln_norm: f32x4,
-    /// `1 − e^{−2/v}`, used by the vMF sampler.
-    one_minus_e: [f32; 4],
+    /// `1 − e^{−2/v}` of lobe p in lane p, used by the vMF sampler.
+    one_minus_e: f32x4,
     /// Logistic scale.
     s: f32,
     /// `1 / (s (CDF(π) − CDF(−π)))`: the trimmed logistic's normalisation including 1/s.
@@ -230,10 +230,10 @@ impl Chiang {
         Ok(Chiang {
             eta: p.eta,
             sigma_a: f32x4::new([sigma_a.x, sigma_a.y, sigma_a.z, 0.0]),
-            v: v.map(|v| v as f32),
+            v: f32x4::new(v.map(|v| v as f32)),
             inv_v: f32x4::new(v.map(|v| (1.0 / v) as f32)),
             ln_norm: f32x4::new(v.map(vmf_ln_norm)),
-            one_minus_e: v.map(|v| (-(-2.0 / v).exp_m1()) as f32),
+            one_minus_e: f32x4::new(v.map(|v| (-(-2.0 / v).exp_m1()) as f32)),
             s: s as f32,
             logistic_norm: (1.0 / (s * cdf_range)) as f32,
             cdf_lo: cdf_lo as f32,
@@ -357,28 +357,25 @@ impl Chiang {
         negligible.select(f32x4::ZERO, n)
     }
 
-    /// Inverse CDFs at `u_m` and `u_n` of lobe p's vMF about its mirror direction and of the
-    /// logistic trimmed to [−π, π]: (`1 − cos θ*`, the azimuth's offset from the lobe's centre).
-    /// Their two logarithms are taken in one vector `ln`.
-    fn sample_offsets(&self, p: usize, u_m: f32, u_n: f32) -> (f32, f32) {
+    /// Inverse CDFs at `u_m` of the vMF lobes about their mirror directions and at `u_n` of the
+    /// logistic trimmed to [−π, π]: (`1 − cos θ*` of each lobe, the azimuth's offset from a
+    /// lobe's centre); the residual's vMF is TRT's (v_3 = v_2). All four logarithms are taken
+    /// in one vector `ln`, and none depends on wo or h, so the CPU overlaps them with the
+    /// geometry.
+    fn sample_offsets(&self, u_m: f32, u_n: f32) -> ([f32; 4], f32) {
         // vMF: cos θ* = 1 + v ln(u + (1 − u) e^{−2/v}) = 1 + v ln(1 + x).
-        let x = -(1.0 - u_m.max(U_MIN)) * self.one_minus_e[p];
-        let one_plus_x = 1.0 + x;
+        let x = f32x4::splat(-(1.0 - u_m.max(U_MIN))) * self.one_minus_e;
+        let one_plus_x = f32x4::ONE + x;
         let q = u_n.max(U_MIN) * self.cdf_range + self.cdf_lo;
-        let [ln_one_plus_x, ln_odds, _, _] = f32x4::new([one_plus_x, q / (1.0 - q), 1.0, 1.0])
-            .ln()
-            .to_array();
+        let [u0, u1, u2, _] = one_plus_x.to_array();
+        let ln = f32x4::new([u0, u1, u2, q / (1.0 - q)]).ln();
         // ln(1 + x) accurate near x = 0 (the lobe's mode): x ln(u) / (u − 1) with u = 1 + x
         // rounded cancels the rounding of u; x itself where u rounds to 1.
-        let ln_1p = if one_plus_x == 1.0 {
-            x
-        } else {
-            ln_one_plus_x * (x / (one_plus_x - 1.0))
-        };
-        (
-            (-self.v[p] * ln_1p).min(2.0),
-            (self.s * ln_odds).clamp(-PI, PI),
-        )
+        let ln_1p = one_plus_x
+            .simd_eq(f32x4::ONE)
+            .select(x, ln * (x / (one_plus_x - f32x4::ONE)));
+        let [w0, w1, w2, _] = (-self.v * ln_1p).min(f32x4::splat(2.0)).to_array();
+        ([w0, w1, w2, w2], (self.s * ln.as_array()[3]).clamp(-PI, PI))
     }
 }
 
@@ -388,6 +385,7 @@ impl Bcsdf for Chiang {
     }
 
     fn sample(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<BcsdfSample> {
+        let (w_lobes, offset) = self.sample_offsets(u[1], u[3]);
         let g = self.geometry(wo, h);
 
         // The first lobe whose cumulative probability exceeds u[0] has positive probability;
@@ -407,7 +405,7 @@ impl Bcsdf for Chiang {
         // θ_i: vMF about the mirror direction (−sin θ_o', cos θ_o') at angle θ* (1 − cos θ* = w),
         // then a uniform azimuth 2π u[2] about that axis. Δφ: the trimmed logistic about Φ(p, h),
         // uniform for the residual.
-        let (w, offset) = self.sample_offsets(p, u[1], u[3]);
+        let w = w_lobes[p];
         let dphi = if p < P_MAX {
             g.phi_exit.as_array()[p] + offset
         } else {
@@ -772,7 +770,7 @@ mod tests {
             let cdf = |x: f64| 1.0 / (1.0 + (-x / s).exp());
             let pi = std::f64::consts::PI;
             for u in [0.01f32, 0.2, 0.5, 0.77, 0.99] {
-                let x = c.sample_offsets(0, 0.5, u).1 as f64;
+                let x = c.sample_offsets(0.5, u).1 as f64;
                 let back = (cdf(x) - cdf(-pi)) / (cdf(pi) - cdf(-pi));
                 assert!(
                     (back - u as f64).abs() < 1e-4,
