@@ -77,8 +77,9 @@ use crate::pigment::Pigment;
 use crate::{check_range, ModelParams, ParamError, TestInstance};
 use serde::{Deserialize, Serialize};
 use std::f32::consts::{PI, TAU};
-use tress_core::math::{fiber_direction, luminance, safe_asin, safe_sqrt, Rgb, Vec3};
+use tress_core::math::{luminance, safe_sqrt, Rgb, Vec3};
 use tress_core::{Bcsdf, BcsdfSample};
+use wide::f32x4;
 
 /// Index of the residual lobe standing for all scattering orders ≥ 3.
 const P_MAX: usize = 3;
@@ -91,6 +92,11 @@ const U_MIN: f32 = 1.0 / (1u32 << 24) as f32;
 /// through a slow underflow path (sharp lobes spend a fifth of `eval` there), and no sample is
 /// ever drawn where a lobe is that small (its inverse CDFs stop at quantile 2⁻²⁴ ≈ e^{−17}).
 const LN_NEGLIGIBLE: f32 = -80.0;
+
+/// Lane p of the lobe vectors holds lobe p; this mask keeps the logistic lanes 0..2 and clears
+/// the residual's lane 3, whose azimuthal factor is the uniform [`N_RESIDUAL`].
+const N_LOGISTIC_LANES: f32x4 = f32x4::new([1.0, 1.0, 1.0, 0.0]);
+const N_RESIDUAL: f32x4 = f32x4::new([0.0, 0.0, 0.0, 1.0 / TAU]);
 
 /// Smallest accepted β_m, β_n (module docs).
 pub const BETA_MIN: f32 = 1e-3;
@@ -144,13 +150,16 @@ impl ModelParams for Params {
 #[derive(Debug, Clone)]
 pub struct Chiang {
     eta: f32,
-    sigma_a: Rgb,
-    /// Longitudinal variance of lobe p.
-    v: [f32; 4],
+    /// σ_a in lanes 0..2 (RGB), 0 in lane 3.
+    sigma_a: f32x4,
+    /// Longitudinal variance of lobe p, in lane p.
+    v: f32x4,
+    /// `1 / v` of lobe p in lane p.
+    inv_v: f32x4,
     /// `−ln v − ln(1 − e^{−2/v})`: the log of the vMF normalisation without its e^{−1/v} factor.
-    ln_norm: [f32; 4],
-    /// `1 − e^{−2/v}`, used by the vMF sampler.
-    one_minus_e: [f32; 4],
+    ln_norm: f32x4,
+    /// `1 − e^{−2/v}` of lobe p in lane p, used by the vMF sampler.
+    one_minus_e: f32x4,
     /// Logistic scale.
     s: f32,
     /// `1 / (s (CDF(π) − CDF(−π)))`: the trimmed logistic's normalisation including 1/s.
@@ -158,19 +167,34 @@ pub struct Chiang {
     /// `CDF(−π)` and `CDF(π) − CDF(−π)` of the logistic, for its inverse-CDF sampler.
     cdf_lo: f32,
     cdf_range: f32,
-    /// (sin, cos) of the rotation of θ_o for lobes R, TT, TRT: −2α, α, 4α.
-    tilt: [(f32, f32); 3],
+    /// sin and cos of the rotation of θ_o for lobes R, TT, TRT: −2α, α, 4α; 0 for the residual.
+    tilt_sin: f32x4,
+    tilt_cos: f32x4,
 }
 
-/// Everything that depends on (wo, h) only, shared by eval, pdf and sample.
+/// Everything that depends on (wo, h) only, shared by eval, pdf and sample. Per-lobe values sit
+/// in lane p of an `f32x4`, so the four lobes are evaluated at once.
 struct Geometry {
-    phi_o: f32,
-    /// (sin θ_o', |cos θ_o'|) seen by each lobe (tilted for p < 3).
-    theta_o: [(f32, f32); 4],
-    /// Exit azimuth Φ(p, h) of lobes 0..3.
-    phi_exit: [f32; 3],
-    ap: [Rgb; 4],
-    lobe_pdf: [f32; 4],
+    /// wo's direction in the normal plane, (wo.y, wo.z), unnormalised; (1, 0) along the fiber,
+    /// where φ_o is undefined and taken as 0.
+    normal_o: (f32, f32),
+    /// sin θ_o' and |cos θ_o'| seen by each lobe (tilted for p < 3).
+    sin_o: f32x4,
+    cos_o: f32x4,
+    /// Exit azimuth Φ(p, h) of lobes 0..2 (lane 3 unused).
+    phi_exit: f32x4,
+    /// A_p of the red, green and blue channel, lobe p in lane p.
+    ap: [f32x4; 3],
+    /// Probability of sampling lobe p, in lane p.
+    lobe_pdf: f32x4,
+}
+
+impl Geometry {
+    /// A_p as RGB, p = 0..3.
+    fn attenuations(&self) -> [Rgb; 4] {
+        let [r, g, b] = self.ap.map(f32x4::to_array);
+        std::array::from_fn(|p| Rgb::new(r[p], g[p], b[p]))
+    }
 }
 
 impl Chiang {
@@ -201,19 +225,21 @@ impl Chiang {
         let cdf_range = (pi / (2.0 * s)).tanh();
 
         let a = (p.alpha as f64).to_radians();
-        let tilt = [-2.0 * a, a, 4.0 * a].map(|t| (t.sin() as f32, t.cos() as f32));
+        let tilt = [-2.0 * a, a, 4.0 * a, 0.0];
 
         Ok(Chiang {
             eta: p.eta,
-            sigma_a,
-            v: v.map(|v| v as f32),
-            ln_norm: v.map(vmf_ln_norm),
-            one_minus_e: v.map(|v| (-(-2.0 / v).exp_m1()) as f32),
+            sigma_a: f32x4::new([sigma_a.x, sigma_a.y, sigma_a.z, 0.0]),
+            v: f32x4::new(v.map(|v| v as f32)),
+            inv_v: f32x4::new(v.map(|v| (1.0 / v) as f32)),
+            ln_norm: f32x4::new(v.map(vmf_ln_norm)),
+            one_minus_e: f32x4::new(v.map(|v| (-(-2.0 / v).exp_m1()) as f32)),
             s: s as f32,
             logistic_norm: (1.0 / (s * cdf_range)) as f32,
             cdf_lo: cdf_lo as f32,
             cdf_range: cdf_range as f32,
-            tilt,
+            tilt_sin: f32x4::new(tilt.map(|t| t.sin() as f32)),
+            tilt_cos: f32x4::new(tilt.map(|t| t.cos() as f32)),
         })
     }
 
@@ -221,45 +247,56 @@ impl Chiang {
         let h = h.clamp(-1.0, 1.0);
         let sin_o = wo.x.clamp(-1.0, 1.0);
         let cos_o = safe_sqrt((1.0 - sin_o) * (1.0 + sin_o));
-        let phi_o = wo.z.atan2(wo.y);
 
         // Refraction in the normal plane (Bravais index η' = √(η² − sin²θ_o)/cos θ_o), written
-        // without dividing by cos θ_o, which vanishes along the fiber.
+        // without dividing by cos θ_o, which vanishes along the fiber. The same root is η cos θ_t.
         let eta = self.eta;
-        let sin_gamma_t = h * cos_o / (eta * eta - sin_o * sin_o).sqrt();
+        let inv_root = 1.0 / (eta * eta - sin_o * sin_o).sqrt();
+        let sin_gamma_t = h * cos_o * inv_root;
         let cos_gamma_t = safe_sqrt(1.0 - sin_gamma_t * sin_gamma_t);
-        let gamma_t = safe_asin(sin_gamma_t);
-        let gamma_o = safe_asin(h);
-        let sin_theta_t = sin_o / eta;
-        let cos_theta_t = safe_sqrt(1.0 - sin_theta_t * sin_theta_t);
-        let t = (-self.sigma_a * (2.0 * cos_gamma_t / cos_theta_t)).exp();
+        // γ_t and γ_o in two lanes of one vector asin.
+        let [gamma_t, gamma_o, _, _] = f32x4::new([sin_gamma_t, h, 0.0, 0.0])
+            .clamp(f32x4::splat(-1.0), f32x4::ONE)
+            .asin()
+            .to_array();
+        // The three channels' transmittance over the path 2 cos γ_t / cos θ_t in one vector exp
+        // (lane 3 spare).
+        let t = (self.sigma_a * f32x4::splat(-2.0 * eta * cos_gamma_t * inv_root)).exp();
 
         let f = fresnel_dielectric(cos_o * safe_sqrt(1.0 - h * h), eta);
-        let a1 = (1.0 - f) * (1.0 - f) * t;
-        let a2 = a1 * t * f;
+        let a1 = f32x4::splat((1.0 - f) * (1.0 - f)) * t;
+        let a2 = a1 * t * f32x4::splat(f);
+        let ft = f32x4::splat(f) * t;
         // 1 − fT = 0 only when f = 1 (h = ±1), where a2 = 0: the floor turns 0/0 into 0.
-        let a3 = a2 * (f * t) / (Rgb::ONE - f * t).max(Rgb::splat(f32::MIN_POSITIVE));
-        let ap = [Rgb::splat(f), a1, a2, a3];
+        let a3 = a2 * ft / (f32x4::ONE - ft).max(f32x4::splat(f32::MIN_POSITIVE));
+        // From lanes = channels to lanes = lobes.
+        let [r, g, b, _] = f32x4::transpose([f32x4::splat(f), a1, a2, a3]);
 
-        let lum = ap.map(luminance);
-        let total: f32 = lum.iter().sum();
+        let lum = r * f32x4::splat(luminance(Rgb::X))
+            + g * f32x4::splat(luminance(Rgb::Y))
+            + b * f32x4::splat(luminance(Rgb::Z));
+        let [l0, l1, l2, l3] = lum.to_array();
+        let total = l0 + l1 + l2 + l3;
         let lobe_pdf = if total > 0.0 {
-            lum.map(|l| l / total)
+            lum / f32x4::splat(total)
         } else {
-            [0.0; 4]
+            f32x4::ZERO
         };
 
-        let tilted = |(s, c): (f32, f32)| (sin_o * c + cos_o * s, (cos_o * c - sin_o * s).abs());
+        // Lane 3's rotation by 0 (sin 0, cos 1) leaves θ_o exactly as it is.
+        let (sin_o, cos_o) = (f32x4::splat(sin_o), f32x4::splat(cos_o));
+        let [phi_r, phi_tt, phi_trt] =
+            [0.0f32, 1.0, 2.0].map(|p| 2.0 * p * gamma_t - 2.0 * gamma_o + p * PI);
         Geometry {
-            phi_o,
-            theta_o: [
-                tilted(self.tilt[0]),
-                tilted(self.tilt[1]),
-                tilted(self.tilt[2]),
-                (sin_o, cos_o),
-            ],
-            phi_exit: [0.0f32, 1.0, 2.0].map(|p| 2.0 * p * gamma_t - 2.0 * gamma_o + p * PI),
-            ap,
+            normal_o: if wo.y == 0.0 && wo.z == 0.0 {
+                (1.0, 0.0)
+            } else {
+                (wo.y, wo.z)
+            },
+            sin_o: sin_o * self.tilt_cos + cos_o * self.tilt_sin,
+            cos_o: (cos_o * self.tilt_cos - sin_o * self.tilt_sin).abs(),
+            phi_exit: f32x4::new([phi_r, phi_tt, phi_trt, 0.0]),
+            ap: [r, g, b],
             lobe_pdf,
         }
     }
@@ -274,49 +311,71 @@ impl Chiang {
     /// difference: a sampled direction is evaluated at the angles it was drawn from, without
     /// taking them back from its vector.
     fn eval_pdf_angles(&self, g: &Geometry, sin_i: f32, cos_i: f32, phi: f32) -> (Rgb, f32) {
-        let mut f = Rgb::ZERO;
-        let mut pdf = 0.0;
-        for p in 0..=P_MAX {
-            let mn = self.m(g, p, sin_i, cos_i) * self.n(g, p, phi);
-            f += g.ap[p] * mn;
-            pdf += g.lobe_pdf[p] * mn;
-        }
-        (f, pdf)
+        let mn = self.lobes(g, sin_i, cos_i, phi);
+        let [r, gr, b] = g.ap;
+        // Lane p of each product is lobe p's term; transposed, lane c of row p is its term in
+        // channel c (3: the pdf), so the sum of rows is (f, pdf).
+        let [t0, t1, t2, t3] = f32x4::transpose([r * mn, gr * mn, b * mn, g.lobe_pdf * mn]);
+        let [fr, fg, fb, pdf] = (t0 + t1 + t2 + t3).to_array();
+        (Rgb::new(fr, fg, fb), pdf)
     }
 
-    /// (sin θ_i, cos θ_i, φ_i − φ_o).
+    /// (sin θ_i, cos θ_i, φ_i − φ_o), the azimuth difference from one atan2 of the normal-plane
+    /// projections' cross and dot products (wide's, in one lane: inlined, and a few times
+    /// cheaper than libm's).
     fn angles_i(&self, g: &Geometry, wi: Vec3) -> (f32, f32, f32) {
         let sin_i = wi.x.clamp(-1.0, 1.0);
         let cos_i = safe_sqrt((1.0 - sin_i) * (1.0 + sin_i));
-        (sin_i, cos_i, wi.z.atan2(wi.y) - g.phi_o)
+        let (y, z) = g.normal_o;
+        let cross = f32x4::splat(y * wi.z - z * wi.y);
+        let phi = cross.atan2(f32x4::splat(y * wi.y + z * wi.z)).as_array()[0];
+        (sin_i, cos_i, phi)
     }
 
-    fn m(&self, g: &Geometry, p: usize, sin_i: f32, cos_i: f32) -> f32 {
-        let (sin_o, cos_o) = g.theta_o[p];
-        longitudinal(self.v[p], self.ln_norm[p], sin_i, cos_i, sin_o, cos_o)
+    /// `M_p N_p` of the four lobes, lobe p in lane p.
+    fn lobes(&self, g: &Geometry, sin_i: f32, cos_i: f32, phi: f32) -> f32x4 {
+        let m = longitudinal(
+            self.inv_v,
+            self.ln_norm,
+            f32x4::splat(sin_i),
+            f32x4::splat(cos_i),
+            g.sin_o,
+            g.cos_o,
+        );
+        let n = self.trimmed_logistic(wrap_pi(f32x4::splat(phi) - g.phi_exit));
+        m * n.mul_add(N_LOGISTIC_LANES, N_RESIDUAL)
     }
 
-    fn n(&self, g: &Geometry, p: usize, phi: f32) -> f32 {
-        if p < P_MAX {
-            self.trimmed_logistic(wrap_pi(phi - g.phi_exit[p]))
-        } else {
-            1.0 / TAU
-        }
+    /// The trimmed logistic at angles in [−π, π], lane by lane.
+    fn trimmed_logistic(&self, x: f32x4) -> f32x4 {
+        let t = x.abs() / f32x4::splat(self.s);
+        // Clamped so that exp never sees the far tail, which the select then zeroes.
+        let negligible = t.simd_gt(f32x4::splat(-LN_NEGLIGIBLE));
+        let e = (-t.min(f32x4::splat(-LN_NEGLIGIBLE))).exp();
+        let one_plus_e = f32x4::ONE + e;
+        let n = f32x4::splat(self.logistic_norm) * e / (one_plus_e * one_plus_e);
+        negligible.select(f32x4::ZERO, n)
     }
 
-    fn trimmed_logistic(&self, x: f32) -> f32 {
-        let t = x.abs() / self.s;
-        if t > -LN_NEGLIGIBLE {
-            return 0.0;
-        }
-        let e = (-t).exp();
-        self.logistic_norm * e / ((1.0 + e) * (1.0 + e))
-    }
-
-    /// Inverse CDF of the logistic trimmed to [−π, π].
-    fn sample_trimmed_logistic(&self, u: f32) -> f32 {
-        let q = u.max(U_MIN) * self.cdf_range + self.cdf_lo;
-        (self.s * (q / (1.0 - q)).ln()).clamp(-PI, PI)
+    /// Inverse CDFs at `u_m` of the vMF lobes about their mirror directions and at `u_n` of the
+    /// logistic trimmed to [−π, π]: (`1 − cos θ*` of each lobe, the azimuth's offset from a
+    /// lobe's centre); the residual's vMF is TRT's (v_3 = v_2). All four logarithms are taken
+    /// in one vector `ln`, and none depends on wo or h, so the CPU overlaps them with the
+    /// geometry.
+    fn sample_offsets(&self, u_m: f32, u_n: f32) -> ([f32; 4], f32) {
+        // vMF: cos θ* = 1 + v ln(u + (1 − u) e^{−2/v}) = 1 + v ln(1 + x).
+        let x = f32x4::splat(-(1.0 - u_m.max(U_MIN))) * self.one_minus_e;
+        let one_plus_x = f32x4::ONE + x;
+        let q = u_n.max(U_MIN) * self.cdf_range + self.cdf_lo;
+        let [u0, u1, u2, _] = one_plus_x.to_array();
+        let ln = f32x4::new([u0, u1, u2, q / (1.0 - q)]).ln();
+        // ln(1 + x) accurate near x = 0 (the lobe's mode): x ln(u) / (u − 1) with u = 1 + x
+        // rounded cancels the rounding of u; x itself where u rounds to 1.
+        let ln_1p = one_plus_x
+            .simd_eq(f32x4::ONE)
+            .select(x, ln * (x / (one_plus_x - f32x4::ONE)));
+        let [w0, w1, w2, _] = (-self.v * ln_1p).min(f32x4::splat(2.0)).to_array();
+        ([w0, w1, w2, w2], (self.s * ln.as_array()[3]).clamp(-PI, PI))
     }
 }
 
@@ -326,36 +385,51 @@ impl Bcsdf for Chiang {
     }
 
     fn sample(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<BcsdfSample> {
+        let (w_lobes, offset) = self.sample_offsets(u[1], u[3]);
         let g = self.geometry(wo, h);
 
         // The first lobe whose cumulative probability exceeds u[0] has positive probability;
         // if rounding leaves u[0] above the total, take the last lobe that can occur.
         let mut cdf = 0.0;
         let mut lobe = None;
-        for (p, &prob) in g.lobe_pdf.iter().enumerate() {
+        let lobe_pdf = g.lobe_pdf.to_array();
+        for (p, &prob) in lobe_pdf.iter().enumerate() {
             cdf += prob;
             if u[0] < cdf {
                 lobe = Some(p);
                 break;
             }
         }
-        let p = lobe.or_else(|| g.lobe_pdf.iter().rposition(|&q| q > 0.0))?;
+        let p = lobe.or_else(|| lobe_pdf.iter().rposition(|&q| q > 0.0))?;
 
-        // vMF about the mirror direction (−sin θ_o', cos θ_o'): 1 − cos θ* by the inverse CDF
-        // `cos θ* = 1 + v ln(u + (1 − u) e^{−2/v})`, then a uniform azimuth about that axis.
-        let (sin_o, cos_o) = g.theta_o[p];
-        let w = (-self.v[p] * (-(1.0 - u[1].max(U_MIN)) * self.one_minus_e[p]).ln_1p()).min(2.0);
-        let cos_star = 1.0 - w;
-        let sin_star = safe_sqrt(w * (2.0 - w));
-        let sin_i = (-cos_star * sin_o + sin_star * (TAU * u[2]).cos() * cos_o).clamp(-1.0, 1.0);
-        let cos_i = safe_sqrt((1.0 - sin_i) * (1.0 + sin_i));
-
+        // θ_i: vMF about the mirror direction (−sin θ_o', cos θ_o') at angle θ* (1 − cos θ* = w),
+        // then a uniform azimuth 2π u[2] about that axis. Δφ: the trimmed logistic about Φ(p, h),
+        // uniform for the residual.
+        let w = w_lobes[p];
         let dphi = if p < P_MAX {
-            g.phi_exit[p] + self.sample_trimmed_logistic(u[3])
+            g.phi_exit.as_array()[p] + offset
         } else {
             TAU * u[3]
         };
-        let wi = fiber_direction(sin_i, cos_i, g.phi_o + dphi);
+        let (sin, cos) = f32x4::new([TAU * u[2], dphi, 0.0, 0.0]).sin_cos();
+        let [_, sin_d, _, _] = sin.to_array();
+        let [cos_axis, cos_d, _, _] = cos.to_array();
+
+        let (sin_o, cos_o) = (g.sin_o.as_array()[p], g.cos_o.as_array()[p]);
+        let cos_star = 1.0 - w;
+        let sin_star = safe_sqrt(w * (2.0 - w));
+        let sin_i = (-cos_star * sin_o + sin_star * cos_axis * cos_o).clamp(-1.0, 1.0);
+        let cos_i = safe_sqrt((1.0 - sin_i) * (1.0 + sin_i));
+
+        // φ_i = φ_o + Δφ by the angle-addition formulas from wo's own (cos φ_o, sin φ_o).
+        let (y, z) = g.normal_o;
+        let r = (y * y + z * z).sqrt();
+        let (cos_phi_o, sin_phi_o) = (y / r, z / r);
+        let wi = Vec3::new(
+            sin_i,
+            cos_i * (cos_phi_o * cos_d - sin_phi_o * sin_d),
+            cos_i * (sin_phi_o * cos_d + cos_phi_o * sin_d),
+        );
         let (f, pdf) = self.eval_pdf_angles(&g, sin_i, cos_i, dphi);
         (pdf > 0.0 && pdf.is_finite()).then_some(BcsdfSample { wi, f, pdf })
     }
@@ -378,17 +452,19 @@ impl Bcsdf for Chiang {
         }
         let g = self.geometry(wo, h);
         let (sin_i, cos_i, phi) = self.angles_i(&g, wi);
-        g.ap[p] * (self.m(&g, p, sin_i, cos_i) * self.n(&g, p, phi))
+        g.attenuations()[p] * self.lobes(&g, sin_i, cos_i, phi).as_array()[p]
     }
 
     // The geometry (Fresnel, attenuations, exit azimuths) once for all directions, and the
     // angles of each direction once for all lobes: the same operations as `eval_lobe`.
     fn eval_lobes_batch(&self, wo: Vec3, h: f32, wis: &[Vec3], out: &mut [Rgb]) {
         let g = self.geometry(wo, h);
+        let ap = g.attenuations();
         for (&wi, row) in wis.iter().zip(out.chunks_exact_mut(P_MAX + 1)) {
             let (sin_i, cos_i, phi) = self.angles_i(&g, wi);
-            for (p, v) in row.iter_mut().enumerate() {
-                *v = g.ap[p] * (self.m(&g, p, sin_i, cos_i) * self.n(&g, p, phi));
+            let mn = self.lobes(&g, sin_i, cos_i, phi).to_array();
+            for ((v, &ap), mn) in row.iter_mut().zip(&ap).zip(mn) {
+                *v = ap * mn;
             }
         }
     }
@@ -399,57 +475,67 @@ fn vmf_ln_norm(v: f64) -> f32 {
     (-v.ln() - (-(-2.0 / v).exp_m1()).ln()) as f32
 }
 
-/// The vMF longitudinal lobe M_p(v; θ_i, θ_o), normalised so that ∫ M cos θ_i dθ_i = 1.
+/// The vMF longitudinal lobe M_p(v; θ_i, θ_o), normalised so that ∫ M cos θ_i dθ_i = 1, lane by
+/// lane (lobe p's `1/v`, `ln_norm` and tilted θ_o in lane p).
 ///
 /// `exp(−b) I₀(a) / (2v sinh(1/v))` with `a = cos θ_i cos θ_o / v`, `b = sin θ_i sin θ_o / v`
 /// equals `exp((a − b − 1/v) + ln_norm) · I₀(a) e^{−a}`, and `a − b − 1/v = −|u − m|²/(2v)`
 /// for the unit vectors `u = (sin θ_i, cos θ_i)`, `m = (−sin θ_o, cos θ_o)`: a sum of squares,
 /// so tiny v neither overflows nor cancels. One `exp` per lobe: the scaled Bessel factor is
 /// folded into its argument (small a) or multiplied after it (large a), never taken as a log.
-fn longitudinal(v: f32, ln_norm: f32, sin_i: f32, cos_i: f32, sin_o: f32, cos_o: f32) -> f32 {
+fn longitudinal(
+    inv_v: f32x4,
+    ln_norm: f32x4,
+    sin_i: f32x4,
+    cos_i: f32x4,
+    sin_o: f32x4,
+    cos_o: f32x4,
+) -> f32x4 {
+    // The Bessel factor is at most I₀(3.75) ≈ 9.1 (≈ e^{2.2}) on the small-argument branch and
+    // below 1 on the other, so a lobe under this cut stays negligible after multiplying it in.
+    const LN_CUT: f32 = LN_NEGLIGIBLE - 2.3;
     let ds = sin_i + sin_o;
     let dc = cos_i - cos_o;
-    let a = cos_i * cos_o / v;
-    let ln_gauss = -(ds * ds + dc * dc) / (2.0 * v) + ln_norm;
-    let (ln_m, bessel) = i0_scaled_split(a);
-    let ln_m = ln_gauss + ln_m;
-    // The Bessel factor is at most I₀(3.75) ≈ 9.1 (≈ e^{2.2}) on the small-argument branch and
-    // below 1 on the other, so a lobe under the cut stays negligible after multiplying it in.
-    if ln_m < LN_NEGLIGIBLE - 2.3 {
-        0.0
-    } else {
-        ln_m.exp() * bessel
-    }
+    let a = cos_i * cos_o * inv_v;
+    let ln_gauss = ln_norm - (ds * ds + dc * dc) * (f32x4::HALF * inv_v);
+    let (ln_part, bessel) = i0_scaled_split(a);
+    let ln_m = ln_gauss + ln_part;
+    // Clamped so that exp never sees the far tail, which the select then zeroes.
+    let m = ln_m.max(f32x4::splat(LN_CUT)).exp() * bessel;
+    ln_m.simd_lt(f32x4::splat(LN_CUT)).select(f32x4::ZERO, m)
 }
 
 /// `I₀(x) e^{−x}` for x ≥ 0 as `exp(ln_part) · factor`, from Abramowitz & Stegun 9.8.1
 /// (x ≤ 3.75, |ε| < 1.6·10⁻⁷: `(−x, I₀(x))`) and 9.8.2 (x > 3.75, |ε| < 1.9·10⁻⁷ on
-/// √x e^{−x} I₀(x): `(0, that / √x)`), so the caller adds `ln_part` to its own exponent.
+/// √x e^{−x} I₀(x): `(0, that / √x)`), so the caller adds `ln_part` to its own exponent. Both
+/// branches are evaluated in every lane and the right one selected (the other may be inf or NaN).
 #[allow(clippy::excessive_precision)] // the published coefficients, digit for digit
-fn i0_scaled_split(x: f32) -> (f32, f32) {
-    if x <= 3.75 {
-        let t = (x / 3.75) * (x / 3.75);
-        let p = 1.0
-            + t * (3.515_622_9
-                + t * (3.089_942_4
-                    + t * (1.206_749_2 + t * (0.265_973_2 + t * (0.036_076_8 + t * 0.004_581_3)))));
-        (-x, p)
-    } else {
-        let t = 3.75 / x;
-        let p = 0.398_942_28
-            + t * (0.013_285_92
-                + t * (0.002_253_19
-                    + t * (-0.001_575_65
-                        + t * (0.009_162_81
-                            + t * (-0.020_577_06
-                                + t * (0.026_355_37 + t * (-0.016_476_33 + t * 0.003_923_77)))))));
-        (0.0, p / x.sqrt())
-    }
+fn i0_scaled_split(x: f32x4) -> (f32x4, f32x4) {
+    let c = f32x4::splat;
+    let small = x.simd_le(c(3.75));
+    // Estrin's scheme: pairs of terms in parallel rather than one long Horner chain.
+    let t = (x * c(1.0 / 3.75)) * (x * c(1.0 / 3.75));
+    let t2 = t * t;
+    let p_small = (c(1.0) + t * c(3.515_622_9))
+        + t2 * (c(3.089_942_4) + t * c(1.206_749_2))
+        + t2 * t2 * ((c(0.265_973_2) + t * c(0.036_076_8)) + t2 * c(0.004_581_3));
+    let t = c(3.75) / x;
+    let t2 = t * t;
+    let t4 = t2 * t2;
+    let p_large = (c(0.398_942_28) + t * c(0.013_285_92))
+        + t2 * (c(0.002_253_19) + t * c(-0.001_575_65))
+        + t4 * ((c(0.009_162_81) + t * c(-0.020_577_06))
+            + t2 * (c(0.026_355_37) + t * c(-0.016_476_33)))
+        + t4 * t4 * c(0.003_923_77);
+    (
+        small.select(-x, f32x4::ZERO),
+        small.select(p_small, p_large / x.sqrt()),
+    )
 }
 
-/// Wraps an angle to [−π, π].
-fn wrap_pi(x: f32) -> f32 {
-    x - TAU * (x / TAU).round()
+/// Wraps angles to [−π, π].
+fn wrap_pi(x: f32x4) -> f32x4 {
+    x - f32x4::splat(TAU) * (x * f32x4::splat(1.0 / TAU)).round_ties_even()
 }
 
 /// Unpolarised Fresnel reflectance entering a dielectric of index `eta` > 1 from outside.
@@ -519,6 +605,7 @@ mod tests {
     use super::*;
     use crate::test_util::assert_rejected;
     use std::f32::consts::FRAC_PI_2;
+    use tress_core::math::fiber_direction;
 
     fn chiang(beta_m: f32, beta_n: f32, alpha: f32, pigment: Pigment) -> Chiang {
         Chiang::new(&Params {
@@ -543,6 +630,26 @@ mod tests {
         (a as f64 - b).abs() / b.abs()
     }
 
+    /// One lobe of variance `v` through the lane-wise [`super::longitudinal`].
+    fn longitudinal(v: f32, ln_norm: f32, sin_i: f32, cos_i: f32, sin_o: f32, cos_o: f32) -> f32 {
+        let s = f32x4::splat;
+        let m = super::longitudinal(
+            s(1.0 / v),
+            s(ln_norm),
+            s(sin_i),
+            s(cos_i),
+            s(sin_o),
+            s(cos_o),
+        );
+        m.as_array()[0]
+    }
+
+    /// One argument through the lane-wise [`super::i0_scaled_split`].
+    fn i0_scaled_split(x: f32) -> (f32, f32) {
+        let (ln_part, factor) = super::i0_scaled_split(f32x4::splat(x));
+        (ln_part.as_array()[0], factor.as_array()[0])
+    }
+
     #[test]
     fn attenuations_sum_to_one_without_absorption() {
         let c = chiang(0.3, 0.3, 2.0, Pigment::SigmaA((0.0, 0.0, 0.0)));
@@ -553,12 +660,12 @@ mod tests {
                 let theta_o = (-90.0 + 5.0 * j as f32).to_radians();
                 let wo = fiber_direction(theta_o.sin(), theta_o.cos(), FRAC_PI_2);
                 let g = c.geometry(wo, h);
-                let sum: Rgb = g.ap.iter().sum();
+                let sum: Rgb = g.attenuations().iter().sum();
                 assert!(
                     (sum - Rgb::ONE).abs().max_element() < 1e-6,
                     "h {h} θ_o {theta_o}: {sum}"
                 );
-                let absorbing: Rgb = brown.geometry(wo, h).ap.iter().sum();
+                let absorbing: Rgb = brown.geometry(wo, h).attenuations().iter().sum();
                 assert!(absorbing.max_element() <= 1.0 && absorbing.min_element() >= 0.0);
             }
         }
@@ -653,7 +760,7 @@ mod tests {
             let acc: f64 = (0..n)
                 .map(|k| {
                     let x = -std::f64::consts::PI + (k as f64 + 0.5) * d;
-                    c.trimmed_logistic(x as f32) as f64 * d
+                    c.trimmed_logistic(f32x4::splat(x as f32)).as_array()[0] as f64 * d
                 })
                 .sum();
             // With s = 1.7e-4 (β_n = 1e-3) the midpoint grid (3e-5) still resolves the lobe.
@@ -663,7 +770,7 @@ mod tests {
             let cdf = |x: f64| 1.0 / (1.0 + (-x / s).exp());
             let pi = std::f64::consts::PI;
             for u in [0.01f32, 0.2, 0.5, 0.77, 0.99] {
-                let x = c.sample_trimmed_logistic(u) as f64;
+                let x = c.sample_offsets(0.5, u).1 as f64;
                 let back = (cdf(x) - cdf(-pi)) / (cdf(pi) - cdf(-pi));
                 assert!(
                     (back - u as f64).abs() < 1e-4,
