@@ -1,9 +1,7 @@
 //! `tress bench --quick` end to end: the table's columns and sections, the CSV beside it, and
 //! clear errors. No timing is checked (the machine is shared and noisy).
 
-mod common;
-
-use common::{stderr, tress};
+use crate::common::{stderr, tress};
 use std::collections::BTreeSet;
 
 const COLUMNS: [&str; 7] = [

@@ -1,8 +1,6 @@
 //! The `tress` binary end to end: rendering, outputs, and clear errors for bad input.
 
-mod common;
-
-use common::{render_ok, scene_dir, stderr, tress, SCENE};
+use crate::common::{render_ok, scene_dir, stderr, tress, SCENE};
 
 #[test]
 fn renders_exr_and_png_with_metadata() {

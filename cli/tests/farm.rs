@@ -1,9 +1,7 @@
 //! Farm rendering: the job lines of `tress farm`, run as separate processes, merge into the
 //! single full render bit for bit; `tress merge` refuses pieces that do not belong together.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 use std::path::Path;
 use std::process::Command;
 

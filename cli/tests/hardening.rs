@@ -3,9 +3,7 @@
 //! a valid image of the samples finished; waves, partial images and sample-range passes do not
 //! change the image by a single bit.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 use std::path::Path;
 use std::time::{Duration, Instant};
 

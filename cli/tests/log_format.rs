@@ -1,9 +1,7 @@
 //! `--log-format json`: every command ends with one JSON summary line on stdout, parsable and
 //! carrying its results; the readable output stays the default.
 
-mod common;
-
-use common::{scene_dir, stderr, tress, SCENE};
+use crate::common::{scene_dir, stderr, tress, SCENE};
 use serde_json::Value;
 use std::process::Output;
 

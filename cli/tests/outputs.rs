@@ -1,9 +1,7 @@
 //! What `tress render` writes: sample sums only on request, alpha and AOV layers, the header
 //! (version, camera matrices, typed attributes) and the tone-mapped sRGB PNG.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 use tress_core::image_io::{read_exr_attributes, Attribute};
 use tress_core::math::Vec3;
 

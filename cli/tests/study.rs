@@ -1,9 +1,7 @@
 //! `tress study` and `tress diff` end to end: outputs, resumption, determinism, convergence,
 //! hand-computed metrics and clear errors for bad input.
 
-mod common;
-
-use common::{stderr, tress};
+use crate::common::{stderr, tress};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Output;

@@ -654,7 +654,7 @@ fn outputs_are_finite_and_non_negative() {
 }
 
 /// Cost of eval, pdf and sample per registered instance (not an assertion):
-/// `cargo test -p tress-materials --test bcsdf_statistics -- --ignored --nocapture eval_cost`.
+/// `cargo test --release -p tress-materials --test integration -- --ignored --nocapture eval_cost`.
 #[test]
 #[ignore]
 fn eval_cost() {

@@ -153,8 +153,8 @@ fn hair_ball_outputs_are_plausible() {
 /// What alpha's extra query costs: the time of one occlusion query per camera ray against the
 /// time of the integrator's sample, measured interleaved pixel by pixel (so that other load on
 /// the machine weighs on both alike) on `scenes/straight_venice.ron`. Prints the
-/// ratios; run with `cargo test --release -p tress-tests --test outputs -- --ignored
-/// --nocapture`.
+/// ratios; run with `cargo test --release -p tress-tests --test integration -- --ignored
+/// --nocapture outputs::`.
 #[test]
 #[ignore = "a measurement, not a check; needs ../shared/data"]
 fn measure_the_cost_of_the_alpha_query() {

@@ -1,9 +1,6 @@
 //! Helpers shared by the tests of the `tress` binary: running it, small scenes, and reading
 //! every channel of an EXR bit for bit.
 
-// Each test crate that includes this module uses only some of its helpers.
-#![allow(dead_code)]
-
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

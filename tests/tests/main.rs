@@ -1,0 +1,14 @@
+//! The cross-crate tests, one module per file, built as a single test binary (a binary per
+//! file linked the whole dependency tree once per file; see `Cargo.toml`).
+
+mod determinism;
+mod docs_links;
+mod dual_scattering;
+mod furnace;
+mod groom_inputs;
+mod library_sources;
+mod outputs;
+mod radiance_cache;
+mod round_curves;
+mod strand_variation;
+mod test_files;
