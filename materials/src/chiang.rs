@@ -45,6 +45,14 @@
 //! vMF lobe about the (tilted) mirror direction, `u[3]` draws Δφ from the trimmed logistic (uniform
 //! for p = 3). `pdf` is the exact density of that mixture, `Σ_p P(p) M_p N_p`.
 //!
+//! # Evaluation in SIMD lanes
+//! Lobe p's per-lobe values (variance, tilted θ_o, exit azimuth, A_p, P(p)) sit in lane p of
+//! `f32x4` vectors (crate `wide`; SSE2 on baseline x86-64), so `M_p` and `N_p` of all four lobes
+//! take one vector `exp` each, and the RGB transmittance, the pair (γ_t, γ_o), sampling's four
+//! inverse-CDF logarithms and its two sines and cosines take one vector `exp`, `asin`, `ln` and
+//! `sin_cos`. These agree with libm to a few ulp over the ranges used; the reference test's worst
+//! error stays at 9e-6.
+//!
 //! # Differences from pbrt-v4 (all keep its formulas; they make `pdf` the exact sampling density)
 //! - I₀ uses the Abramowitz & Stegun 9.8.1/9.8.2 approximations (relative error < 5·10⁻⁷) instead
 //!   of pbrt's 10-term series, which is 1.7 % low at the argument 11.8 — the R-lobe peak at the
@@ -52,7 +60,8 @@
 //! - M_p is evaluated as `exp(−|m − u|²/(2v) + ln(I₀(a) e^{−a}) − ln v − ln(1 − e^{−2/v}))` with
 //!   `u = (sin θ_i, cos θ_i)` and `m = (−sin θ_o, cos θ_o)`, which equals pbrt's two branches
 //!   (direct for v > 0.1, logarithmic below) without the cancellation of `a − b − 1/v` in f32.
-//! - The vMF sampler computes `1 − cos θ` with `ln_1p` (accurate near the lobe's mode), and the
+//! - The vMF sampler computes `1 − cos θ` from `ln(1 + x)` taken as `x ln u / (u − 1)` on the
+//!   rounded `u = 1 + x` (accurate near the lobe's mode, where x → 0), and the
 //!   random numbers of both inverse CDFs are clamped to ≥ 2⁻²⁴ (the spacing of 24-bit uniforms)
 //!   instead of pbrt's 10⁻⁵, which moves 10⁻⁵ of each lobe's mass onto one cone. u = 0 itself must
 //!   not reach the inverse CDFs: it maps onto the vMF's antipode and the logistic's trimmed end,
