@@ -1585,8 +1585,11 @@ mod tests {
     /// White energy-conserving fibers: the quadrature must put all the energy somewhere.
     #[test]
     fn white_fibers_scatter_all_energy() {
+        // ā_f and ā_b come from the quadrature alone: the fiber medium's random walks, which
+        // white fibers make long, would not change them.
         let s = DualScatteringSettings {
             theta_nodes: 4,
+            multiple_scattering: MultipleScattering::Paper,
             ..Default::default()
         };
         let mut checked = 0;
