@@ -2,11 +2,12 @@
 # Installs anything missing, then runs clippy (warnings are errors) and the full test suite.
 set -euo pipefail
 cd "$(dirname "$0")"
-.ci/install-deps
 target_dir="${CARGO_TARGET_DIR:-$PWD/target}"
+# Whatever stops this script early stops the jobs it started in the background too.
+trap 'jobs -p | xargs -r kill 2>/dev/null' EXIT
 
 # mdBook, to build the book below, has no Debian package: cargo installs it into the target folder,
-# in the background while clippy runs, so its build overlaps the workspace's. Unoptimised and
+# in the background while apt and clippy run, so its build overlaps theirs. Unoptimised and
 # without debug info it compiles in a fraction of the time and still builds this book in a second.
 mdbook_root="$target_dir/tools"
 export PATH="$mdbook_root/bin:$PATH"
@@ -17,26 +18,22 @@ if ! command -v mdbook >/dev/null 2>&1; then
         --target-dir "$target_dir/tools-build" mdbook &
     mdbook_install=$!
 fi
+.ci/install-deps
 if cargo clippy --version >/dev/null 2>&1; then
     cargo clippy --workspace --all-targets --release -- -D warnings
 else
     echo "test.sh: clippy is not installed (rustup component add clippy): lints skipped" >&2
 fi
-cargo test --workspace --release "$@"
-
-# The book (docs/): cargo test has checked its links (tests/tests/docs_links.rs); mdBook builds
-# it outside the source tree. mdBook exits 0 on a broken include or unclosed HTML, so any warning
-# or error it prints fails the run.
-if [ -n "$mdbook_install" ]; then wait "$mdbook_install"; fi
-book_dir="$target_dir/book"
-mdbook build docs --dest-dir "$book_dir" 2>&1 | tee "$book_dir.log"
-if grep -qE 'WARN|ERROR' "$book_dir.log"; then
-    echo "test.sh: mdbook build docs printed warnings or errors (above)" >&2
-    exit 1
-fi
+# The tests run in the background while maturin builds the Python package below: once the test
+# binaries are built, cargo holds the build folder only for the moment it takes to see that
+# they are fresh (the virtualenv's set-up comes first), and the tests leave a core idle at
+# times. maturin reuses the crates built here.
+cargo test --workspace --release --no-run "$@"
+cargo test --workspace --release "$@" &
+tests=$!
 
 # The Python package (python/): maturin builds the extension module into a virtualenv kept in
-# the target folder, reusing the crates built above, and pytest runs its suite.
+# the target folder, and pytest runs its suite once the tests are done.
 venv="$target_dir/python-venv"
 if [ ! -x "$venv/bin/pip" ]; then
     rm -rf "$venv"
@@ -53,8 +50,28 @@ if [ ! -x "$venv/bin/pip" ]; then
 fi
 "$venv/bin/pip" install --quiet --disable-pip-version-check "maturin>=1.9.4,<2" numpy pytest
 rm -rf "$target_dir/python-wheels"
-"$venv/bin/maturin" build --release --manifest-path python/Cargo.toml --interpreter "$venv/bin/python" \
-    --out "$target_dir/python-wheels"
+maturin_log="$target_dir/maturin.log"
+if ! "$venv/bin/maturin" build --release --manifest-path python/Cargo.toml \
+    --interpreter "$venv/bin/python" --out "$target_dir/python-wheels" >"$maturin_log" 2>&1; then
+    wait "$tests" || true
+    cat "$maturin_log" >&2
+    echo "test.sh: maturin could not build the Python package (above)" >&2
+    exit 1
+fi
+wait "$tests"
+tail -n 1 "$maturin_log"
+
+# The book (docs/): cargo test has checked its links (tests/tests/docs_links.rs); mdBook builds
+# it outside the source tree. mdBook exits 0 on a broken include or unclosed HTML, so any warning
+# or error it prints fails the run.
+if [ -n "$mdbook_install" ]; then wait "$mdbook_install"; fi
+book_dir="$target_dir/book"
+mdbook build docs --dest-dir "$book_dir" 2>&1 | tee "$book_dir.log"
+if grep -qE 'WARN|ERROR' "$book_dir.log"; then
+    echo "test.sh: mdbook build docs printed warnings or errors (above)" >&2
+    exit 1
+fi
+
 "$venv/bin/pip" install --quiet --disable-pip-version-check --force-reinstall --no-deps \
     "$target_dir"/python-wheels/tress-*.whl
 "$venv/bin/pytest" -q python/tests
