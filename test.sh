@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Installs anything missing, then runs clippy (warnings are errors) and the full test suite.
+# Installs anything missing, then runs the full test suite with clippy's lints (warnings are errors).
 set -euo pipefail
 cd "$(dirname "$0")"
 target_dir="${CARGO_TARGET_DIR:-$PWD/target}"
@@ -7,7 +7,7 @@ target_dir="${CARGO_TARGET_DIR:-$PWD/target}"
 trap 'jobs -p | xargs -r kill 2>/dev/null' EXIT
 
 # mdBook, to build the book below, has no Debian package: cargo installs it into the target folder,
-# in the background while apt and clippy run, so its build overlaps theirs. Unoptimised and
+# in the background while apt and the workspace's build run, so its build overlaps theirs. Unoptimised and
 # without debug info it compiles in a fraction of the time and still builds this book in a second.
 mdbook_root="$target_dir/tools"
 export PATH="$mdbook_root/bin:$PATH"
@@ -19,8 +19,13 @@ if ! command -v mdbook >/dev/null 2>&1; then
     mdbook_install=$!
 fi
 .ci/install-deps
-if cargo clippy --version >/dev/null 2>&1; then
-    cargo clippy --workspace --all-targets --release -- -D warnings
+# Clippy lints the workspace's crates as they are compiled for the tests and the Python package:
+# cargo hands each of them to clippy-driver (as `cargo clippy` does, but with code generation),
+# so the dependencies are compiled once instead of checked for clippy and then built again.
+# Every target `cargo clippy --all-targets` lints is compiled below: libraries, binaries, unit
+# and integration tests, examples (the workspace has no benches).
+if clippy-driver --version >/dev/null 2>&1; then
+    export RUSTC_WORKSPACE_WRAPPER="$PWD/.ci/clippy-rustc"
 else
     echo "test.sh: clippy is not installed (rustup component add clippy): lints skipped" >&2
 fi
