@@ -29,12 +29,13 @@ if clippy-driver --version >/dev/null 2>&1; then
 else
     echo "test.sh: clippy is not installed (rustup component add clippy): lints skipped" >&2
 fi
-# The tests run in the background while maturin builds the Python package below: once the test
-# binaries are built, cargo holds the build folder only for the moment it takes to see that
-# they are fresh (the virtualenv's set-up comes first), and the tests leave a core idle at
-# times. maturin reuses the crates built here.
-cargo test --workspace --release --no-run "$@"
-cargo test --workspace --release "$@" &
+# The tests run in the background while maturin builds the Python package below, reusing the
+# crates built here. .ci/run-tests runs the test binaries themselves (cargo's build folder stays
+# free for maturin), two at a time, then the doc tests; this script's arguments go to every
+# test binary (a name filter, --ignored, ...).
+artifacts="$target_dir/test-binaries.json"
+cargo test --workspace --release --no-run --message-format=json-render-diagnostics >"$artifacts"
+.ci/run-tests "$artifacts" "$@" &
 tests=$!
 
 # The Python package (python/): maturin builds the extension module into a virtualenv kept in
