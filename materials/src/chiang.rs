@@ -50,10 +50,11 @@
 //! `f32x4` vectors (crate `wide`; SSE2 on baseline x86-64), so `M_p` and `N_p` of all four lobes
 //! take one vector `exp` each, and the RGB transmittance, the pair (γ_t, γ_o), sampling's four
 //! inverse-CDF logarithms and its two sines and cosines take one vector `exp`, `asin`, `ln` and
-//! `sin_cos`. These are [`crate::simd_math`]'s, specialised to the arguments passed here (finite,
-//! bounded angles, exp of arguments ≤ 16, ln of positive numbers) and within 2.5 ulp of libm;
-//! `wide`'s general versions cost a third of `sample` (171 → 125 ns per call) and a tenth of
-//! `eval_pdf` (125 → 111 ns). The reference test's worst error stays at 9e-6.
+//! `sin_cos`. `exp`, `ln` and `sin_cos` are [`crate::simd_math`]'s, specialised to the arguments
+//! passed here (exp of arguments ≤ 16, ln of positive numbers, bounded angles) and within 1.4 ulp
+//! of libm; `wide`'s general versions cost a quarter of `sample` and a tenth of `eval_pdf`.
+//! `asin` and `atan2` are `wide`'s (lean versions did not measurably pay). The reference test's
+//! worst error stays at 9e-6.
 //!
 //! # Differences from pbrt-v4 (all keep its formulas; they make `pdf` the exact sampling density)
 //! - I₀ uses the Abramowitz & Stegun 9.8.1/9.8.2 approximations (relative error < 5·10⁻⁷) instead
@@ -268,10 +269,10 @@ impl Chiang {
         let sin_gamma_t = h * cos_o * inv_root;
         let cos_gamma_t = safe_sqrt(1.0 - sin_gamma_t * sin_gamma_t);
         // γ_t and γ_o in two lanes of one vector asin.
-        let [gamma_t, gamma_o, _, _] = simd_math::asin(
-            f32x4::new([sin_gamma_t, h, 0.0, 0.0]).clamp(f32x4::splat(-1.0), f32x4::ONE),
-        )
-        .to_array();
+        let [gamma_t, gamma_o, _, _] = f32x4::new([sin_gamma_t, h, 0.0, 0.0])
+            .clamp(f32x4::splat(-1.0), f32x4::ONE)
+            .asin()
+            .to_array();
         // The three channels' transmittance over the path 2 cos γ_t / cos θ_t in one vector exp
         // (lane 3 spare).
         let t = simd_math::exp(self.sigma_a * f32x4::splat(-2.0 * eta * cos_gamma_t * inv_root));
@@ -334,14 +335,14 @@ impl Chiang {
     }
 
     /// (sin θ_i, cos θ_i, φ_i − φ_o), the azimuth difference from one atan2 of the normal-plane
-    /// projections' cross and dot products ([`simd_math::atan2`] in one lane: inlined, and a few
-    /// times cheaper than libm's).
+    /// projections' cross and dot products (wide's, in one lane: inlined, and a few times
+    /// cheaper than libm's).
     fn angles_i(&self, g: &Geometry, wi: Vec3) -> (f32, f32, f32) {
         let sin_i = wi.x.clamp(-1.0, 1.0);
         let cos_i = safe_sqrt((1.0 - sin_i) * (1.0 + sin_i));
         let (y, z) = g.normal_o;
         let cross = f32x4::splat(y * wi.z - z * wi.y);
-        let phi = simd_math::atan2(cross, f32x4::splat(y * wi.y + z * wi.z)).as_array()[0];
+        let phi = cross.atan2(f32x4::splat(y * wi.y + z * wi.z)).as_array()[0];
         (sin_i, cos_i, phi)
     }
 

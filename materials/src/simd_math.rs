@@ -1,12 +1,13 @@
-//! Lean `f32x4` versions of the transcendental functions [`crate::chiang`] evaluates, each
-//! specialised to the arguments Chiang passes it.
+//! Lean `f32x4` versions of the transcendental functions that dominated [`crate::chiang`]'s cost,
+//! each specialised to the arguments Chiang passes it.
 //!
-//! `wide`'s own `exp`, `ln`, `asin`, `atan2` and `sin_cos` handle every input (NaN, ±∞,
-//! overflow, subnormal results) with a dozen selects and an early-out branch each, and round with
-//! a slow SSE2 emulation of `roundps`; on baseline x86-64 (SSE2, no FMA) they took most of
-//! Chiang's `sample` and `eval`. Here each function accepts a stated domain only, reduces its
-//! argument with integer bit arithmetic and the 1.5·2²³ rounding trick, and evaluates one short
-//! polynomial. The polynomial coefficients were fitted for this module (weighted minimax fits by
+//! `wide`'s own `exp`, `ln` and `sin_cos` handle every input (NaN, ±∞, overflow, subnormal
+//! results) with a dozen selects and an early-out branch each, and round with a slow SSE2
+//! emulation of `roundps`; on baseline x86-64 (SSE2, no FMA) they took a quarter of Chiang's
+//! `sample` and a tenth of its `eval`. Here each function accepts a stated domain only, reduces
+//! its argument with integer bit arithmetic and the 1.5·2²³ rounding trick, and evaluates one
+//! short polynomial. (Lean `asin` and `atan2` were written and measured too; Chiang's cost did not
+//! change measurably, so it keeps `wide`'s.) The polynomial coefficients were fitted for this module (weighted minimax fits by
 //! Lawson's iteratively reweighted least squares on dense grids in f64, weight = the relative
 //! error, or absolute where stated, of the final result), then rounded to f32; the errors quoted
 //! are measured on the f32 results against f64 `std` by the tests below, which fail if a bound is
@@ -16,7 +17,7 @@
 // is the f32 the fit was re-measured with.
 #![allow(clippy::excessive_precision)]
 
-use std::f32::consts::{FRAC_PI_2, FRAC_PI_4, LOG2_E, PI};
+use std::f32::consts::LOG2_E;
 use wide::bytemuck::cast;
 use wide::{f32x4, i32x4};
 
@@ -28,12 +29,6 @@ const ROUND_MAGIC: f32 = 12_582_912.0;
 /// |n| < 2¹⁵, the second the f32 nearest to the rest.
 const LN2_HI: f32 = 0.693_359_375;
 const LN2_LO: f32 = -2.121_944_4e-4;
-
-/// π/2 − `FRAC_PI_2` (the f32 nearest π/2).
-const FRAC_PI_2_LO: f32 = -4.371_139e-8;
-
-/// Only the sign bit set, for copying and flipping signs.
-const SIGN: f32x4 = f32x4::new([-0.0; 4]);
 
 /// Rounds to the nearest integer: (that integer as f32, its two's complement as i32).
 #[inline(always)]
@@ -120,63 +115,10 @@ pub fn sin_cos(x: f32x4) -> (f32x4, f32x4) {
     )
 }
 
-/// `asin x` for x in [−1, 1].
-///
-/// Method: for |x| ≤ ½, `asin z = z + z³ A(z²)` with A of degree 4 (fit: 5.6·10⁻⁹ relative);
-/// above, `asin |x| = π/2 − 2 asin √((1 − |x|)/2)` by the same polynomial (1 − |x| is exact
-/// there, and π/2 is taken in two parts); the sign of x is copied. Measured: relative error
-/// 1.5·10⁻⁷ (2.5 ulp) on [−1, 1].
-#[inline(always)]
-pub fn asin(x: f32x4) -> f32x4 {
-    let c = f32x4::splat;
-    let a = x.abs();
-    let far = a.simd_gt(c(0.5));
-    let z2 = far.select((c(1.0) - a) * c(0.5), a * a);
-    let z = far.select(z2.sqrt(), a);
-    let z4 = z2 * z2;
-    let poly = (c(1.666_675_359e-1) + z2 * c(7.495_241_612e-2))
-        + z4 * ((c(4.547_710_344e-2) + z2 * c(2.414_757_572e-2)) + z4 * c(4.221_861_437e-2));
-    let tail = (z * z2) * poly;
-    // π/2 − 2 asin z with π/2 in two parts, its leading difference exact.
-    let asin_a = far.select(
-        (c(FRAC_PI_2) - c(2.0) * z) + (c(FRAC_PI_2_LO) - c(2.0) * tail),
-        z + tail,
-    );
-    asin_a | (x & SIGN)
-}
-
-/// `atan2(y, x)` in [−π, π] for finite y, x; `atan2(±0, 0) = ±0`, and unlike `std` a zero x is
-/// taken as positive whatever its sign.
-///
-/// Method: with `n = min(|x|, |y|)` and `d = max(|x|, |y|)`, `atan(n/d)` for n/d in [0, 1] is
-/// reduced to `t` in [−tan π/8, tan π/8] by `atan(n/d) = π/4 + atan((n − d)/(n + d))` above
-/// tan π/8 (one division either way), then `atan t = t + t³ T(t²)` with T of degree 4 (fit:
-/// 2.4·10⁻⁹ relative); octant and quadrant follow from |y| > |x|, x < 0 and the sign of y.
-/// Measured: absolute error 2.6·10⁻⁷ (1.1 ulp of π) over all directions.
-#[inline(always)]
-pub fn atan2(y: f32x4, x: f32x4) -> f32x4 {
-    let c = f32x4::splat;
-    let (ax, ay) = (x.abs(), y.abs());
-    let steep = ay.simd_gt(ax);
-    let n = ax.min(ay);
-    let d = ax.max(ay);
-    let upper = n.simd_gt(d * c(0.414_213_57));
-    // d = 0 only for y = x = 0, where n = 0 and t must be 0.
-    let t = upper.select(n - d, n) / upper.select(n + d, d).max(c(f32::MIN_POSITIVE));
-    let t2 = t * t;
-    let t4 = t2 * t2;
-    let poly = (c(-3.333_331_645e-1) + t2 * c(1.999_848_932e-1))
-        + t4 * ((c(-1.424_384_862e-1) + t2 * c(1.059_600_115e-1)) + t4 * c(-6.083_451_957e-2));
-    let atan_t = t + (t * t2) * poly;
-    let octant = upper.select(c(FRAC_PI_4) + atan_t, atan_t);
-    let quadrant = steep.select(c(FRAC_PI_2) - octant, octant);
-    let half = x.simd_lt(f32x4::ZERO).select(c(PI) - quadrant, quadrant);
-    half | (y & SIGN)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f32::consts::{FRAC_PI_2, PI};
 
     /// Runs `f` on `xs` four at a time and returns its lane results.
     fn lanes(xs: &[f32], f: impl Fn(f32x4) -> f32x4) -> Vec<f32> {
@@ -309,56 +251,5 @@ mod tests {
         assert_eq!(s.to_array()[..2], [0.0, 0.0]);
         assert_eq!(c.to_array()[..2], [1.0, 1.0]);
         assert!((s.to_array()[2] - 1.0).abs() < 1e-7 && c.to_array()[3] == -1.0);
-    }
-
-    #[test]
-    fn asin_matches_std() {
-        let xs = grid(-1.0, 1.0, 2_000_000);
-        check("asin", errors(&xs, asin, f64::asin), 1.6e-7, 2e-7);
-        // The branch switch at ½ and the ends.
-        let ends = [0.0f32, 0.5, f32::from_bits(0.5f32.to_bits() + 1), 1.0, -1.0];
-        for (x, y) in ends.iter().zip(lanes(&ends, asin)) {
-            let want = (*x as f64).asin();
-            assert!(
-                (y as f64 - want).abs() <= 1.6e-7 * want.abs(),
-                "asin({x}) = {y}"
-            );
-        }
-    }
-
-    #[test]
-    fn atan2_matches_std() {
-        // Directions all around the circle at several radii, and the axes.
-        let n = 1_000_000;
-        let (mut ys, mut xs) = (Vec::new(), Vec::new());
-        for i in 0..=n {
-            let a = -std::f64::consts::PI + std::f64::consts::TAU * i as f64 / n as f64;
-            let r = [1e-30, 1e-3, 1.0, 1e30][i % 4];
-            ys.push((r * a.sin()) as f32);
-            xs.push((r * a.cos()) as f32);
-        }
-        ys.extend([0.0, 1.0, 0.0, -1.0, 0.0, -0.0]);
-        xs.extend([1.0, 0.0, -1.0, 0.0, 0.0, 0.0]);
-        let got = xs.chunks(4).zip(ys.chunks(4)).flat_map(|(x, y)| {
-            let pad = |v: &[f32]| {
-                let mut a = [1.0; 4];
-                a[..v.len()].copy_from_slice(v);
-                f32x4::new(a)
-            };
-            atan2(pad(y), pad(x)).to_array()[..x.len()].to_vec()
-        });
-        let mut worst = 0.0f64;
-        for ((&y, &x), got) in ys.iter().zip(&xs).zip(got) {
-            let want = (y as f64).atan2(x as f64);
-            worst = worst.max((got as f64 - want).abs());
-        }
-        check("atan2", (0.0, worst), f64::INFINITY, 2.7e-7);
-        let zeros = atan2(
-            f32x4::new([0.0, -0.0, 0.0, 0.0]),
-            f32x4::new([0.0, 0.0, 1.0, -1.0]),
-        );
-        assert_eq!(zeros.to_array()[..3], [0.0, 0.0, 0.0]);
-        assert_eq!(zeros.to_array()[1].to_bits(), (-0.0f32).to_bits());
-        assert_eq!(zeros.to_array()[3], PI);
     }
 }
