@@ -26,6 +26,7 @@ pub mod model_params;
 mod parallel;
 mod params;
 pub mod pigment;
+pub(crate) mod simd_math;
 pub mod strand_variation;
 #[cfg(test)]
 mod test_util;
