@@ -10,6 +10,7 @@
 //! is expanded as mdBook expands it, so anchors into included text resolve in the including
 //! chapter. External links (`http:`, `https:`, `mailto:`) are not fetched.
 
+use crate::workspace;
 use std::collections::{BTreeMap, BTreeSet, HashSet};
 use std::path::{Component, Path, PathBuf};
 
@@ -539,11 +540,7 @@ fn check(files: &dyn Files) -> Vec<String> {
 
 #[test]
 fn the_readme_and_the_book_have_no_broken_links() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("tests/ has a parent")
-        .to_path_buf();
-    let problems = check(&Repository(root));
+    let problems = check(&Repository(workspace::root()));
     assert!(
         problems.is_empty(),
         "{} broken links in the documentation:\n{}",

@@ -22,6 +22,7 @@
 //! check (the rules would not see it). Test code — `#[cfg(test)]` items and modules, and the
 //! files of `#[cfg(test)] mod x;` — is not library code and is skipped by all three rules.
 
+use crate::workspace;
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::path::{Path, PathBuf};
 
@@ -602,28 +603,7 @@ struct Crate {
 /// The library members of the workspace at `root`: those its `Cargo.toml` lists, bar the
 /// front ends.
 fn library_members(root: &Path) -> Result<Vec<String>, String> {
-    let manifest = root.join("Cargo.toml");
-    let text =
-        std::fs::read_to_string(&manifest).map_err(|e| format!("{}: {e}", manifest.display()))?;
-    let start = text
-        .find("members")
-        .and_then(|m| text[m..].find('[').map(|b| m + b + 1))
-        .ok_or_else(|| format!("{}: no `members = [...]`", manifest.display()))?;
-    let end = text[start..]
-        .find(']')
-        .map(|e| start + e)
-        .ok_or_else(|| format!("{}: unterminated `members`", manifest.display()))?;
-    let members: Vec<String> = text[start..end]
-        .lines()
-        .map(|l| l.split('#').next().unwrap_or(""))
-        .flat_map(|l| l.split(','))
-        .map(|m| m.trim().trim_matches('"').to_owned())
-        .filter(|m| !m.is_empty())
-        .collect();
-    if members.is_empty() {
-        return Err(format!("{}: `members` is empty", manifest.display()));
-    }
-    Ok(members
+    Ok(workspace::members(root)?
         .into_iter()
         .filter(|m| !FRONT_ENDS.contains(&m.as_str()))
         .collect())
@@ -950,30 +930,26 @@ fn check_workspace(root: &Path, rule: impl Fn(&Crate) -> Vec<String>) -> Vec<Str
     problems
 }
 
-fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("tests/ lies in the workspace")
-        .to_path_buf()
-}
-
 fn assert_none(problems: Vec<String>) {
     assert!(problems.is_empty(), "\n{}\n", problems.join("\n"));
 }
 
 #[test]
 fn library_files_import_each_other_without_cycles() {
-    assert_none(check_workspace(&workspace_root(), Crate::cycles));
+    assert_none(check_workspace(&workspace::root(), Crate::cycles));
 }
 
 #[test]
 fn library_crates_read_no_environment() {
-    assert_none(check_workspace(&workspace_root(), Crate::environment_reads));
+    assert_none(check_workspace(
+        &workspace::root(),
+        Crate::environment_reads,
+    ));
 }
 
 #[test]
 fn library_crates_keep_no_process_wide_mutable_state() {
-    assert_none(check_workspace(&workspace_root(), Crate::mutable_statics));
+    assert_none(check_workspace(&workspace::root(), Crate::mutable_statics));
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -12,3 +12,4 @@ mod radiance_cache;
 mod round_curves;
 mod strand_variation;
 mod test_files;
+mod workspace;

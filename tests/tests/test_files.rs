@@ -2,22 +2,8 @@
 //! integration tests as one binary from `tests/main.rs`, and Cargo then ignores every file of
 //! `tests/` that main.rs does not declare as a module: its tests would silently never run.
 
+use crate::workspace;
 use std::path::Path;
-
-/// The workspace members, from the root `Cargo.toml`'s `members = [...]`.
-fn members(root: &Path) -> Vec<String> {
-    let manifest = std::fs::read_to_string(root.join("Cargo.toml")).unwrap();
-    let list = manifest
-        .split_once("members = [")
-        .and_then(|(_, rest)| rest.split_once(']'))
-        .expect("the root Cargo.toml lists its members")
-        .0;
-    list.split('"')
-        .skip(1)
-        .step_by(2)
-        .map(String::from)
-        .collect()
-}
 
 /// The modules of `tests/` that `tests/main.rs` of `member` fails to declare, as paths; empty
 /// when the member's tests are Cargo's usual one binary per file.
@@ -55,8 +41,9 @@ fn undeclared_test_files(root: &Path, member: &str) -> Vec<String> {
 
 #[test]
 fn test_files_are_modules() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let missing: Vec<String> = members(&root)
+    let root = workspace::root();
+    let missing: Vec<String> = workspace::members(&root)
+        .unwrap()
         .iter()
         .flat_map(|m| undeclared_test_files(&root, m))
         .collect();
@@ -89,7 +76,8 @@ fn an_undeclared_test_file_or_folder_is_found() {
     // Cargo's default: every file is its own binary.
     write("two/Cargo.toml", "[package]\n");
     write("two/tests/c.rs", "");
-    let missing: Vec<String> = members(root.path())
+    let missing: Vec<String> = workspace::members(root.path())
+        .unwrap()
         .iter()
         .flat_map(|m| undeclared_test_files(root.path(), m))
         .collect();
