@@ -7,8 +7,9 @@ target_dir="${CARGO_TARGET_DIR:-$PWD/target}"
 trap 'jobs -p | xargs -r kill 2>/dev/null' EXIT
 
 # mdBook, to build the book below, has no Debian package: cargo installs it into the target folder,
-# in the background while apt and the workspace's build run, so its build overlaps theirs. Unoptimised and
-# without debug info it compiles in a fraction of the time and still builds this book in a second.
+# in the background while apt and the workspace's build run, so its build overlaps theirs.
+# Unoptimised and without debug info it compiles in a fraction of the time and still builds this
+# book in a second.
 mdbook_root="$target_dir/tools"
 export PATH="$mdbook_root/bin:$PATH"
 mdbook_install=""

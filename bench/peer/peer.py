@@ -304,10 +304,15 @@ class Renderers:
         (work / "scenes").mkdir(exist_ok=True)
         (work / "images").mkdir(exist_ok=True)
 
-    def tress_render(self, scene, curve, overlaps, res, spp, seed, out):
+    def tress_scene_file(self, scene, curve, overlaps, res):
+        """The tress scene file of `scene` with these options, named by its contents."""
         ron = scene.tress_ron(curve, overlaps, res)
         path = self.work / "scenes" / (hashlib.sha1(ron.encode()).hexdigest()[:12] + ".ron")
         path.write_text(ron)
+        return path
+
+    def tress_render(self, scene, curve, overlaps, res, spp, seed, out):
+        path = self.tress_scene_file(scene, curve, overlaps, res)
         cmd = [str(self.tress), "render", str(path), "--spp", str(spp), "--seed", str(seed),
                "--threads", str(self.threads), "--out", str(out), "--no-preview", "--alpha",
                "--log-format", "json"]
@@ -459,9 +464,7 @@ def embree_bound_table(r, scenes, cfg, equal_error):
         scene = scenes[key]
         for curve in ["Round", "Flat"]:
             v = (scene, "tress", curve, "Scatter")
-            ron = scene.tress_ron(curve, "Scatter", cfg.res)
-            path = r.work / "scenes" / (hashlib.sha1(ron.encode()).hexdigest()[:12] + ".ron")
-            path.write_text(ron)
+            path = r.tress_scene_file(scene, curve, "Scatter", cfg.res)
             csv_path = r.work / "bench-scene.csv"
             cmd = [str(r.tress), "bench", "--scene", str(path), "--spp", str(cfg.spp),
                    "--threads", str(r.threads), "--csv", str(csv_path)]
