@@ -43,6 +43,18 @@ pub trait Bcsdf: Send + Sync + Debug {
     /// The solid-angle density with which [`Bcsdf::sample`] produces `wi`.
     fn pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> f32;
 
+    /// The direction [`Bcsdf::sample`] draws from the same numbers, with a Monte Carlo weight
+    /// whose expectation is that of `f / pdf` — `E[weight · g(wi)] = ∫ eval(wo, wi) g(wi) dω_i`
+    /// for every `g` — but which may differ from it sample by sample. For paths that need no
+    /// density (no multiple importance sampling at the next vertex). The default is `f / pdf`;
+    /// a model that samples each of its lobes exactly overrides it with the chosen lobe's
+    /// attenuation over the probability of choosing it, and skips evaluating every lobe at the
+    /// new direction.
+    fn sample_weight(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<(Vec3, Rgb)> {
+        let s = self.sample(wo, h, u)?;
+        (s.pdf > 0.0).then(|| (s.wi, s.f / s.pdf))
+    }
+
     /// `(eval, pdf)` in one call, for next-event estimation with MIS, which needs both. Models
     /// whose two share per-hit work (angles, Fresnel, attenuations, lobe terms) override it.
     fn eval_pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> (Rgb, f32) {

@@ -76,20 +76,35 @@ pub trait IntegratorKind {
 /// Why an integrator could not be built for a scene (the integrator's own error).
 pub use crate::accel::BuildError;
 
-/// Continues a path at `sp` by sampling its scattering function: the next ray and the sample's
-/// density (for MIS at the next vertex), with `throughput` multiplied by f/pdf; `None` ends the
-/// path (no sample, or one that carries nothing).
+/// Continues a path at `sp` by sampling its scattering function: the next ray, with
+/// `throughput` multiplied by the sample's weight, and — when `density_needed`, because the
+/// next vertex weighs the lights at infinity it may find by MIS — the sample's density. `None`
+/// ends the path (no sample, or one that carries nothing). Without the density the weight is
+/// [`Bcsdf::sample_weight`]'s, which may skip evaluating the whole model.
+///
+/// [`Bcsdf::sample_weight`]: crate::Bcsdf::sample_weight
 pub fn scatter(
     sp: &ShadingPoint,
     sampler: &mut Sampler,
     throughput: &mut Rgb,
-) -> Option<(Ray, f32)> {
-    let s = sp.sample(sampler.next_4d())?;
-    if s.pdf <= 0.0 || s.f == Rgb::ZERO {
+    density_needed: bool,
+) -> Option<(Ray, Option<f32>)> {
+    let u = sampler.next_4d();
+    let (wi, weight, pdf) = if density_needed {
+        let s = sp.sample(u)?;
+        if s.pdf <= 0.0 {
+            return None;
+        }
+        (s.wi, s.f / s.pdf, Some(s.pdf))
+    } else {
+        let (wi, weight) = sp.sample_weight(u)?;
+        (wi, weight, None)
+    };
+    if weight == Rgb::ZERO {
         return None;
     }
-    *throughput *= s.f / s.pdf;
-    Some((sp.spawn(s.wi), s.pdf))
+    *throughput *= weight;
+    Some((sp.spawn(wi), pdf))
 }
 
 /// Russian roulette after a path's scattering event number `depth` (from 0), from `rr_depth`
@@ -153,7 +168,11 @@ pub fn direct_light(
 /// `dir`, MIS-weighted against next-event estimation choosing it with probability
 /// `select_pdf`. `scatter_pdf` is the density of the scattering sample that produced the ray;
 /// `None` for a camera ray, which light sampling cannot produce (weight 1), and which sees
-/// environment maps interpolated between texels ([`Light::le_seen`]).
+/// environment maps interpolated between texels ([`Light::le_seen`]), and for a scattered ray
+/// where no light at infinity is sampled directly ([`Lights::weighs_escapes`]: weight 1 too,
+/// and the lights it can find, constant skies, look the same either way).
+///
+/// [`Lights::weighs_escapes`]: crate::scene::Lights::weighs_escapes
 pub fn escaped_light(
     light: &Light,
     dir: Vec3,

@@ -81,6 +81,7 @@ pub struct Lights {
     sampled: Vec<usize>,
     non_delta: Vec<usize>,
     delta: Vec<usize>,
+    weighs_escapes: bool,
 }
 
 impl From<Vec<Light>> for Lights {
@@ -89,11 +90,15 @@ impl From<Vec<Light>> for Lights {
         let sampled = (0..all.len())
             .filter(|&i| all[i].is_sampled_directly())
             .collect();
+        let weighs_escapes = all
+            .iter()
+            .any(|l| l.is_infinite() && !l.is_delta() && l.is_sampled_directly());
         Lights {
             all,
             sampled,
             non_delta,
             delta,
+            weighs_escapes,
         }
     }
 }
@@ -133,6 +138,13 @@ impl Lights {
         } else {
             0.0
         }
+    }
+
+    /// Whether next-event estimation samples a light that escaping rays can find (an
+    /// environment map or a sun disc), so that a scattered ray's MIS weight needs the density
+    /// of its direction. Without one, every light at infinity it finds takes the whole weight.
+    pub fn weighs_escapes(&self) -> bool {
+        self.weighs_escapes
     }
 
     /// The lights at infinity (environment maps, constant skies, suns, disc or delta).

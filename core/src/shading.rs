@@ -145,6 +145,24 @@ impl<'a> ShadingPoint<'a> {
         }
     }
 
+    /// Importance-samples an incident direction (world space) with a Monte Carlo weight of the
+    /// same expectation as [`ShadingPoint::sample`]'s `f / pdf`, without its density
+    /// ([`Bcsdf::sample_weight`]).
+    pub fn sample_weight(&self, u: [f32; 4]) -> Option<(Vec3, Rgb)> {
+        match self.scattering {
+            Scattering::Fiber { bcsdf, frame, h } => {
+                let (wi, weight) = bcsdf.sample_weight(frame.to_local(self.wo), h, u)?;
+                Some((frame.to_world(wi), weight))
+            }
+            // Cosine sampling weighs every direction by the albedo.
+            Scattering::Diffuse { albedo, frame } => {
+                let local = sample_cosine_hemisphere(glam::Vec2::new(u[0], u[1]));
+                (local.z > 0.0).then(|| (frame.to_world(local), albedo))
+            }
+            Scattering::Black => None,
+        }
+    }
+
     /// A ray leaving this point in direction `dir`.
     pub fn spawn(&self, dir: Vec3) -> Ray {
         Ray::leaving(self.p, dir, self.prim)

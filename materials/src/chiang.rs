@@ -211,6 +211,15 @@ impl Geometry {
     }
 }
 
+/// A direction drawn by [`Chiang::draw`], with what evaluating or weighting it needs.
+struct Draw {
+    g: Geometry,
+    lobe: usize,
+    wi: Vec3,
+    /// (sin θ_i, cos θ_i, φ_i − φ_o) the direction was built from.
+    angles: (f32, f32, f32),
+}
+
 impl Chiang {
     /// Validates `p` and precomputes the lobe variances, logistic scale and tilts.
     pub fn new(p: &Params) -> Result<Self, ParamError> {
@@ -391,14 +400,10 @@ impl Chiang {
         let [w0, w1, w2, _] = (-self.v * ln_1p).min(f32x4::splat(2.0)).to_array();
         ([w0, w1, w2, w2], (self.s * ln.as_array()[3]).clamp(-PI, PI))
     }
-}
 
-impl Bcsdf for Chiang {
-    fn eval(&self, wo: Vec3, wi: Vec3, h: f32) -> Rgb {
-        self.eval_pdf_at(&self.geometry(wo, h), wi).0
-    }
-
-    fn sample(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<BcsdfSample> {
+    /// Draws a lobe, then θ_i from its longitudinal lobe and Δφ from its azimuthal one: the
+    /// geometry, the lobe, the direction and its angles (sin θ_i, cos θ_i, Δφ).
+    fn draw(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<Draw> {
         let (w_lobes, offset) = self.sample_offsets(u[1], u[3]);
         let g = self.geometry(wo, h);
 
@@ -444,8 +449,35 @@ impl Bcsdf for Chiang {
             cos_i * (cos_phi_o * cos_d - sin_phi_o * sin_d),
             cos_i * (sin_phi_o * cos_d + cos_phi_o * sin_d),
         );
-        let (f, pdf) = self.eval_pdf_angles(&g, sin_i, cos_i, dphi);
+        Some(Draw {
+            g,
+            lobe: p,
+            wi,
+            angles: (sin_i, cos_i, dphi),
+        })
+    }
+}
+
+impl Bcsdf for Chiang {
+    fn eval(&self, wo: Vec3, wi: Vec3, h: f32) -> Rgb {
+        self.eval_pdf_at(&self.geometry(wo, h), wi).0
+    }
+
+    fn sample(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<BcsdfSample> {
+        let Draw { g, wi, angles, .. } = self.draw(wo, h, u)?;
+        let (f, pdf) = self.eval_pdf_angles(&g, angles.0, angles.1, angles.2);
         (pdf > 0.0 && pdf.is_finite()).then_some(BcsdfSample { wi, f, pdf })
+    }
+
+    // Each lobe's M_p and N_p are sampled exactly (the vMF about the lobe's mirror direction,
+    // the trimmed logistic or the uniform azimuth), so a sample of lobe p has f_p / pdf_p = A_p,
+    // and choosing p with probability P(p) makes A_p / P(p) an unbiased weight: the other lobes'
+    // values at the new direction are not needed.
+    fn sample_weight(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<(Vec3, Rgb)> {
+        let Draw { g, lobe, wi, .. } = self.draw(wo, h, u)?;
+        let [r, gr, b] = g.ap.map(|c| c.as_array()[lobe]);
+        let weight = Rgb::new(r, gr, b) / g.lobe_pdf.as_array()[lobe];
+        weight.is_finite().then_some((wi, weight))
     }
 
     fn pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> f32 {

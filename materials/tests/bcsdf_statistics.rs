@@ -292,11 +292,13 @@ fn white_furnace_importance_sampled() {
         let wo = wo_at(th);
         mc_mean(200_000, seed(2, &all[i].name, th, 0.0), |rng| {
             let h = 2.0 * rng.next_1d() - 1.0;
-            b.sample(wo, h, rng.next_4d())
-                .map_or(Rgb::ZERO, |s| s.f / s.pdf)
+            b.sample_weight(wo, h, rng.next_4d())
+                .map_or(Rgb::ZERO, |(_, weight)| weight)
         })
     });
-    println!("\nwhite furnace, importance sampled (h uniform): mean f/pdf, channel 0 ± s.e.");
+    println!(
+        "\nwhite furnace, importance sampled (h uniform): mean sample weight, channel 0 ± s.e."
+    );
     print_theta_table(&all, &jobs, &est, |e| e.fmt(0));
     assert_furnace(&all, &jobs, &est, 1.0);
 }
@@ -376,6 +378,76 @@ fn sample_returns_eval_and_pdf() {
     }
 }
 
+/// `sample_weight` draws the direction `sample` draws from the same numbers, and its weight has
+/// the expectation of `f / pdf` in every channel: over one set of draws the mean of the two
+/// weights' difference is zero within 5 standard errors and rounding (paired: the difference's
+/// noise is only how far the two weights spread apart, so a bias of a few tenths of a percent
+/// shows).
+#[test]
+fn sample_weight_draws_samples_direction_with_the_same_mean() {
+    const CONFIGS: [(f32, f32); 3] = [(-40.0, 0.6), (10.0, -0.3), (70.0, 0.9)];
+    const DRAWS: usize = 100_000;
+    let all = instances();
+    let jobs: Vec<(usize, usize)> = (0..all.len())
+        .flat_map(|i| (0..CONFIGS.len()).map(move |c| (i, c)))
+        .collect();
+    let results = par_map(&jobs, |&(i, c)| {
+        let (th, h) = CONFIGS[c];
+        let b = &all[i].bcsdf;
+        let wo = wo_at(th);
+        let mut mismatches = Vec::new();
+        let mut weight_sum = [0.0f64; 3];
+        let difference = mc_mean(DRAWS, seed(11, &all[i].name, th, h), |rng| {
+            let u = rng.next_4d();
+            let sampled = b.sample(wo, h, u).filter(|s| s.pdf > 0.0);
+            let weighted = b.sample_weight(wo, h, u);
+            match (sampled, weighted) {
+                (Some(s), Some((wi, weight))) if s.wi == wi => {
+                    for (sum, w) in weight_sum.iter_mut().zip([weight.x, weight.y, weight.z]) {
+                        *sum += w as f64;
+                    }
+                    weight - s.f / s.pdf
+                }
+                (None, None) => Rgb::ZERO,
+                (s, w) => {
+                    mismatches.push(format!(
+                        "u {u:?}: sample gives {:?}, sample_weight {w:?}",
+                        s.map(|s| s.wi)
+                    ));
+                    Rgb::ZERO
+                }
+            }
+        });
+        (difference, weight_sum.map(|s| s / DRAWS as f64), mismatches)
+    });
+    let mut failures = Vec::new();
+    for ((i, c), (difference, mean_weight, mismatches)) in jobs.iter().zip(&results) {
+        let (th, h) = CONFIGS[*c];
+        let name = &all[*i].name;
+        println!(
+            "{name:<32} θ_o={th:>5}° h={h:>4}: mean weight {:.5}, mean difference {:.2e} ± {:.2e}",
+            mean_weight[0], difference.mean[0], difference.se[0]
+        );
+        assert_none(
+            name,
+            mismatches,
+            "draws differ between sample and sample_weight",
+            3,
+        );
+        for (k, weight) in mean_weight.iter().enumerate() {
+            let (mean, se) = (difference.mean[k], difference.se[k]);
+            // A floor of 10⁻⁶ relative: f/pdf rounds where the lobe weight is exact.
+            if mean.abs() > 5.0 * se + 1e-6 * weight {
+                failures.push(format!(
+                    "{name} θ_o {th}° h {h} channel {k}: sample_weight's mean {weight:.6} \
+                     differs from f/pdf's by {mean:.2e} ± {se:.2e} (more than 5 s.e.)"
+                ));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
 /// A smooth positive radiance in the fiber frame.
 fn test_radiance(w: Vec3) -> f32 {
     1.0 + w.z * w.z + 0.5 * w.x
@@ -405,8 +477,8 @@ fn importance_and_uniform_estimates_agree() {
         let sampled = refine(0.0017, |level| {
             let n = 300_000 << (2 * level);
             mc_mean(n, seed(5, &all[i].name, th, h + level as f32), |rng| {
-                b.sample(wo, h, rng.next_4d())
-                    .map_or(Rgb::ZERO, |s| s.f * (test_radiance(s.wi) / s.pdf))
+                b.sample_weight(wo, h, rng.next_4d())
+                    .map_or(Rgb::ZERO, |(wi, weight)| weight * test_radiance(wi))
             })
         });
         (uniform, sampled)

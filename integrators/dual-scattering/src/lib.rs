@@ -402,10 +402,12 @@ impl<D: DirectionSampling> Integrator for DualScattering<D> {
             if let Some((light, select_pdf)) = scene.lights.choose_non_delta(u_select) {
                 radiance += direct_light(scene, &sp, light, u_light, select_pdf, throughput);
             }
-            let Some((next, pdf)) = scatter(&sp, sampler, &mut throughput) else {
+            // Every light with area is sampled directly here, so an escaping ray is weighed.
+            let density_needed = scene.lights.non_delta().len() > 0;
+            let Some((next, pdf)) = scatter(&sp, sampler, &mut throughput, density_needed) else {
                 break;
             };
-            scatter_pdf = Some(pdf);
+            scatter_pdf = pdf;
             ray = next;
         }
         radiance

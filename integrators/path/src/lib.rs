@@ -76,7 +76,8 @@ impl Integrator for PathTracer {
         let mut radiance = Rgb::ZERO;
         let mut throughput = Rgb::ONE;
         let mut ray = *camera_ray;
-        // Density of the scattering sample that produced `ray`; None for the camera ray.
+        // Density of the scattering sample that produced `ray`, when its MIS weight needs it;
+        // None for the camera ray.
         let mut scatter_pdf: Option<f32> = None;
 
         for depth in 0.. {
@@ -99,10 +100,11 @@ impl Integrator for PathTracer {
                 radiance += direct_light(scene, &sp, light, u_light, select_pdf, throughput);
             }
 
-            let Some((next, pdf)) = scatter(&sp, sampler, &mut throughput) else {
+            let density_needed = scene.lights.weighs_escapes();
+            let Some((next, pdf)) = scatter(&sp, sampler, &mut throughput, density_needed) else {
                 break;
             };
-            scatter_pdf = Some(pdf);
+            scatter_pdf = pdf;
             ray = next;
 
             if roulette(depth, self.settings.rr_depth, &mut throughput, sampler).is_none() {

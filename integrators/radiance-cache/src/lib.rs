@@ -356,15 +356,15 @@ fn training_path(
     let mut throughput = Rgb::ONE;
     // What arrives at the last vertex from its continuation when that escapes.
     let mut escaped = Rgb::ZERO;
-    // Density of the last continuation, for the MIS weight of the light its ray finds.
-    let mut scatter_pdf = 0.0;
+    // Density of the last continuation, for the MIS weight of the light its ray finds (when
+    // that weight needs it).
+    let mut scatter_pdf = None;
     for depth in 0..settings.max_depth {
         let Some(hit) = scene.intersect(&ray) else {
             if !vertices.is_empty() {
                 for light in scene.lights.infinite() {
                     let select_pdf = scene.lights.select_pdf_of(light);
-                    escaped +=
-                        escaped_light(light, ray.dir, Some(scatter_pdf), select_pdf, Rgb::ONE);
+                    escaped += escaped_light(light, ray.dir, scatter_pdf, select_pdf, Rgb::ONE);
                 }
             }
             break;
@@ -385,7 +385,8 @@ fn training_path(
             weight: Rgb::ZERO,
         };
         let mut weight = Rgb::ONE;
-        let Some((next, pdf)) = scatter(&sp, sampler, &mut weight) else {
+        let density_needed = scene.lights.weighs_escapes();
+        let Some((next, pdf)) = scatter(&sp, sampler, &mut weight, density_needed) else {
             vertices.push(vertex);
             break;
         };
@@ -444,10 +445,11 @@ fn trace(
         if let Some((light, select_pdf)) = scene.lights.choose(u_select) {
             radiance += direct_light(scene, &sp, light, u_light, select_pdf, throughput);
         }
-        let Some((next, pdf)) = scatter(&sp, sampler, &mut throughput) else {
+        let density_needed = scene.lights.weighs_escapes();
+        let Some((next, pdf)) = scatter(&sp, sampler, &mut throughput, density_needed) else {
             break;
         };
-        scatter_pdf = Some(pdf);
+        scatter_pdf = pdf;
         ray = next;
         if roulette(depth, settings.rr_depth, &mut throughput, sampler).is_none() {
             break;
