@@ -35,6 +35,7 @@ fi
 # free for maturin), two at a time, then the doc tests; this script's arguments go to every
 # test binary (a name filter, --ignored, ...).
 artifacts="$target_dir/test-binaries.json"
+mkdir -p "$target_dir"
 cargo test --workspace --release --no-run --message-format=json-render-diagnostics >"$artifacts"
 .ci/run-tests "$artifacts" "$@" &
 tests=$!
