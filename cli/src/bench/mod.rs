@@ -297,6 +297,10 @@ fn bench_bcsdfs(table: &mut Table, calls: usize) -> Result<()> {
         };
         let eval = time(&|i| b.eval(dirs[i].0, dirs[i].1, hs[i]).x);
         let sample = time(&|i| b.sample(dirs[i].0, hs[i], us[i]).map_or(0.0, |s| s.pdf));
+        let sample_weight = time(&|i| {
+            b.sample_weight(dirs[i].0, hs[i], us[i])
+                .map_or(0.0, |(_, w)| w.x)
+        });
         let pdf = time(&|i| b.pdf(dirs[i].0, dirs[i].1, hs[i]));
         let eval_pdf = time(&|i| {
             let (f, pdf) = b.eval_pdf(dirs[i].0, dirs[i].1, hs[i]);
@@ -305,6 +309,7 @@ fn bench_bcsdfs(table: &mut Table, calls: usize) -> Result<()> {
         for (metric, ns) in [
             ("eval", eval),
             ("sample", sample),
+            ("sample_weight", sample_weight),
             ("pdf", pdf),
             ("eval_pdf", eval_pdf),
         ] {
