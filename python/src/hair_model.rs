@@ -318,4 +318,35 @@ impl HairModel {
             number_array(py, pdf, batched),
         ))
     }
+
+    /// The directions `sample` draws from the same numbers `u`, with the Monte Carlo weight a
+    /// path tracer uses where it needs no density: `(wi, weight)`, (N, 3) each. Its mean equals
+    /// that of `f / pdf` but not row by row (Chiang: the chosen lobe's `A_p / P(p)`). Rows
+    /// where nothing is drawn are zeros.
+    fn sample_weight<'py>(
+        &self,
+        py: Python<'py>,
+        wo: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
+        h: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
+        u: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let (wo, h, u) = (directions("wo", &wo)?, offsets(&h)?, randoms(&u)?);
+        let n = row_count(&[
+            ("wo", wo.batched, wo.values.len()),
+            ("h", h.batched, h.values.len()),
+            ("u", u.batched, u.values.len()),
+        ])?;
+        let bcsdf = self.bcsdf.as_ref();
+        let samples = py.detach(|| {
+            map_rows(n.unwrap_or(1), |i| {
+                bcsdf
+                    .sample_weight(wo.get(i), h.get(i), u.get(i))
+                    .unwrap_or((Vec3::ZERO, Vec3::ZERO))
+            })
+        });
+        let batched = n.is_some();
+        let wi = samples.iter().map(|s| s.0).collect();
+        let weight = samples.iter().map(|s| s.1).collect();
+        Ok((rgb_array(py, wi, batched), rgb_array(py, weight, batched)))
+    }
 }

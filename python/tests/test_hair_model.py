@@ -87,6 +87,21 @@ def test_samples_agree_with_eval_and_pdf():
     np.testing.assert_allclose(m.eval(wo[drawn], wi[drawn], h[drawn]), f[drawn], rtol=2e-3, atol=1e-7)
 
 
+def test_sample_weight_draws_the_same_directions_with_the_same_mean():
+    m = tress.HairModel(BROWN)
+    rng = np.random.default_rng(12)
+    n = 100_000
+    wo, h, u = direction(np.radians(20)), rng.uniform(-1, 1, n), rng.uniform(0, 1, (n, 4))
+    wi, f, pdf = m.sample(wo, h, u)
+    wi_weighted, weight = m.sample_weight(wo, h, u)
+    np.testing.assert_array_equal(wi_weighted, wi)
+    # Paired: the difference of the two weights has far less noise than either.
+    ratio = np.where(pdf[:, None] > 0, f / np.maximum(pdf, 1e-30)[:, None], 0.0)
+    d = weight.astype(np.float64) - ratio
+    assert (np.abs(d.mean(axis=0)) < 5 * d.std(axis=0) / np.sqrt(n) + 1e-6).all()
+    assert not np.allclose(weight, ratio)  # Chiang's lobe weight is not f / pdf row by row
+
+
 def furnace(model, theta_o, n, seed):
     """Mean and standard error of f/pdf over n importance samples with h uniform: the albedo
     (eval includes cos θ_i)."""

@@ -55,6 +55,9 @@ class HairModel:
     ) -> tuple[
         npt.NDArray[np.float32], npt.NDArray[np.float32], Union[npt.NDArray[np.float32], float]
     ]: ...
+    def sample_weight(
+        self, wo: _Floats, h: _Floats, u: _Floats
+    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
 
 def run_study(
     path: _Path,
