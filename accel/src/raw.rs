@@ -139,10 +139,10 @@ impl EmbreeAccel {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_util::{line, rng_dir};
     use crate::{HairOptions, ProceduralHair, SceneBuilder};
-    use tress_core::math::{Vec2, Vec3};
+    use tress_core::math::Vec3;
     use tress_core::rng::Pcg32;
-    use tress_core::sampling::sample_uniform_sphere;
     use tress_core::{Accel, HitKind};
 
     fn ball() -> EmbreeAccel {
@@ -163,23 +163,19 @@ mod tests {
             .unwrap()
     }
 
-    fn dir(rng: &mut Pcg32) -> Vec3 {
-        sample_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()))
-    }
-
     /// Rays from outside toward the ball, and rays leaving the fibers they hit.
     fn rays(accel: &EmbreeAccel) -> Vec<RawRay> {
         let mut rng = Pcg32::new(3, 0);
         let mut out = Vec::new();
         for _ in 0..400 {
-            let o = 3.0 * dir(&mut rng);
-            let target = 0.8 * dir(&mut rng);
+            let o = 3.0 * rng_dir(&mut rng);
+            let target = 0.8 * rng_dir(&mut rng);
             let ray = Ray::new(o, (target - o).normalize());
             out.push(RawRay { ray, t_near: 0.0 });
             if let Some(hit) = accel.intersect(&ray) {
                 assert!(matches!(hit.kind, HitKind::Fiber { .. }));
                 out.push(RawRay {
-                    ray: Ray::leaving(hit.p, dir(&mut rng), hit.prim),
+                    ray: Ray::leaving(hit.p, rng_dir(&mut rng), hit.prim),
                     t_near: 0.0,
                 });
             }
@@ -276,11 +272,8 @@ mod tests {
     #[test]
     fn a_ray_leaves_a_straight_fiber_at_its_far_wall() {
         let (r, len) = (0.05, 1.0);
-        let mut hair = crate::HairGeometry::empty("line");
-        let points: Vec<Vec3> = (0..=4)
-            .map(|i| Vec3::new(len * i as f32, 0.0, 0.0))
-            .collect();
-        hair.push_strand(&points, r);
+        let hair =
+            crate::test_util::hair(&[line(Vec3::ZERO, Vec3::new(4.0 * len, 0.0, 0.0), 5)], r);
         let options = HairOptions {
             curve: crate::CurveShape::Round,
             ..Default::default()

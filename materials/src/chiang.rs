@@ -204,6 +204,12 @@ struct Geometry {
 }
 
 impl Geometry {
+    /// A_p of lobe `p` as RGB.
+    fn attenuation(&self, p: usize) -> Rgb {
+        let [r, g, b] = self.ap.map(|c| c.as_array()[p]);
+        Rgb::new(r, g, b)
+    }
+
     /// A_p as RGB, p = 0..3.
     fn attenuations(&self) -> [Rgb; 4] {
         let [r, g, b] = self.ap.map(f32x4::to_array);
@@ -475,8 +481,7 @@ impl Bcsdf for Chiang {
     // values at the new direction are not needed.
     fn sample_weight(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<(Vec3, Rgb)> {
         let Draw { g, lobe, wi, .. } = self.draw(wo, h, u)?;
-        let [r, gr, b] = g.ap.map(|c| c.as_array()[lobe]);
-        let weight = Rgb::new(r, gr, b) / g.lobe_pdf.as_array()[lobe];
+        let weight = g.attenuation(lobe) / g.lobe_pdf.as_array()[lobe];
         weight.is_finite().then_some((wi, weight))
     }
 
@@ -498,7 +503,7 @@ impl Bcsdf for Chiang {
         }
         let g = self.geometry(wo, h);
         let (sin_i, cos_i, phi) = self.angles_i(&g, wi);
-        g.attenuations()[p] * self.lobes(&g, sin_i, cos_i, phi).as_array()[p]
+        g.attenuation(p) * self.lobes(&g, sin_i, cos_i, phi).as_array()[p]
     }
 
     // The geometry (Fresnel, attenuations, exit azimuths) once for all directions, and the

@@ -378,6 +378,16 @@ fn sample_returns_eval_and_pdf() {
     }
 }
 
+/// (θ_o in degrees, h) at which the integral tests compare two estimators.
+const CONFIGS: [(f32, f32); 3] = [(-40.0, 0.6), (10.0, -0.3), (70.0, 0.9)];
+
+/// (instance, index into `CONFIGS`) for every instance and configuration.
+fn config_jobs(all: &[Instance]) -> Vec<(usize, usize)> {
+    (0..all.len())
+        .flat_map(|i| (0..CONFIGS.len()).map(move |c| (i, c)))
+        .collect()
+}
+
 /// `sample_weight` draws the direction `sample` draws from the same numbers, and its weight has
 /// the expectation of `f / pdf` in every channel: over one set of draws the mean of the two
 /// weights' difference is zero within 5 standard errors and rounding (paired: the difference's
@@ -385,12 +395,9 @@ fn sample_returns_eval_and_pdf() {
 /// shows).
 #[test]
 fn sample_weight_draws_samples_direction_with_the_same_mean() {
-    const CONFIGS: [(f32, f32); 3] = [(-40.0, 0.6), (10.0, -0.3), (70.0, 0.9)];
     const DRAWS: usize = 100_000;
     let all = instances();
-    let jobs: Vec<(usize, usize)> = (0..all.len())
-        .flat_map(|i| (0..CONFIGS.len()).map(move |c| (i, c)))
-        .collect();
+    let jobs = config_jobs(&all);
     let results = par_map(&jobs, |&(i, c)| {
         let (th, h) = CONFIGS[c];
         let b = &all[i].bcsdf;
@@ -455,11 +462,8 @@ fn test_radiance(w: Vec3) -> f32 {
 
 #[test]
 fn importance_and_uniform_estimates_agree() {
-    const CONFIGS: [(f32, f32); 3] = [(-40.0, 0.6), (10.0, -0.3), (70.0, 0.9)];
     let all = instances();
-    let jobs: Vec<(usize, usize)> = (0..all.len())
-        .flat_map(|i| (0..CONFIGS.len()).map(move |c| (i, c)))
-        .collect();
+    let jobs = config_jobs(&all);
     let est = par_map(&jobs, |&(i, c)| {
         let (th, h) = CONFIGS[c];
         let b = &all[i].bcsdf;

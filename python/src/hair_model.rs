@@ -164,6 +164,23 @@ fn direction_pairs(
     Ok((wo, wi, h, n))
 }
 
+/// The arguments of `sample` and `sample_weight` (`wo`, `h`, `u`) and their common row count.
+type SampleInputs = (Rows<Vec3>, Rows<f32>, Rows<[f32; 4]>, Option<usize>);
+
+fn sample_inputs(
+    wo: &PyArrayLikeDyn<'_, f32, AllowTypeChange>,
+    h: &PyArrayLikeDyn<'_, f32, AllowTypeChange>,
+    u: &PyArrayLikeDyn<'_, f32, AllowTypeChange>,
+) -> PyResult<SampleInputs> {
+    let (wo, h, u) = (directions("wo", wo)?, offsets(h)?, randoms(u)?);
+    let n = row_count(&[
+        ("wo", wo.batched, wo.values.len()),
+        ("h", h.batched, h.values.len()),
+        ("u", u.batched, u.values.len()),
+    ])?;
+    Ok((wo, h, u, n))
+}
+
 /// The common row count of the arguments, `None` when none is batched.
 fn row_count(args: &[(&str, bool, usize)]) -> PyResult<Option<usize>> {
     let mut count: Option<(&str, usize)> = None;
@@ -293,12 +310,7 @@ impl HairModel {
         h: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
         u: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-        let (wo, h, u) = (directions("wo", &wo)?, offsets(&h)?, randoms(&u)?);
-        let n = row_count(&[
-            ("wo", wo.batched, wo.values.len()),
-            ("h", h.batched, h.values.len()),
-            ("u", u.batched, u.values.len()),
-        ])?;
+        let (wo, h, u, n) = sample_inputs(&wo, &h, &u)?;
         let bcsdf = self.bcsdf.as_ref();
         let samples = py.detach(|| {
             map_rows(n.unwrap_or(1), |i| {
@@ -330,12 +342,7 @@ impl HairModel {
         h: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
         u: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-        let (wo, h, u) = (directions("wo", &wo)?, offsets(&h)?, randoms(&u)?);
-        let n = row_count(&[
-            ("wo", wo.batched, wo.values.len()),
-            ("h", h.batched, h.values.len()),
-            ("u", u.batched, u.values.len()),
-        ])?;
+        let (wo, h, u, n) = sample_inputs(&wo, &h, &u)?;
         let bcsdf = self.bcsdf.as_ref();
         let samples = py.detach(|| {
             map_rows(n.unwrap_or(1), |i| {
