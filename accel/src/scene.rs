@@ -305,6 +305,11 @@ impl SceneBuilder {
         self
     }
 
+    /// The limits the hair it adds is held to ([`SceneBuilder::with_limits`]).
+    pub fn limits(&self) -> &Limits {
+        &self.limits
+    }
+
     /// A scene without filter support, for measuring Embree's own speed (`tress bench`): its
     /// queries ignore `ray.exclude`, so a ray leaving a fiber may hit that fiber again, and
     /// [`EmbreeAccel::count_fibers_crossed`] sees only the first fiber. Not for rendering.

@@ -10,7 +10,6 @@ use std::path::{Path, PathBuf};
 use tress_accel::{
     EmbreeAccel, HairAttribute, HairOptions, HairSource, SceneBuilder, Transform, TriangleMesh,
 };
-use tress_core::limits::Limits;
 use tress_core::Material;
 use tress_materials::pigment::Pigment;
 use tress_materials::strand_variation::{quantise_variants, StrandVariation};
@@ -67,9 +66,8 @@ impl ObjectDesc {
     }
 }
 
-/// Builds the accelerator for the scene's objects with `builder` (which holds the limits the
-/// hair is built within; `limits` are the same, for loading files); returns it with a summary
-/// (`tress info`).
+/// Builds the accelerator for the scene's objects with `builder`, whose limits the hair is
+/// loaded and built within; returns it with a summary (`tress info`).
 /// `materials` holds the built materials of `descriptions` (in `material_index` order); hair
 /// objects with a `variation` append their variants to it.
 pub fn build_accel(
@@ -79,8 +77,8 @@ pub fn build_accel(
     material_index: &BTreeMap<String, u32>,
     materials: &mut Vec<Material>,
     mut builder: SceneBuilder,
-    limits: &Limits,
 ) -> Result<(EmbreeAccel, String)> {
+    let limits = *builder.limits();
     let here = |i: usize, what: String| anyhow!("{}: objects[{i}]: {what}", scene_path.display());
     let mut notes = Vec::new();
     for (i, object) in objects.iter().enumerate() {
@@ -113,7 +111,7 @@ pub fn build_accel(
                 if let Some(p) = source.path_mut() {
                     *p = resolve(scene_path, p);
                 }
-                let hair = source.load(limits).map_err(|e| here(i, e.to_string()))?;
+                let hair = source.load(&limits).map_err(|e| here(i, e.to_string()))?;
                 match variation {
                     None => builder
                         .add_hair(&hair, options, material)

@@ -240,7 +240,6 @@ pub fn build_plain_accel(
         &material_index,
         &mut materials,
         builder,
-        limits,
     )?;
     Ok(accel)
 }
@@ -321,7 +320,6 @@ pub fn build_wrapped(
         &material_index,
         &mut materials,
         SceneBuilder::new()?.with_limits(*limits),
-        limits,
     )?;
     let geometry_time = t1.elapsed();
     let summary = format!(

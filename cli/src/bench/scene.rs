@@ -11,7 +11,7 @@ use anyhow::{anyhow, Result};
 use rayon::ThreadPool;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use tress_core::prepare::Preparation;
 use tress_scene::scene_desc;
 
@@ -37,11 +37,11 @@ pub(super) fn bench_scene(
 
     eprintln!("bench: {name}: building the scene and its twin without filters");
     let recording = Arc::new(AtomicBool::new(false));
-    let tress_accel = Mutex::new(None);
+    let mut tress_accel = None;
     let built = big_pool.install(|| {
         scene_desc::build_wrapped(&desc, path, &limits, |accel| {
             let accel = Arc::new(accel);
-            *tress_accel.lock().expect("not poisoned") = Some(Arc::clone(&accel));
+            tress_accel = Some(Arc::clone(&accel));
             Box::new(CountingAccel {
                 inner: accel,
                 record: Arc::clone(&recording),
@@ -49,10 +49,7 @@ pub(super) fn bench_scene(
             })
         })
     })?;
-    let tress = tress_accel
-        .into_inner()
-        .expect("not poisoned")
-        .expect("the scene's accelerator");
+    let tress = tress_accel.expect("the scene's accelerator");
     let plain = big_pool.install(|| scene_desc::build_plain_accel(&desc, path, &limits))?;
     let accels = Accels { tress, plain };
 
