@@ -283,10 +283,15 @@ pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
     // as render time.
     let t_prepare = Instant::now();
     let prepare_bar = progress_bar(1000, verbose, "precomputing ");
+    let samples = args.spp_offset..args.spp_offset + desc.film.spp as u64;
     let prepared = pool.install(|| {
-        integrator.for_film(&built.scene, &desc.film, &|done| {
-            prepare_bar.set_position((done * 1000.0) as u64)
-        })
+        integrator.for_film(
+            &built.scene,
+            &desc.film,
+            samples,
+            interrupt.cancel_flag(),
+            &|done| prepare_bar.set_position((done * 1000.0) as u64),
+        )
     });
     prepare_bar.finish_and_clear();
     let prepare_time = t_prepare.elapsed();

@@ -8,6 +8,8 @@ use crate::rng::Sampler;
 use crate::sampling::power_heuristic;
 use crate::scene::Scene;
 use crate::shading::ShadingPoint;
+use std::ops::Range;
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 /// Estimates the radiance arriving along a camera ray. The render loop in [`crate::render`] owns
@@ -16,19 +18,32 @@ pub trait Integrator: Send + Sync + std::fmt::Debug {
     /// One sample of the radiance arriving at the camera along `ray` (travelling away from it).
     fn li(&self, ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb;
 
+    /// [`Integrator::li`] for sample number `sample_index` of its pixel, which the render loop
+    /// calls: integrators whose estimator changes as the samples accumulate (a cache refined
+    /// for later samples) override it. It must depend on the index alone, never on which
+    /// samples a pass renders.
+    fn li_sample(&self, ray: &Ray, scene: &Scene, sampler: &mut Sampler, sample_index: u64) -> Rgb {
+        let _ = sample_index;
+        self.li(ray, scene, sampler)
+    }
+
     /// Precomputation that depends on the film as well as the scene (a radiance cache trained
     /// on paths through the film's own pixels), reporting the fraction done to `progress`. The
     /// render loop calls it before its first sample, so its cost is render time, and renders
-    /// with what it returns; `None` renders with `self`. It may depend on the film's size and
-    /// seed only, never on its crop, spp or sample range: the tiles and later samples of one
-    /// image must all render alike.
+    /// with what it returns; `None` renders with `self`, and so does a precomputation stopped
+    /// by `cancel` (the render loop then stops before its first sample). What it builds may
+    /// depend on the film's size and seed and on the sample indices `samples` to be rendered,
+    /// never on the film's crop: the tiles and passes of one image must render each sample
+    /// alike.
     fn for_film(
         &self,
         scene: &Scene,
         film: &FilmSettings,
+        samples: Range<u64>,
+        cancel: &AtomicBool,
         progress: &(dyn Fn(f64) + Sync),
     ) -> Option<FilmIntegrator> {
-        let _ = (scene, film, progress);
+        let _ = (scene, film, samples, cancel, progress);
         None
     }
 }
@@ -143,25 +158,68 @@ pub fn direct_light(
     select_pdf: f32,
     throughput: Rgb,
 ) -> Rgb {
-    let Some(ls) = light.sample_li(sp.p, u) else {
-        return Rgb::ZERO;
-    };
+    direct_light_sample(scene, sp, light, u, select_pdf, |_, scatter_pdf| {
+        scatter_pdf
+    })
+    .map_or(Rgb::ZERO, |d| d.contribution(throughput))
+}
+
+/// One next-event estimate at a shading point, before it is weighed by the path's throughput.
+#[derive(Clone, Copy, Debug)]
+pub struct DirectSample {
+    /// Unit direction toward the light.
+    pub wi: Vec3,
+    /// The scattering value toward `wi` (cosine included).
+    pub f: Rgb,
+    /// Radiance arriving along `wi`.
+    pub radiance: Rgb,
+    /// MIS weight over the light sample's density (selection included): `radiance · scale`
+    /// estimates the incident radiance's integral.
+    pub scale: f32,
+}
+
+impl DirectSample {
+    /// What the estimate adds to a path of weight `throughput`.
+    pub fn contribution(&self, throughput: Rgb) -> Rgb {
+        throughput * self.f * self.radiance * self.scale
+    }
+}
+
+/// [`direct_light`]'s estimate before the throughput, for integrators that sample scattering
+/// directions with a density of their own: `scatter_density(wi, pdf)` maps the scattering
+/// function's density `pdf` of `wi` to the density with which the integrator would have
+/// sampled `wi`, against which the light sample is MIS-weighted. `None` when the light is
+/// blocked or sends nothing.
+pub fn direct_light_sample(
+    scene: &Scene,
+    sp: &ShadingPoint,
+    light: &Light,
+    u: Vec2,
+    select_pdf: f32,
+    scatter_density: impl Fn(Vec3, f32) -> f32,
+) -> Option<DirectSample> {
+    let ls = light.sample_li(sp.p, u)?;
     // The scattering pdf comes with f at little extra cost; it is only used when the shadow
     // ray is unoccluded.
     let (f, scatter_pdf) = sp.eval_pdf(ls.wi);
     if !(ls.pdf > 0.0 && f != Rgb::ZERO && ls.radiance != Rgb::ZERO) {
-        return Rgb::ZERO;
+        return None;
     }
     if scene.occluded(&sp.spawn(ls.wi).with_t_max(ls.distance * (1.0 - 1e-4))) {
-        return Rgb::ZERO;
+        return None;
     }
     let light_pdf = select_pdf * ls.pdf;
     let weight = if ls.is_delta {
         1.0
     } else {
-        power_heuristic(light_pdf, scatter_pdf)
+        power_heuristic(light_pdf, scatter_density(ls.wi, scatter_pdf))
     };
-    throughput * f * ls.radiance * (weight / light_pdf)
+    Some(DirectSample {
+        wi: ls.wi,
+        f,
+        radiance: ls.radiance,
+        scale: weight / light_pdf,
+    })
 }
 
 /// What the light at infinity `light` adds to a path of weight `throughput` that escaped along

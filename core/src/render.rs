@@ -658,7 +658,7 @@ pub fn render_outputs(
     progress: &(dyn Fn(u64) + Sync),
 ) -> Option<SampleRender> {
     let start = Instant::now();
-    let prepared = integrator.for_film(scene, film, &|_| {});
+    let prepared = integrator.for_film(scene, film, samples.clone(), cancel, &|_| {});
     let integrator = prepared
         .as_ref()
         .map_or(integrator, |p| p.integrator.as_ref());
@@ -791,7 +791,7 @@ impl TileJob<'_> {
                         // Alpha needs no hit record: an any-hit query stops at the first fiber.
                         record.hit = scene.occluded(&ray);
                     }
-                    let l = self.integrator.li(&ray, scene, &mut sampler);
+                    let l = self.integrator.li_sample(&ray, scene, &mut sampler, s);
                     if l.is_finite() {
                         record.radiance = [l.x as f64, l.y as f64, l.z as f64];
                     } else {

@@ -99,6 +99,9 @@ integrators! {
     /// Path tracing that gathers its neighbours' light from a radiance cache trained on the
     /// film's own paths.
     RadianceCache => tress_radiance_cache::RadianceCacheIntegrator,
+    /// Path tracing whose continuations are drawn from a mixture of the light learned from
+    /// the film's own training paths and the fibers' own sampling: unbiased.
+    Guided => tress_guided::GuidedPathTracer,
 }
 
 #[cfg(test)]

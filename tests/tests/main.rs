@@ -6,6 +6,7 @@ mod docs_links;
 mod dual_scattering;
 mod furnace;
 mod groom_inputs;
+mod guided;
 mod library_sources;
 mod outputs;
 mod radiance_cache;

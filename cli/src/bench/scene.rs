@@ -59,7 +59,10 @@ pub(super) fn bench_scene(
         .map_err(|e| anyhow!("{}: integrator: {e:#}", path.display()))?;
     // A per-film precomputation (a radiance cache) is made once, untimed: the rows measure
     // the render that follows it.
-    let prepared = big_pool.install(|| integrator.for_film(&built.scene, &desc.film, &|_| {}));
+    let never = std::sync::atomic::AtomicBool::new(false);
+    let samples = 0..desc.film.spp as u64;
+    let prepared = big_pool
+        .install(|| integrator.for_film(&built.scene, &desc.film, samples, &never, &|_| {}));
     let integrator = prepared
         .as_ref()
         .map_or(integrator.as_ref(), |p| p.integrator.as_ref());

@@ -9,77 +9,8 @@
 //! where the training paths went often (the hair near its surface) and coarse ones elsewhere.
 
 use rustc_hash::FxHashMap;
-use tress_core::math::{Aabb, Rgb, Vec3};
-
-/// How cells and directions are quantised.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Lattice {
-    origin: Vec3,
-    /// Side of a finest-level cell.
-    cell: f32,
-    /// Cells per side at the finest level, as a power of two.
-    finest: u32,
-    /// Levels, finest first.
-    levels: u32,
-    /// Direction bins per side of the octahedral map.
-    bins: u32,
-}
-
-impl Lattice {
-    /// A lattice over `bounds` with `2^finest` cells along their longest side.
-    pub(crate) fn new(bounds: Aabb, finest: u32, levels: u32, bins: u32) -> Self {
-        let extent = (bounds.max - bounds.min)
-            .max_element()
-            .max(f32::MIN_POSITIVE);
-        Lattice {
-            origin: bounds.min,
-            cell: extent / (1u32 << finest) as f32,
-            finest,
-            levels,
-            bins,
-        }
-    }
-
-    /// `p` moved into the lattice's box.
-    fn clamp(&self, p: Vec3) -> Vec3 {
-        let extent = self.cell * (1u32 << self.finest) as f32;
-        p.clamp(self.origin, self.origin + Vec3::splat(extent))
-    }
-
-    /// The finest level's cell coordinates of `p` (clamped to the lattice) and the direction
-    /// bin of `dir`.
-    fn locate(&self, p: Vec3, dir: Vec3) -> ([u32; 3], u32) {
-        let max = ((1u32 << self.finest) - 1) as f32;
-        let c = ((p - self.origin) / self.cell).clamp(Vec3::ZERO, Vec3::splat(max));
-        (
-            [c.x as u32, c.y as u32, c.z as u32],
-            self.direction_bin(dir),
-        )
-    }
-
-    /// Octahedral map of a unit direction onto [0, 1)², quantised to `bins × bins`.
-    fn direction_bin(&self, d: Vec3) -> u32 {
-        let l1 = d.x.abs() + d.y.abs() + d.z.abs();
-        let (mut u, mut v) = (d.x / l1, d.y / l1);
-        if d.z < 0.0 {
-            (u, v) = ((1.0 - v.abs()) * u.signum(), (1.0 - u.abs()) * v.signum());
-        }
-        let n = self.bins as f32;
-        let q = |x: f32| (((x * 0.5 + 0.5) * n) as u32).min(self.bins - 1);
-        q(u) * self.bins + q(v)
-    }
-
-    /// The key of level `level`'s cell containing finest-level cell `c`, bin `bin`.
-    fn key(&self, level: u32, c: [u32; 3], bin: u32) -> u64 {
-        self.key_at_level(level, c.map(|v| v >> level), bin)
-    }
-
-    /// The key of level `level`'s cell `c` (in that level's cells), bin `bin`.
-    fn key_at_level(&self, level: u32, c: [u32; 3], bin: u32) -> u64 {
-        let [x, y, z] = c.map(u64::from);
-        (level as u64) << 60 | (bin as u64) << 48 | z << 32 | y << 16 | x
-    }
-}
+use tress_core::math::{Rgb, Vec3};
+use tress_learned_light::Lattice;
 
 /// Sums of records.
 #[derive(Clone, Copy, Debug, Default)]
@@ -152,16 +83,14 @@ impl RadianceCache {
     /// it averages at least `min_records` records.
     pub(crate) fn new(lattice: Lattice, records: Records, min_records: u32) -> Self {
         let mut levels: Vec<FxHashMap<u64, Sums>> = vec![records.cells];
-        for level in 1..lattice.levels {
+        for level in 1..lattice.levels() {
             let mut coarser = FxHashMap::default();
             let finer = &levels[level as usize - 1];
             let mut keys: Vec<_> = finer.keys().copied().collect();
             keys.sort_unstable();
             for key in keys {
                 let sums = &finer[&key];
-                let bin = ((key >> 48) & 0xfff) as u32;
-                let c = [key & 0xffff, (key >> 16) & 0xffff, (key >> 32) & 0xffff]
-                    .map(|v| (v as u32) << (level - 1));
+                let (_, c, bin) = Lattice::split_key(key);
                 coarser
                     .entry(lattice.key(level, c, bin))
                     .or_insert_with(Sums::default)
@@ -200,14 +129,14 @@ impl RadianceCache {
     pub(crate) fn lookup(&self, p: Vec3, dir: Vec3) -> Option<Rgb> {
         let p = self.lattice.clamp(p);
         let (c, bin) = self.lattice.locate(p, dir);
-        let level = (0..self.lattice.levels).find(|&level| {
+        let level = (0..self.lattice.levels()).find(|&level| {
             self.cells
                 .get(&self.lattice.key(level, c, bin))
                 .is_some_and(|cell| cell.count >= self.min_records)
         })?;
         // Position in cells of this level, relative to the centres of the cells below it.
-        let side = self.lattice.cell * (1u32 << level) as f32;
-        let u = (p - self.lattice.origin) / side - Vec3::splat(0.5);
+        let side = self.lattice.cell_side(level);
+        let u = (p - self.lattice.origin()) / side - Vec3::splat(0.5);
         let base = u.floor();
         let t = u - base;
         let mut sum = Rgb::ZERO;
@@ -219,7 +148,7 @@ impl RadianceCache {
                 (corner >> 2) as f32,
             );
             let at = base + offset;
-            let cells_per_side = (1u32 << (self.lattice.finest - level)) as f32;
+            let cells_per_side = (1u32 << (self.lattice.finest() - level)) as f32;
             if at.min_element() < 0.0 || at.max_element() >= cells_per_side {
                 continue;
             }
@@ -243,10 +172,10 @@ impl RadianceCache {
              longest side, {} direction bins)",
             self.records,
             self.cells.len(),
-            self.lattice.levels,
-            1u32 << self.lattice.finest,
-            1u32 << (self.lattice.finest + 1 - self.lattice.levels),
-            self.lattice.bins * self.lattice.bins
+            self.lattice.levels(),
+            1u32 << self.lattice.finest(),
+            1u32 << (self.lattice.finest() + 1 - self.lattice.levels()),
+            self.lattice.bins() * self.lattice.bins()
         )
     }
 }
@@ -254,39 +183,12 @@ impl RadianceCache {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use tress_core::math::Aabb;
 
     fn unit_box() -> Aabb {
         Aabb {
             min: Vec3::ZERO,
             max: Vec3::ONE,
-        }
-    }
-
-    /// Directions spread over the sphere (a Fibonacci lattice).
-    fn directions(n: usize) -> impl Iterator<Item = Vec3> {
-        (0..n).map(move |i| {
-            let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
-            let phi = i as f32 * 2.399_963;
-            let r = (1.0 - z * z).sqrt();
-            Vec3::new(r * phi.cos(), r * phi.sin(), z)
-        })
-    }
-
-    #[test]
-    fn direction_bins_cover_the_sphere_evenly() {
-        let lattice = Lattice::new(unit_box(), 3, 1, 4);
-        let mut counts = [0u32; 16];
-        let n = 16_000;
-        for d in directions(n) {
-            counts[lattice.direction_bin(d) as usize] += 1;
-        }
-        // The octahedral map's bins are not equal-area, but none is empty or more than three
-        // times another.
-        let (min, max) = (counts.iter().min().unwrap(), counts.iter().max().unwrap());
-        assert!(*min > 0 && *max < 3 * min, "{counts:?}");
-        // Opposite directions never share a bin.
-        for d in directions(500) {
-            assert_ne!(lattice.direction_bin(d), lattice.direction_bin(-d), "{d}");
         }
     }
 

@@ -1,7 +1,9 @@
 //! Path tracing that ends its paths in a radiance cache trained on the film's own paths.
 //!
-//! Before the first sample of a film, `training_spp` path-traced paths per pixel record, at
-//! every vertex, the radiance leaving it toward the previous vertex as the rest of the path
+//! Samples fall in blocks that double in length (`block_spp`, then twice as many, …); before
+//! the first sample of a block, the block's cache is trained on `training_spp · 2^b`
+//! path-traced paths per pixel (block b; each block's paths include the block before's), so
+//! the cache's error falls as samples accumulate. The paths record, at every vertex, the radiance leaving it toward the previous vertex as the rest of the path
 //! estimated it: an unbiased estimate of the light a point sends in a direction, however many
 //! bounces along the fibers it took. Records are averaged per cell and direction bin
 //! ([`cache`]).
@@ -17,16 +19,19 @@
 //! twice (measured: a white furnace at β = 0.9 returned 1.034).
 //! docs/src/research/radiance-cache.md measures it against the path tracer.
 //!
-//! RON: `RadianceCache(training_spp: 8, traced_bounces: 2)`
+//! Records are kept per vertex number (`match_depth`): a lookup at a path's vertex d reads
+//! records made at training paths' vertex d, which are spread over a cell as the lookups are.
+//!
+//! RON: `RadianceCache(training_spp: 4, block_spp: 32, traced_bounces: 2)`
 
 #![warn(missing_docs)]
 
 mod cache;
 
-use cache::{Lattice, RadianceCache, Records};
-use rayon::prelude::*;
+use cache::{RadianceCache, Records};
 use serde::{Deserialize, Serialize};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::ops::Range;
+use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 use tress_core::film::FilmSettings;
@@ -35,16 +40,30 @@ use tress_core::integrator::{
 };
 use tress_core::math::Vec3;
 use tress_core::prepare::Preparation;
-use tress_core::rng::hash_words;
 use tress_core::{Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint};
+use tress_learned_light::{FilmKey, Lattice};
 
 /// Radiance-cache settings.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct CacheSettings {
     /// Training paths per pixel of the film (over the whole film, whatever its crop), each
-    /// traced to its end.
+    /// traced to its end, for the first block of samples; each later block's cache is trained
+    /// on twice as many.
     pub training_spp: u32,
+    /// Samples of the first block: sample blocks double in length (`block_spp`, then
+    /// `2 block_spp`, …), and each renders with a cache of its own trained on twice the paths
+    /// of the block before, so that the cache's error keeps falling as samples accumulate.
+    pub block_spp: u32,
+    /// Vertices traced exactly before the cache is read grow by this many with each block,
+    /// so that what the cache averages weighs less and less.
+    pub handoff_growth: u32,
+    /// Whether a lookup at a path's vertex number d reads only records made at training
+    /// paths' vertex number d (the last class, 15, holds every deeper one). Training paths
+    /// start at the camera as rendered paths do, so their vertices of one number are spread
+    /// over a cell as the lookups at that number are; records of all numbers together are
+    /// not (the points a path reaches early are more open than deeper ones).
+    pub match_depth: bool,
     /// Vertices of a camera path shaded exactly before the cache is used. The points a path
     /// reaches early are more open than the average of their cell's records, so the later the
     /// cache is read the less its averaging darkens: measured on blond hair (64², hair means
@@ -69,12 +88,15 @@ pub struct CacheSettings {
 impl Default for CacheSettings {
     fn default() -> Self {
         CacheSettings {
-            training_spp: 8,
+            training_spp: 4,
+            block_spp: 32,
+            handoff_growth: 0,
+            match_depth: true,
             traced_bounces: 2,
             finest_cells_log2: 7,
             levels: 8,
             direction_bins: 4,
-            min_records: 64,
+            min_records: 16,
             max_depth: 100,
             rr_depth: 5,
         }
@@ -98,7 +120,19 @@ pub enum CacheSettingsError {
 
 impl CacheSettings {
     fn check(&self) -> Result<(), CacheSettingsError> {
-        let checks: [(&'static str, u32, bool, &'static str); 5] = [
+        let checks: [(&'static str, u32, bool, &'static str); 7] = [
+            (
+                "block_spp",
+                self.block_spp,
+                self.block_spp >= 1,
+                "must be at least 1",
+            ),
+            (
+                "handoff_growth",
+                self.handoff_growth,
+                self.handoff_growth <= 16,
+                "must lie in 0..=16",
+            ),
             (
                 "training_spp",
                 self.training_spp,
@@ -147,14 +181,6 @@ pub struct RadianceCacheIntegrator {
     trained: Mutex<Option<(FilmKey, Arc<Trained>)>>,
 }
 
-/// What a cache depends on besides the scene: the film's size and seed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct FilmKey {
-    width: u32,
-    height: u32,
-    seed: u64,
-}
-
 impl IntegratorKind for RadianceCacheIntegrator {
     type Settings = CacheSettings;
     const NAME: &'static str = "radiance-cache";
@@ -172,10 +198,12 @@ impl IntegratorKind for RadianceCacheIntegrator {
         }))
     }
 
-    /// A coarse cache from one path per pixel, and paths deep enough for white furnaces.
+    /// A coarse cache from one path per pixel, sample blocks of two (so that the tests' few
+    /// samples cross blocks), and paths deep enough for white furnaces.
     fn test_settings() -> CacheSettings {
         CacheSettings {
             training_spp: 1,
+            block_spp: 2,
             max_depth: 10_000,
             ..Default::default()
         }
@@ -185,25 +213,35 @@ impl IntegratorKind for RadianceCacheIntegrator {
 impl Integrator for RadianceCacheIntegrator {
     /// Without a film there is no cache: every path is traced to its end.
     fn li(&self, ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb {
-        trace(&self.settings, None, ray, scene, sampler)
+        trace(&self.settings, None, 0, ray, scene, sampler)
     }
 
     fn for_film(
         &self,
         scene: &Scene,
         film: &FilmSettings,
+        samples: Range<u64>,
+        cancel: &AtomicBool,
         progress: &(dyn Fn(f64) + Sync),
     ) -> Option<FilmIntegrator> {
-        let key = FilmKey {
-            width: film.width,
-            height: film.height,
-            seed: film.seed,
-        };
+        let key = FilmKey::of(film);
+        let blocks = block_of(self.settings.block_spp, samples.start)
+            ..block_of(
+                self.settings.block_spp,
+                samples.end.saturating_sub(1).max(samples.start),
+            ) + 1;
         let mut trained = self.trained.lock().unwrap_or_else(|e| e.into_inner());
         let t = match trained.as_ref() {
-            Some((k, t)) if *k == key => t.clone(),
+            Some((k, t)) if *k == key && t.covers(&blocks) => t.clone(),
             _ => {
-                let t = Arc::new(Trained::new(&self.settings, scene, key, progress));
+                let t = Arc::new(Trained::new(
+                    &self.settings,
+                    scene,
+                    key,
+                    blocks,
+                    cancel,
+                    progress,
+                )?);
                 *trained = Some((key, t.clone()));
                 t
             }
@@ -215,11 +253,20 @@ impl Integrator for RadianceCacheIntegrator {
     }
 }
 
-/// The integrator with its cache for one film.
+/// The block of sample `sample`: block `b` holds samples `block_spp · (2^b − 1)` up to
+/// `block_spp · (2^(b+1) − 1)`.
+fn block_of(block_spp: u32, sample: u64) -> u32 {
+    (sample / block_spp as u64 + 1).ilog2()
+}
+
+/// The integrator with the caches of one film's sample blocks.
 struct Trained {
     settings: CacheSettings,
-    cache: RadianceCache,
-    /// How the cache was made, for logs.
+    /// The first block that has a cache.
+    first_block: u32,
+    /// The caches of blocks `first_block..`.
+    caches: Vec<BlockCaches>,
+    /// How the caches were made, for logs.
     description: String,
 }
 
@@ -230,26 +277,69 @@ impl std::fmt::Debug for Trained {
 }
 
 impl Integrator for Trained {
+    /// Traced with the cache of the sample's block.
     fn li(&self, ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb {
-        trace(&self.settings, Some(&self.cache), ray, scene, sampler)
+        self.li_sample(ray, scene, sampler, 0)
+    }
+
+    fn li_sample(&self, ray: &Ray, scene: &Scene, sampler: &mut Sampler, sample_index: u64) -> Rgb {
+        let block = block_of(self.settings.block_spp, sample_index);
+        let cache = block
+            .checked_sub(self.first_block)
+            .and_then(|i| self.caches.get(i as usize));
+        trace(&self.settings, cache, block, ray, scene, sampler)
     }
 }
 
-/// Paths traced per training task: fixed, so the records each task sums — and so the cache —
-/// are the same for any number of threads.
-const TRAINING_CHUNK: u64 = 256;
-/// Chunks traced in parallel before their records are merged.
-const TRAINING_BATCH: u64 = 64;
+/// Vertex-number classes of records (see [`CacheSettings::match_depth`]).
+const DEPTH_CLASSES: u32 = 16;
+
+impl CacheSettings {
+    /// The vertex number at which block `block`'s paths first read the cache.
+    fn handoff(&self, block: u32) -> u32 {
+        self.traced_bounces
+            .saturating_add(block.saturating_mul(self.handoff_growth))
+    }
+
+    /// The record class of vertex number `depth`.
+    fn depth_class(&self, depth: u32) -> u32 {
+        if self.match_depth {
+            depth.min(DEPTH_CLASSES - 1)
+        } else {
+            0
+        }
+    }
+}
+
+/// One sample block's caches, one per record class from `first_class` on.
+struct BlockCaches {
+    first_class: u32,
+    caches: Vec<RadianceCache>,
+}
+
+impl BlockCaches {
+    fn lookup(&self, class: u32, p: Vec3, dir: Vec3) -> Option<Rgb> {
+        self.caches
+            .get(class.checked_sub(self.first_class)? as usize)?
+            .lookup(p, dir)
+    }
+}
+
 /// Stream tag of the training paths' random numbers (apart from every pixel sample's).
 const TRAINING_STREAM: u64 = 0x7261_6469_616e_6365;
 
 impl Trained {
+    /// The caches of sample blocks `blocks`: block `b`'s from the first `training_spp · 2^b`
+    /// training paths per pixel (each block's paths include the block before's). `None` when
+    /// cancelled.
     fn new(
         settings: &CacheSettings,
         scene: &Scene,
         film: FilmKey,
+        blocks: Range<u32>,
+        cancel: &AtomicBool,
         progress: &(dyn Fn(f64) + Sync),
-    ) -> Self {
+    ) -> Option<Self> {
         let start = Instant::now();
         let lattice = Lattice::new(
             scene.bounds(),
@@ -257,76 +347,96 @@ impl Trained {
             settings.levels,
             settings.direction_bins,
         );
-        let paths = film.width as u64 * film.height as u64 * settings.training_spp as u64;
-        let records = train(settings, scene, film, lattice, paths, &|done| {
-            progress(done as f64 / paths as f64)
-        });
-        let cache = RadianceCache::new(lattice, records, settings.min_records);
+        let paths_of = |block: u32| film.pixels() * ((settings.training_spp as u64) << block);
+        let total = paths_of(blocks.end - 1);
+        let mut records: Vec<Records> = vec![Records::default(); DEPTH_CLASSES as usize];
+        let mut caches = Vec::new();
+        let mut traced = 0;
+        for block in 0..blocks.end {
+            let paths = traced..paths_of(block);
+            train(
+                settings,
+                scene,
+                film,
+                lattice,
+                paths.clone(),
+                cancel,
+                &|done| progress((paths.start + done) as f64 / total as f64),
+                &mut records,
+            )?;
+            traced = paths.end;
+            if block >= blocks.start {
+                let first_class = settings.depth_class(settings.handoff(block));
+                let last_class = settings.depth_class(u32::MAX);
+                caches.push(BlockCaches {
+                    first_class,
+                    caches: records[first_class as usize..=last_class as usize]
+                        .iter()
+                        .map(|r| RadianceCache::new(lattice, r.clone(), settings.min_records))
+                        .collect(),
+                });
+            }
+        }
+        let last = &caches.last().expect("at least one block").caches[0];
         let description = format!(
-            "{} from {paths} training paths, built in {:.2} s",
-            cache.describe(),
+            "{} caches for sample blocks {}..{} (the last {}), from {total} training paths, built \
+             in {:.2} s",
+            caches.len(),
+            blocks.start,
+            blocks.end,
+            last.describe(),
             start.elapsed().as_secs_f64()
         );
-        Trained {
+        Some(Trained {
             settings: settings.clone(),
-            cache,
+            first_block: blocks.start,
+            caches,
             description,
-        }
+        })
+    }
+
+    /// Whether it has the caches of every block of `blocks`.
+    fn covers(&self, blocks: &Range<u32>) -> bool {
+        blocks.start >= self.first_block
+            && blocks.end <= self.first_block + self.caches.len() as u32
     }
 }
 
-/// The records of `paths` training paths through the film's pixels. `progress` gets the
-/// paths done.
+/// Adds the records of training paths `paths` through the film's pixels to `records`.
+/// `progress` gets the paths done; `None` when cancelled.
+#[allow(clippy::too_many_arguments)]
 fn train(
     settings: &CacheSettings,
     scene: &Scene,
     film: FilmKey,
     lattice: Lattice,
-    paths: u64,
+    paths: Range<u64>,
+    cancel: &AtomicBool,
     progress: &(dyn Fn(u64) + Sync),
-) -> Records {
-    let pixels = film.width as u64 * film.height as u64;
-    let done = AtomicU64::new(0);
-    let chunks = paths.div_ceil(TRAINING_CHUNK);
-    let mut records = Records::default();
-    // A batch of chunks at a time, merged before the next, so that only one batch's unmerged
-    // records are held at once.
-    for batch in (0..chunks).step_by(TRAINING_BATCH as usize) {
-        let chunk_records: Vec<Records> = (batch..(batch + TRAINING_BATCH).min(chunks))
-            .into_par_iter()
-            .map(|chunk| {
-                let mut records = Records::default();
-                let mut vertices = Vec::new();
-                let range = chunk * TRAINING_CHUNK..((chunk + 1) * TRAINING_CHUNK).min(paths);
-                let n = range.end - range.start;
-                for i in range {
-                    let pixel = i % pixels;
-                    let (x, y) = (pixel % film.width as u64, pixel / film.width as u64);
-                    let mut sampler =
-                        Sampler::from_seed(hash_words(&[film.seed, TRAINING_STREAM, i]));
-                    let jitter = sampler.next_2d();
-                    let lens = sampler.next_2d();
-                    let ray = scene.camera.generate_ray(
-                        x as f32 + jitter.x,
-                        y as f32 + jitter.y,
-                        film.width,
-                        film.height,
-                        lens,
-                    );
-                    training_path(settings, &ray, scene, &mut sampler, &mut vertices);
-                    for v in &vertices {
-                        records.add(&lattice, v.p, v.wo, v.radiance);
-                    }
-                }
-                progress(done.fetch_add(n, Ordering::Relaxed) + n);
-                records
-            })
-            .collect();
-        for chunk in &chunk_records {
-            records.merge(chunk);
-        }
-    }
-    records
+    records: &mut [Records],
+) -> Option<()> {
+    tress_learned_light::train(
+        scene,
+        film,
+        TRAINING_STREAM,
+        paths,
+        cancel,
+        progress,
+        |ray, sampler, chunk: &mut (Vec<Records>, Vec<Vertex>)| {
+            let (chunk_records, vertices) = chunk;
+            chunk_records.resize_with(DEPTH_CLASSES as usize, Records::default);
+            training_path(settings, ray, scene, sampler, vertices);
+            for (depth, v) in vertices.iter().enumerate() {
+                let class = settings.depth_class(depth as u32) as usize;
+                chunk_records[class].add(&lattice, v.p, v.wo, v.radiance);
+            }
+        },
+        |(chunk, _)| {
+            for (records, chunk) in records.iter_mut().zip(&chunk) {
+                records.merge(chunk);
+            }
+        },
+    )
 }
 
 /// A vertex of a training path with the radiance the rest of the path brought back from it.
@@ -413,7 +523,8 @@ fn training_path(
 /// tracing where the cache has nothing there).
 fn trace(
     settings: &CacheSettings,
-    cache: Option<&RadianceCache>,
+    cache: Option<&BlockCaches>,
+    block: u32,
     camera_ray: &Ray,
     scene: &Scene,
     sampler: &mut Sampler,
@@ -430,8 +541,9 @@ fn trace(
             }
             break;
         };
-        if depth >= settings.traced_bounces {
-            if let Some(cached) = cache.and_then(|c| c.lookup(hit.p, -ray.dir)) {
+        if depth >= settings.handoff(block) {
+            let class = settings.depth_class(depth);
+            if let Some(cached) = cache.and_then(|c| c.lookup(class, hit.p, -ray.dir)) {
                 radiance += throughput * cached;
                 break;
             }
