@@ -1,6 +1,7 @@
 //! The guided path tracer is unbiased: whatever it learned, its images converge to the path
-//! tracer's. Both of its samplings (the mixture and resampling) are held to the path tracer's
-//! mean within the noise of independent renders.
+//! tracer's. Both of its samplings (the mixture and resampling), and the roulette and splitting
+//! driven by the learned radiance, are held to the path tracer's mean within the noise of
+//! independent renders.
 
 use std::sync::Arc;
 use tress_core::light::{EnvironmentMap, Light};
@@ -37,7 +38,7 @@ fn channel_means(
 ) -> [(f64, f64); 3] {
     let per_render: Vec<[f64; 3]> = (0..renders)
         .map(|seed| {
-            let mut f = film(32, 32, 192, 100 + seed);
+            let mut f = film(32, 32, 128, 100 + seed);
             f.crop = Some([8, 8, 24, 24]);
             render(scene, integrator, &f, &|_| {}).image.mean_rgb()
         })
@@ -58,9 +59,9 @@ fn both_samplings_converge_to_the_path_tracer() {
     for (name, sampling, target, noise) in [
         ("mixture", Sampling::Mixture, Target::Radiance, 0.008),
         (
-            "mixture, contribution",
+            "mixture, adjoint-driven roulette and splitting",
             Sampling::Mixture,
-            Target::Contribution,
+            Target::Radiance,
             0.008,
         ),
         (
@@ -73,6 +74,7 @@ fn both_samplings_converge_to_the_path_tracer() {
         let settings = GuidedSettings {
             sampling,
             target,
+            adjoint_roulette: name.contains("adjoint"),
             training_spp: 2,
             training_rounds: 2,
             min_records: 32,

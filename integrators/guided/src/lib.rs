@@ -17,6 +17,12 @@
 //! multiplied by it: the fiber's sampling keeps the specular cone and the forward lobe, the
 //! guide adds the directions that the light inside the hair comes from.
 //!
+//! Optionally (`adjoint_roulette`), Russian roulette and splitting are driven by the radiance
+//! the training paths saw leave each cell (Vorba & Křivánek 2016).
+//!
+//! docs/src/research/radiance-cache.md measures it: unbiased, but not yet faster than the path
+//! tracer on hair.
+//!
 //! RON: `Guided(training_spp: 4, training_rounds: 3, guide_probability: 0.5)`
 
 #![warn(missing_docs)]
@@ -37,8 +43,10 @@ use tress_core::integrator::{
 };
 use tress_core::math::Vec3;
 use tress_core::prepare::Preparation;
-use tress_core::{luminance, Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint};
-use tress_learned_light::{FilmKey, Lattice};
+use tress_core::{
+    luminance, Hit, Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint,
+};
+use tress_learned_light::{FilmKey, Lattice, RadianceCache, Records as RadianceRecords};
 
 /// Guided path tracer settings.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
@@ -74,6 +82,13 @@ pub struct GuidedSettings {
     pub z_bins: u32,
     /// Azimuthal sectors of the sphere's direction bins.
     pub phi_bins: u32,
+    /// Russian roulette and splitting driven by the learned radiance (Vorba & Křivánek 2016):
+    /// from the second vertex on, a path whose expected contribution — its throughput times
+    /// the radiance the cache expects to leave the vertex toward it — is below the pixel's
+    /// expected value is ended with the matching probability, one above it is split into up to
+    /// eight, each reweighted so that the estimate stays unbiased. Otherwise the path tracer's
+    /// roulette on the throughput alone.
+    pub adjoint_roulette: bool,
     /// Scattering events of a path (training and rendering) before it ends.
     pub max_depth: u32,
     /// Bounces before Russian roulette starts.
@@ -94,6 +109,7 @@ impl Default for GuidedSettings {
             min_records: 256,
             z_bins: 8,
             phi_bins: 16,
+            adjoint_roulette: false,
             max_depth: 100,
             rr_depth: 5,
         }
@@ -272,8 +288,14 @@ impl Integrator for GuidedPathTracer {
 /// The integrator with its guide for one film.
 struct Trained {
     settings: GuidedSettings,
-    guide: Guide,
+    learned: Learned,
     description: String,
+}
+
+/// What training learned: the directions light comes from, and the radiance leaving each cell.
+struct Learned {
+    guide: Guide,
+    radiance: RadianceCache,
 }
 
 impl std::fmt::Debug for Trained {
@@ -284,7 +306,14 @@ impl std::fmt::Debug for Trained {
 
 impl Integrator for Trained {
     fn li(&self, ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb {
-        trace(&self.settings, Some(&self.guide), ray, scene, sampler, None)
+        trace(
+            &self.settings,
+            Some(&self.learned),
+            ray,
+            scene,
+            sampler,
+            None,
+        )
     }
 }
 
@@ -307,6 +336,12 @@ impl Trained {
             1,
         );
         let bins = SphereBins::new(settings.z_bins, settings.phi_bins);
+        let radiance_lattice = Lattice::new(
+            scene.bounds(),
+            settings.finest_cells_log2,
+            settings.levels,
+            RADIANCE_DIRECTION_BINS,
+        );
         let rounds = settings.training_rounds;
         // Paths per pixel of each round: the last `training_spp`, each before it half.
         let spp: Vec<u64> = (0..rounds)
@@ -314,11 +349,12 @@ impl Trained {
             .collect();
         let total = film.pixels() * spp.iter().sum::<u64>();
         let mut records = Records::new(bins);
-        let mut guide: Option<Guide> = None;
+        let mut radiance_records = RadianceRecords::default();
+        let mut learned: Option<Learned> = None;
         let mut first = 0;
         for round_spp in spp {
             let paths = first..first + film.pixels() * round_spp;
-            let current = guide.as_ref();
+            let current = learned.as_ref();
             tress_learned_light::train(
                 scene,
                 film,
@@ -326,37 +362,64 @@ impl Trained {
                 paths.clone(),
                 cancel,
                 &|done| progress((first + done) as f64 / total as f64),
-                |ray, sampler, chunk: &mut (ChunkRecords, Vec<Vertex>)| {
-                    let (records, vertices) = chunk;
+                |ray, sampler, chunk: &mut (ChunkRecords, RadianceRecords, Vec<Vertex>)| {
+                    let (records, radiance_records, vertices) = chunk;
                     vertices.clear();
                     trace(settings, current, ray, scene, sampler, Some(vertices));
-                    record(settings.target, &lattice, &bins, vertices, records);
+                    let lattices = (&lattice, &radiance_lattice);
+                    record(
+                        settings.target,
+                        lattices,
+                        &bins,
+                        vertices,
+                        records,
+                        radiance_records,
+                    );
                 },
-                |(chunk, _)| records.merge(&chunk),
+                |(chunk, radiance_chunk, _)| {
+                    records.merge(&chunk);
+                    radiance_records.merge(&radiance_chunk);
+                },
             )?;
-            guide = Some(Guide::new(lattice, &records, settings.min_records));
+            learned = Some(Learned {
+                guide: Guide::new(lattice, &records, settings.min_records),
+                radiance: RadianceCache::new(
+                    radiance_lattice,
+                    radiance_records.clone(),
+                    RADIANCE_MIN_RECORDS,
+                ),
+            });
             first = paths.end;
         }
-        let guide = guide.expect("at least one training round");
+        let learned = learned.expect("at least one training round");
         let description = format!(
-            "{} ({:.1} MB) from {total} training paths in {rounds} rounds, built in {:.2} s",
-            guide.describe(),
-            guide.bytes() as f64 / 1e6,
+            "{} ({:.1} MB) and {}, from {total} training paths in {rounds} rounds, built in \
+             {:.2} s",
+            learned.guide.describe(),
+            learned.guide.bytes() as f64 / 1e6,
+            learned.radiance.describe(),
             start.elapsed().as_secs_f64()
         );
         Some(Trained {
             settings: settings.clone(),
-            guide,
+            learned,
             description,
         })
     }
 }
+
+/// Direction bins per side of the octahedral map of the radiance cache that drives roulette.
+const RADIANCE_DIRECTION_BINS: u32 = 4;
+/// Records a cell of that cache needs before roulette trusts it.
+const RADIANCE_MIN_RECORDS: u32 = 16;
 
 /// A vertex of a training path: what it saw by next-event estimation, where it continued,
 /// and (filled in backwards once the path has ended) the radiance the rest of the path brought
 /// back.
 struct Vertex {
     p: Vec3,
+    /// Toward the previous vertex.
+    wo: Vec3,
     /// Next-event estimation's direction, and what it found there: the scattering value and
     /// the MIS-weighted incident radiance over the light sample's density.
     direct: Option<(Vec3, Rgb, Rgb)>,
@@ -368,13 +431,15 @@ struct Vertex {
 }
 
 /// Records a training path's vertices, from the last back: the light each continuation
-/// brought back is the radiance leaving the vertex after it.
+/// brought back is the radiance leaving the vertex after it; the radiance leaving each vertex
+/// toward the one before goes into `radiance_records`.
 fn record(
     target: Target,
-    lattice: &Lattice,
+    (lattice, radiance_lattice): (&Lattice, &Lattice),
     bins: &SphereBins,
     vertices: &mut [Vertex],
     records: &mut ChunkRecords,
+    radiance_records: &mut RadianceRecords,
 ) {
     let mut after = vertices.last().map_or(Rgb::ZERO, |v| v.incident);
     for v in vertices.iter_mut().rev() {
@@ -396,120 +461,196 @@ fn record(
             records.add(lattice, bins, v.p, wi, value);
             leaving += weight * after;
         }
+        radiance_records.add(radiance_lattice, v.p, v.wo, leaving);
         after = leaving;
     }
 }
 
+/// A path waiting to be shaded at its next vertex: a split's copies wait on a stack.
+#[derive(Clone, Copy)]
+struct PathState {
+    ray: Ray,
+    hit: Hit,
+    throughput: Rgb,
+    depth: u32,
+}
+
+/// Most copies a path is split into at one vertex.
+const MAX_SPLIT: u32 = 8;
+/// Least probability with which adjoint-driven roulette keeps a path: where the cache
+/// underestimates, a path must still survive often enough not to be a firefly.
+const MIN_SURVIVAL: f32 = 0.05;
+
 /// The radiance along `camera_ray`: path tracing with next-event estimation, continuations
-/// drawn from the mixture of `guide` and the fibers' sampling. With `vertices`, the path's
-/// vertices are recorded for training (the last one's `incident` holds the light its
-/// continuation found on escaping).
+/// drawn from the mixture of the learned guide and the fibers' sampling. With `vertices`,
+/// the path's vertices are recorded for training (the last one's `incident` holds the light
+/// its continuation found on escaping); training paths are neither split nor rouletted by
+/// the learned radiance.
 fn trace(
     settings: &GuidedSettings,
-    guide: Option<&Guide>,
+    learned: Option<&Learned>,
     camera_ray: &Ray,
     scene: &Scene,
     sampler: &mut Sampler,
     mut vertices: Option<&mut Vec<Vertex>>,
 ) -> Rgb {
-    let mut radiance = Rgb::ZERO;
-    let mut throughput = Rgb::ONE;
-    let mut ray = *camera_ray;
-    let mut scatter_pdf: Option<f32> = None;
     let density_needed = scene.lights.weighs_escapes();
-    // Whether the ray being traced is a continuation chosen by resampling.
-    let mut resampled_continuation = false;
-    for depth in 0.. {
-        let Some(hit) = scene.intersect(&ray) else {
-            let mut escaped = Rgb::ZERO;
-            for light in scene.lights.infinite() {
-                let select_pdf = scene.lights.select_pdf_of(light);
-                escaped += match (scatter_pdf, resampled_continuation) {
-                    // Next-event estimation alone counts the lights it samples.
-                    (Some(_), true) if select_pdf > 0.0 => Rgb::ZERO,
-                    (Some(_), true) => escaped_light(light, ray.dir, Some(1.0), 0.0, Rgb::ONE),
-                    _ => escaped_light(light, ray.dir, scatter_pdf, select_pdf, Rgb::ONE),
-                };
+    let resampled = match settings.sampling {
+        Sampling::Resampled { candidates } => Some(candidates),
+        Sampling::Mixture => None,
+    };
+    let guide = learned.map(|l| &l.guide);
+    let adjoint = learned
+        .filter(|_| settings.adjoint_roulette && vertices.is_none())
+        .map(|l| &l.radiance);
+    let Some(hit) = scene.intersect(camera_ray) else {
+        return scene
+            .lights
+            .infinite()
+            .map(|light| escaped_light(light, camera_ray.dir, None, 1.0, Rgb::ONE))
+            .sum();
+    };
+    // The pixel's expected value, as the cache sees the camera's vertex.
+    let pixel = adjoint
+        .and_then(|a| a.lookup(hit.p, -camera_ray.dir))
+        .map(luminance)
+        .filter(|&v| v > 0.0);
+    let mut radiance = Rgb::ZERO;
+    let mut stack = vec![PathState {
+        ray: *camera_ray,
+        hit,
+        throughput: Rgb::ONE,
+        depth: 0,
+    }];
+    while let Some(mut path) = stack.pop() {
+        loop {
+            let PathState {
+                ray, hit, depth, ..
+            } = path;
+            if depth >= settings.max_depth {
+                break;
             }
-            radiance += throughput * escaped;
-            if let Some(last) = vertices.as_mut().and_then(|v| v.last_mut()) {
-                last.incident = escaped;
+            // Adjoint-driven roulette and splitting on arriving at the vertex; where the cache
+            // knows nothing, the throughput's roulette after scattering instead.
+            let mut adjoint_rouletted = false;
+            if let (Some(cache), Some(pixel), true) = (adjoint, pixel, depth > 0) {
+                if let Some(expected) = cache.lookup(hit.p, -ray.dir) {
+                    adjoint_rouletted = true;
+                    let ratio = luminance(path.throughput * expected) / pixel;
+                    if ratio < 1.0 {
+                        let survive = ratio.max(MIN_SURVIVAL);
+                        if sampler.next_1d() >= survive {
+                            break;
+                        }
+                        path.throughput /= survive;
+                    } else {
+                        let copies = (ratio.round() as u32).clamp(1, MAX_SPLIT);
+                        path.throughput /= copies as f32;
+                        for _ in 1..copies {
+                            stack.push(path);
+                        }
+                    }
+                }
             }
-            break;
-        };
-        if depth >= settings.max_depth {
-            break;
-        }
-        let sp = ShadingPoint::new(&hit, &ray, &scene.materials);
-        let mixture = guide
-            .filter(|_| depth < settings.guided_vertices)
-            .and_then(|g| {
-                let cdf = g.find(hit.p)?;
-                Some(Mixture {
-                    guide: g,
-                    cdf,
-                    probability: settings.guide_probability,
-                })
-            });
-        let resampled = match settings.sampling {
-            Sampling::Resampled { candidates } => Some(candidates),
-            Sampling::Mixture => None,
-        };
-        // With resampling, next-event estimation alone counts the lights it samples.
-        let density = |wi: Vec3, pdf: f32| match (&mixture, resampled) {
-            (Some(_), Some(_)) => 0.0,
-            (Some(m), None) => m.pdf(wi, pdf),
-            (None, _) => pdf,
-        };
+            let sp = ShadingPoint::new(&hit, &ray, &scene.materials);
+            let mixture = guide
+                .filter(|_| depth < settings.guided_vertices)
+                .and_then(|g| {
+                    let cdf = g.find(hit.p)?;
+                    Some(Mixture {
+                        guide: g,
+                        cdf,
+                        probability: settings.guide_probability,
+                    })
+                });
+            let resampling = mixture.is_some() && resampled.is_some();
+            // With resampling, next-event estimation alone counts the lights it samples.
+            let density = |wi: Vec3, pdf: f32| match &mixture {
+                Some(_) if resampling => 0.0,
+                Some(m) => m.pdf(wi, pdf),
+                None => pdf,
+            };
 
-        let u_select = sampler.next_1d();
-        let u_light = sampler.next_2d();
-        let mut direct = None;
-        if let Some((light, select_pdf)) = scene.lights.choose(u_select) {
-            if let Some(d) = direct_light_sample(scene, &sp, light, u_light, select_pdf, density) {
-                radiance += d.contribution(throughput);
-                direct = Some((d.wi, d.f, d.radiance * d.scale));
+            let u_select = sampler.next_1d();
+            let u_light = sampler.next_2d();
+            let mut direct = None;
+            if let Some((light, select_pdf)) = scene.lights.choose(u_select) {
+                if let Some(d) =
+                    direct_light_sample(scene, &sp, light, u_light, select_pdf, density)
+                {
+                    radiance += d.contribution(path.throughput);
+                    direct = Some((d.wi, d.f, d.radiance * d.scale));
+                }
             }
-        }
 
-        let continuation = match (&mixture, resampled) {
-            (Some(m), Some(candidates)) => m.resample(&sp, candidates, sampler),
-            (Some(m), None) => {
-                let u_mix = sampler.next_1d();
-                m.sample(&sp, u_mix, sampler.next_4d())
+            let continuation = match (&mixture, resampled) {
+                (Some(m), Some(candidates)) => m.resample(&sp, candidates, sampler),
+                (Some(m), None) => {
+                    let u_mix = sampler.next_1d();
+                    m.sample(&sp, u_mix, sampler.next_4d())
+                }
+                (None, _) => sp
+                    .sample(sampler.next_4d())
+                    .filter(|s| s.pdf > 0.0)
+                    .map(|s| (s.wi, s.f / s.pdf, s.pdf)),
             }
-            (None, _) => sp
-                .sample(sampler.next_4d())
-                .filter(|s| s.pdf > 0.0)
-                .map(|s| (s.wi, s.f / s.pdf, s.pdf)),
-        }
-        .filter(|(_, weight, _)| *weight != Rgb::ZERO && weight.is_finite());
-        let mut vertex = Vertex {
-            p: hit.p,
-            direct,
-            continuation: None,
-            incident: Rgb::ZERO,
-        };
-        let Some((wi, weight, pdf)) = continuation else {
+            .filter(|(_, weight, _)| *weight != Rgb::ZERO && weight.is_finite());
+            let mut vertex = Vertex {
+                p: hit.p,
+                wo: -ray.dir,
+                direct,
+                continuation: None,
+                incident: Rgb::ZERO,
+            };
+            let Some((wi, weight, pdf)) = continuation else {
+                if let Some(v) = vertices.as_mut() {
+                    v.push(vertex);
+                }
+                break;
+            };
+            path.throughput *= weight;
+            let survive = if adjoint_rouletted {
+                Some(1.0)
+            } else {
+                roulette(depth, settings.rr_depth, &mut path.throughput, sampler)
+            };
+            if let (true, Some(survive)) = (vertices.is_some(), survive) {
+                vertex.continuation = Some((wi, weight / survive, pdf));
+            }
             if let Some(v) = vertices.as_mut() {
                 v.push(vertex);
             }
-            break;
-        };
-        throughput *= weight;
-        let survive = roulette(depth, settings.rr_depth, &mut throughput, sampler);
-        if let (true, Some(survive)) = (vertices.is_some(), survive) {
-            vertex.continuation = Some((wi, weight / survive, pdf));
+            if survive.is_none() {
+                break;
+            }
+            let next = sp.spawn(wi);
+            let scatter_pdf = density_needed.then_some(pdf);
+            let Some(next_hit) = scene.intersect(&next) else {
+                let mut escaped = Rgb::ZERO;
+                for light in scene.lights.infinite() {
+                    let select_pdf = scene.lights.select_pdf_of(light);
+                    escaped += match scatter_pdf {
+                        // Next-event estimation alone counts the lights it samples.
+                        Some(_) if resampling && select_pdf > 0.0 => Rgb::ZERO,
+                        Some(_) if resampling => {
+                            escaped_light(light, next.dir, Some(1.0), 0.0, Rgb::ONE)
+                        }
+                        _ => escaped_light(light, next.dir, scatter_pdf, select_pdf, Rgb::ONE),
+                    };
+                }
+                radiance += path.throughput * escaped;
+                if let Some(last) = vertices.as_mut().and_then(|v| v.last_mut()) {
+                    last.incident = escaped;
+                }
+                break;
+            };
+            path = PathState {
+                ray: next,
+                hit: next_hit,
+                throughput: path.throughput,
+                depth: depth + 1,
+            };
         }
-        if let Some(v) = vertices.as_mut() {
-            v.push(vertex);
-        }
-        if survive.is_none() {
-            break;
-        }
-        scatter_pdf = density_needed.then_some(pdf);
-        resampled_continuation = mixture.is_some() && resampled.is_some();
-        ray = sp.spawn(wi);
     }
     radiance
 }

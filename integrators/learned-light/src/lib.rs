@@ -1,13 +1,15 @@
 //! What the integrators that learn the light in a scene from the film's own paths share
 //! (`radiance-cache`, `guided`): a lattice of cells at several sizes over the scene's bounds
-//! ([`Lattice`]) and training paths traced through the film's pixels so that what is learned
+//! ([`Lattice`]), the mean radiance leaving its cells ([`RadianceCache`]) and training paths traced through the film's pixels so that what is learned
 //! depends only on the scene, the film's size and seed, and the training path indices, never on
 //! threads ([`train`]).
 
 #![warn(missing_docs)]
 
 mod lattice;
+mod radiance;
 mod training;
 
 pub use lattice::Lattice;
+pub use radiance::{RadianceCache, Records};
 pub use training::{train, FilmKey};

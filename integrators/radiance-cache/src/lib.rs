@@ -26,9 +26,6 @@
 
 #![warn(missing_docs)]
 
-mod cache;
-
-use cache::{RadianceCache, Records};
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::sync::atomic::AtomicBool;
@@ -41,7 +38,7 @@ use tress_core::integrator::{
 use tress_core::math::Vec3;
 use tress_core::prepare::Preparation;
 use tress_core::{Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint};
-use tress_learned_light::{FilmKey, Lattice};
+use tress_learned_light::{FilmKey, Lattice, RadianceCache, Records};
 
 /// Radiance-cache settings.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
@@ -568,4 +565,44 @@ fn trace(
         }
     }
     radiance
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sample_blocks_double_in_length() {
+        // block_spp 4: samples 0..4, 4..12, 12..28, 28..60, …
+        let blocks: Vec<u32> = (0..61).map(|s| block_of(4, s)).collect();
+        for (s, &b) in blocks.iter().enumerate() {
+            let start = 4 * ((1u64 << b) - 1);
+            let end = 4 * ((1u64 << (b + 1)) - 1);
+            assert!(
+                (start..end).contains(&(s as u64)),
+                "sample {s} in block {b}"
+            );
+        }
+        assert_eq!(block_of(1, 0), 0);
+        assert_eq!(block_of(1, u64::MAX - 1), 63);
+    }
+
+    #[test]
+    fn records_are_classed_by_vertex_number_when_matched() {
+        let matched = CacheSettings::default();
+        assert_eq!(matched.depth_class(0), 0);
+        assert_eq!(matched.depth_class(3), 3);
+        assert_eq!(matched.depth_class(1000), DEPTH_CLASSES - 1);
+        let pooled = CacheSettings {
+            match_depth: false,
+            ..Default::default()
+        };
+        assert_eq!(pooled.depth_class(7), 0);
+        assert_eq!(pooled.handoff(3), pooled.traced_bounces);
+        let growing = CacheSettings {
+            handoff_growth: 2,
+            ..Default::default()
+        };
+        assert_eq!(growing.handoff(3), growing.traced_bounces + 6);
+    }
 }

@@ -1,4 +1,4 @@
-//! The radiance cache: mean outgoing radiance per (cell, direction bin), at several cell sizes.
+//! A radiance cache: mean outgoing radiance per (cell, direction bin), at several cell sizes.
 //!
 //! A record is one unbiased estimate of the radiance leaving a point toward a direction (the
 //! rest of a training path). Records are summed per chunk of training paths and the chunks'
@@ -8,13 +8,13 @@
 //! lookup takes the finest level whose cell and bin hold enough records, which puts fine cells
 //! where the training paths went often (the hair near its surface) and coarse ones elsewhere.
 
+use crate::Lattice;
 use rustc_hash::FxHashMap;
 use tress_core::math::{Rgb, Vec3};
-use tress_learned_light::Lattice;
 
 /// Sums of records.
 #[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct Sums {
+struct Sums {
     rgb: [f64; 3],
     count: u32,
 }
@@ -30,14 +30,15 @@ impl Sums {
 
 /// Records of the finest level, summed: one training chunk's, or all of them.
 #[derive(Clone, Default)]
-pub(crate) struct Records {
+pub struct Records {
     cells: FxHashMap<u64, Sums>,
-    pub(crate) count: u64,
+    /// Records added (those dropped for carrying no estimate not counted).
+    pub count: u64,
 }
 
 impl Records {
     /// Adds one record; non-finite or negative values are dropped (they carry no estimate).
-    pub(crate) fn add(&mut self, lattice: &Lattice, p: Vec3, dir: Vec3, radiance: Rgb) {
+    pub fn add(&mut self, lattice: &Lattice, p: Vec3, dir: Vec3, radiance: Rgb) {
         if !(radiance.is_finite() && radiance.min_element() >= 0.0 && p.is_finite()) {
             return;
         }
@@ -52,7 +53,7 @@ impl Records {
 
     /// Adds a later chunk's records. Floating-point sums depend on their order, so chunks
     /// must be merged in a fixed order for the cache to be the same on every run.
-    pub(crate) fn merge(&mut self, later: &Records) {
+    pub fn merge(&mut self, later: &Records) {
         // Keys in sorted order: a map's iteration order depends on its history.
         let mut keys: Vec<_> = later.cells.keys().copied().collect();
         keys.sort_unstable();
@@ -71,7 +72,7 @@ struct Cell {
 }
 
 /// The cache a render looks radiance up in.
-pub(crate) struct RadianceCache {
+pub struct RadianceCache {
     lattice: Lattice,
     cells: FxHashMap<u64, Cell>,
     min_records: u32,
@@ -81,7 +82,7 @@ pub(crate) struct RadianceCache {
 impl RadianceCache {
     /// Every level's cells from the finest level's `records`; a lookup uses a cell only when
     /// it averages at least `min_records` records.
-    pub(crate) fn new(lattice: Lattice, records: Records, min_records: u32) -> Self {
+    pub fn new(lattice: Lattice, records: Records, min_records: u32) -> Self {
         let mut levels: Vec<FxHashMap<u64, Sums>> = vec![records.cells];
         for level in 1..lattice.levels() {
             let mut coarser = FxHashMap::default();
@@ -126,7 +127,7 @@ impl RadianceCache {
     /// `p` one cell wide (trilinear interpolation of the cells' means, weighted by their
     /// counts), so that neighbouring points see a smooth average rather than the steps and the
     /// independent noise of single cells. `None` where no level has enough.
-    pub(crate) fn lookup(&self, p: Vec3, dir: Vec3) -> Option<Rgb> {
+    pub fn lookup(&self, p: Vec3, dir: Vec3) -> Option<Rgb> {
         let p = self.lattice.clamp(p);
         let (c, bin) = self.lattice.locate(p, dir);
         let level = (0..self.lattice.levels()).find(|&level| {
@@ -166,7 +167,7 @@ impl RadianceCache {
     }
 
     /// One line for logs.
-    pub(crate) fn describe(&self) -> String {
+    pub fn describe(&self) -> String {
         format!(
             "radiance cache: {} records in {} cells of {} levels ({} to {} cells along the \
              longest side, {} direction bins)",
