@@ -35,7 +35,7 @@ use guide::{ChunkRecords, Guide, Records, SphereBins};
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::sync::atomic::AtomicBool;
-use std::sync::{Arc, Mutex};
+
 use std::time::Instant;
 use tress_core::film::FilmSettings;
 use tress_core::integrator::{
@@ -46,7 +46,9 @@ use tress_core::prepare::Preparation;
 use tress_core::{
     luminance, Hit, Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint,
 };
-use tress_learned_light::{FilmKey, Lattice, RadianceCache, Records as RadianceRecords};
+use tress_learned_light::{
+    check_ranges, FilmKey, LastFilm, Lattice, OutOfRange, RadianceCache, Records as RadianceRecords,
+};
 
 /// Guided path tracer settings.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
@@ -134,84 +136,66 @@ pub enum Sampling {
     },
 }
 
-/// Settings that cannot describe a guide.
-#[derive(Debug, thiserror::Error)]
-pub enum GuidedSettingsError {
-    /// A value outside its range.
-    #[error("guided settings: {field} = {value}: {why}")]
-    OutOfRange {
-        /// The setting.
-        field: &'static str,
-        /// Its value.
-        value: f64,
-        /// The range it must lie in.
-        why: &'static str,
-    },
-}
-
 impl GuidedSettings {
-    fn check(&self) -> Result<(), GuidedSettingsError> {
+    fn check(&self) -> Result<(), OutOfRange> {
         let s = self;
         let candidates = match s.sampling {
             Sampling::Resampled { candidates } => candidates,
             Sampling::Mixture => 1,
         };
-        let checks: [(&'static str, f64, bool, &'static str); 8] = [
-            (
-                "candidates",
-                candidates as f64,
-                (1..=64).contains(&candidates),
-                "must lie in 1..=64",
-            ),
-            (
-                "training_spp",
-                s.training_spp as f64,
-                (1..=4096).contains(&s.training_spp),
-                "must lie in 1..=4096",
-            ),
-            (
-                "training_rounds",
-                s.training_rounds as f64,
-                (1..=12).contains(&s.training_rounds),
-                "must lie in 1..=12",
-            ),
-            (
-                "guide_probability",
-                s.guide_probability as f64,
-                (0.0..1.0).contains(&s.guide_probability),
-                "must lie in [0, 1)",
-            ),
-            (
-                "finest_cells_log2",
-                s.finest_cells_log2 as f64,
-                (1..=12).contains(&s.finest_cells_log2),
-                "must lie in 1..=12",
-            ),
-            (
-                "levels",
-                s.levels as f64,
-                (1..=s.finest_cells_log2.min(12) + 1).contains(&s.levels),
-                "must lie in 1..=finest_cells_log2 + 1",
-            ),
-            (
-                "z_bins",
-                s.z_bins as f64,
-                (1..=256).contains(&s.z_bins) && (1..=256).contains(&s.phi_bins),
-                "z_bins and phi_bins must lie in 1..=256",
-            ),
-            (
-                "min_records",
-                s.min_records as f64,
-                s.min_records >= 1,
-                "must be at least 1",
-            ),
-        ];
-        for (field, value, ok, why) in checks {
-            if !ok {
-                return Err(GuidedSettingsError::OutOfRange { field, value, why });
-            }
-        }
-        Ok(())
+        check_ranges(
+            GuidedPathTracer::NAME,
+            &[
+                (
+                    "candidates",
+                    candidates as f64,
+                    (1..=64).contains(&candidates),
+                    "must lie in 1..=64",
+                ),
+                (
+                    "training_spp",
+                    s.training_spp as f64,
+                    (1..=4096).contains(&s.training_spp),
+                    "must lie in 1..=4096",
+                ),
+                (
+                    "training_rounds",
+                    s.training_rounds as f64,
+                    (1..=12).contains(&s.training_rounds),
+                    "must lie in 1..=12",
+                ),
+                (
+                    "guide_probability",
+                    s.guide_probability as f64,
+                    (0.0..1.0).contains(&s.guide_probability),
+                    "must lie in [0, 1)",
+                ),
+                (
+                    "finest_cells_log2",
+                    s.finest_cells_log2 as f64,
+                    (1..=12).contains(&s.finest_cells_log2),
+                    "must lie in 1..=12",
+                ),
+                (
+                    "levels",
+                    s.levels as f64,
+                    (1..=s.finest_cells_log2.min(12) + 1).contains(&s.levels),
+                    "must lie in 1..=finest_cells_log2 + 1",
+                ),
+                (
+                    "z_bins",
+                    s.z_bins as f64,
+                    (1..=256).contains(&s.z_bins) && (1..=256).contains(&s.phi_bins),
+                    "z_bins and phi_bins must lie in 1..=256",
+                ),
+                (
+                    "min_records",
+                    s.min_records as f64,
+                    s.min_records >= 1,
+                    "must be at least 1",
+                ),
+            ],
+        )
     }
 }
 
@@ -220,7 +204,7 @@ impl GuidedSettings {
 #[derive(Debug)]
 pub struct GuidedPathTracer {
     settings: GuidedSettings,
-    trained: Mutex<Option<(FilmKey, Arc<Trained>)>>,
+    trained: LastFilm<Trained>,
 }
 
 impl IntegratorKind for GuidedPathTracer {
@@ -236,7 +220,7 @@ impl IntegratorKind for GuidedPathTracer {
         settings.check()?;
         Ok(Box::new(GuidedPathTracer {
             settings: settings.clone(),
-            trained: Mutex::new(None),
+            trained: LastFilm::default(),
         }))
     }
 
@@ -269,15 +253,11 @@ impl Integrator for GuidedPathTracer {
         progress: &(dyn Fn(f64) + Sync),
     ) -> Option<FilmIntegrator> {
         let key = FilmKey::of(film);
-        let mut trained = self.trained.lock().unwrap_or_else(|e| e.into_inner());
-        let t = match trained.as_ref() {
-            Some((k, t)) if *k == key => t.clone(),
-            _ => {
-                let t = Arc::new(Trained::new(&self.settings, scene, key, cancel, progress)?);
-                *trained = Some((key, t.clone()));
-                t
-            }
-        };
+        let t = self.trained.get_or_train(
+            key,
+            |_| true,
+            || Trained::new(&self.settings, scene, key, cancel, progress),
+        )?;
         Some(FilmIntegrator {
             note: t.description.clone(),
             integrator: t,

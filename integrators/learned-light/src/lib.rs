@@ -8,8 +8,10 @@
 
 mod lattice;
 mod radiance;
+mod settings;
 mod training;
 
 pub use lattice::Lattice;
 pub use radiance::{RadianceCache, Records};
+pub use settings::{check_ranges, LastFilm, OutOfRange, RangeCheck};
 pub use training::{train, FilmKey};

@@ -29,7 +29,6 @@
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::sync::atomic::AtomicBool;
-use std::sync::{Arc, Mutex};
 use std::time::Instant;
 use tress_core::film::FilmSettings;
 use tress_core::integrator::{
@@ -38,7 +37,9 @@ use tress_core::integrator::{
 use tress_core::math::Vec3;
 use tress_core::prepare::Preparation;
 use tress_core::{Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint};
-use tress_learned_light::{FilmKey, Lattice, RadianceCache, Records};
+use tress_learned_light::{
+    check_ranges, FilmKey, LastFilm, Lattice, OutOfRange, RadianceCache, Records,
+};
 
 /// Radiance-cache settings.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
@@ -100,73 +101,55 @@ impl Default for CacheSettings {
     }
 }
 
-/// Settings that cannot describe a cache.
-#[derive(Debug, thiserror::Error)]
-pub enum CacheSettingsError {
-    /// A value outside its range.
-    #[error("radiance-cache settings: {field} = {value}: {why}")]
-    OutOfRange {
-        /// The setting.
-        field: &'static str,
-        /// Its value.
-        value: u32,
-        /// The range it must lie in.
-        why: &'static str,
-    },
-}
-
 impl CacheSettings {
-    fn check(&self) -> Result<(), CacheSettingsError> {
-        let checks: [(&'static str, u32, bool, &'static str); 7] = [
-            (
-                "block_spp",
-                self.block_spp,
-                self.block_spp >= 1,
-                "must be at least 1",
-            ),
-            (
-                "handoff_growth",
-                self.handoff_growth,
-                self.handoff_growth <= 16,
-                "must lie in 0..=16",
-            ),
-            (
-                "training_spp",
-                self.training_spp,
-                (1..=4096).contains(&self.training_spp),
-                "must lie in 1..=4096",
-            ),
-            (
-                "finest_cells_log2",
-                self.finest_cells_log2,
-                (1..=16).contains(&self.finest_cells_log2),
-                "must lie in 1..=16 (2 to 65 536 cells per side)",
-            ),
-            (
-                "levels",
-                self.levels,
-                (1..=self.finest_cells_log2.min(15) + 1).contains(&self.levels),
-                "must lie in 1..=finest_cells_log2 + 1",
-            ),
-            (
-                "direction_bins",
-                self.direction_bins,
-                (1..=64).contains(&self.direction_bins),
-                "must lie in 1..=64",
-            ),
-            (
-                "min_records",
-                self.min_records,
-                self.min_records >= 1,
-                "must be at least 1",
-            ),
-        ];
-        for (field, value, ok, why) in checks {
-            if !ok {
-                return Err(CacheSettingsError::OutOfRange { field, value, why });
-            }
-        }
-        Ok(())
+    fn check(&self) -> Result<(), OutOfRange> {
+        check_ranges(
+            RadianceCacheIntegrator::NAME,
+            &[
+                (
+                    "block_spp",
+                    self.block_spp as f64,
+                    self.block_spp >= 1,
+                    "must be at least 1",
+                ),
+                (
+                    "handoff_growth",
+                    self.handoff_growth as f64,
+                    self.handoff_growth <= 16,
+                    "must lie in 0..=16",
+                ),
+                (
+                    "training_spp",
+                    self.training_spp as f64,
+                    (1..=4096).contains(&self.training_spp),
+                    "must lie in 1..=4096",
+                ),
+                (
+                    "finest_cells_log2",
+                    self.finest_cells_log2 as f64,
+                    (1..=16).contains(&self.finest_cells_log2),
+                    "must lie in 1..=16 (2 to 65 536 cells per side)",
+                ),
+                (
+                    "levels",
+                    self.levels as f64,
+                    (1..=self.finest_cells_log2.min(15) + 1).contains(&self.levels),
+                    "must lie in 1..=finest_cells_log2 + 1",
+                ),
+                (
+                    "direction_bins",
+                    self.direction_bins as f64,
+                    (1..=64).contains(&self.direction_bins),
+                    "must lie in 1..=64",
+                ),
+                (
+                    "min_records",
+                    self.min_records as f64,
+                    self.min_records >= 1,
+                    "must be at least 1",
+                ),
+            ],
+        )
     }
 }
 
@@ -175,7 +158,7 @@ impl CacheSettings {
 #[derive(Debug)]
 pub struct RadianceCacheIntegrator {
     settings: CacheSettings,
-    trained: Mutex<Option<(FilmKey, Arc<Trained>)>>,
+    trained: LastFilm<Trained>,
 }
 
 impl IntegratorKind for RadianceCacheIntegrator {
@@ -191,7 +174,7 @@ impl IntegratorKind for RadianceCacheIntegrator {
         settings.check()?;
         Ok(Box::new(RadianceCacheIntegrator {
             settings: settings.clone(),
-            trained: Mutex::new(None),
+            trained: LastFilm::default(),
         }))
     }
 
@@ -227,22 +210,11 @@ impl Integrator for RadianceCacheIntegrator {
                 self.settings.block_spp,
                 samples.end.saturating_sub(1).max(samples.start),
             ) + 1;
-        let mut trained = self.trained.lock().unwrap_or_else(|e| e.into_inner());
-        let t = match trained.as_ref() {
-            Some((k, t)) if *k == key && t.covers(&blocks) => t.clone(),
-            _ => {
-                let t = Arc::new(Trained::new(
-                    &self.settings,
-                    scene,
-                    key,
-                    blocks,
-                    cancel,
-                    progress,
-                )?);
-                *trained = Some((key, t.clone()));
-                t
-            }
-        };
+        let t = self.trained.get_or_train(
+            key,
+            |t| t.covers(&blocks),
+            || Trained::new(&self.settings, scene, key, blocks.clone(), cancel, progress),
+        )?;
         Some(FilmIntegrator {
             note: t.description.clone(),
             integrator: t,

@@ -1,0 +1,121 @@
+//! What the learning integrators share around their settings: range checks, and what was
+//! learned for the film last rendered.
+
+use crate::FilmKey;
+use std::sync::{Arc, Mutex};
+
+/// A setting outside its range.
+#[derive(Debug, thiserror::Error)]
+#[error("{integrator} settings: {field} = {value}: {why}")]
+pub struct OutOfRange {
+    /// The integrator's name.
+    pub integrator: &'static str,
+    /// The setting.
+    pub field: &'static str,
+    /// Its value.
+    pub value: f64,
+    /// The range it must lie in.
+    pub why: &'static str,
+}
+
+/// One range check: the setting, its value, whether it is in range, and the range.
+pub type RangeCheck = (&'static str, f64, bool, &'static str);
+
+/// The first of `checks` that fails, as an error of `integrator`'s settings.
+pub fn check_ranges(integrator: &'static str, checks: &[RangeCheck]) -> Result<(), OutOfRange> {
+    match checks.iter().find(|(_, _, ok, _)| !ok) {
+        Some(&(field, value, _, why)) => Err(OutOfRange {
+            integrator,
+            field,
+            value,
+            why,
+        }),
+        None => Ok(()),
+    }
+}
+
+/// What an integrator learned for the film it rendered last, kept so that the waves and sample
+/// ranges of one image train once.
+#[derive(Debug)]
+pub struct LastFilm<T> {
+    last: Mutex<Option<(FilmKey, Arc<T>)>>,
+}
+
+impl<T> Default for LastFilm<T> {
+    fn default() -> Self {
+        LastFilm {
+            last: Mutex::new(None),
+        }
+    }
+}
+
+impl<T> LastFilm<T> {
+    /// What was learned for `film`, if it `serves` the request, else what `train` learns
+    /// (kept for the next request); `None` when training was stopped.
+    pub fn get_or_train(
+        &self,
+        film: FilmKey,
+        serves: impl Fn(&T) -> bool,
+        train: impl FnOnce() -> Option<T>,
+    ) -> Option<Arc<T>> {
+        let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((key, learned)) = last.as_ref() {
+            if *key == film && serves(learned) {
+                return Some(learned.clone());
+            }
+        }
+        let learned = Arc::new(train()?);
+        *last = Some((film, learned.clone()));
+        Some(learned)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::cell::Cell;
+
+    #[test]
+    fn the_first_failing_check_names_its_setting() {
+        let checks = [
+            ("a", 1.0, true, "fine"),
+            ("b", 7.0, false, "must lie in 0..=4"),
+        ];
+        let e = check_ranges("cache", &checks).unwrap_err();
+        assert_eq!(e.to_string(), "cache settings: b = 7: must lie in 0..=4");
+        assert!(check_ranges("cache", &checks[..1]).is_ok());
+    }
+
+    #[test]
+    fn what_was_learned_is_kept_for_its_film_while_it_serves() {
+        let film = |seed| FilmKey {
+            width: 4,
+            height: 4,
+            seed,
+        };
+        let trained = Cell::new(0);
+        let learned: LastFilm<u32> = LastFilm::default();
+        let get = |key, wanted: u32| {
+            learned.get_or_train(
+                key,
+                |&have| have >= wanted,
+                || {
+                    trained.set(trained.get() + 1);
+                    Some(wanted)
+                },
+            )
+        };
+        assert_eq!(*get(film(1), 2).unwrap(), 2);
+        assert_eq!(*get(film(1), 1).unwrap(), 2, "kept: it serves");
+        assert_eq!(trained.get(), 1);
+        assert_eq!(
+            *get(film(1), 3).unwrap(),
+            3,
+            "trained again: it does not serve"
+        );
+        assert_eq!(*get(film(2), 1).unwrap(), 1, "trained again: another film");
+        assert_eq!(trained.get(), 3);
+        // A stopped training keeps nothing and returns nothing.
+        assert!(learned.get_or_train(film(3), |_| true, || None).is_none());
+    }
+}
