@@ -56,7 +56,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Stop after the sample wave (1, 2, 4, … spp) that ends past this many seconds of
-    /// rendering; the outputs record the spp reached.
+    /// rendering (an integrator's training included); the outputs record the spp reached.
     #[arg(long, value_parser = parse_seconds, allow_hyphen_values = true)]
     pub time_limit: Option<f64>,
     /// Also write the EXR and PNG after every wave, so the output always holds the samples
@@ -427,7 +427,10 @@ impl Waves<'_> {
         let bar = progress_bar((x1 - x0) as u64 * (y1 - y0) as u64 * target, verbose, "");
         let progress = |n: u64| bar.inc(n);
         let limit = args.time_limit.map(Duration::from_secs_f64);
-        let start = Instant::now();
+        // The limit counts the precomputation (a radiance cache's training) as render time.
+        let start = Instant::now()
+            .checked_sub(stats.precompute)
+            .unwrap_or_else(Instant::now);
         let mut sums = SampleSums::empty(
             film.window(),
             film.width,

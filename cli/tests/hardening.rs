@@ -622,6 +622,53 @@ fn time_limit_stops_after_the_wave_that_crosses_it() {
     );
 }
 
+/// An integrator's training (a radiance cache's) is render time: `--time-limit` counts it, and
+/// SIGTERM stops it within a chunk of training paths, writing nothing.
+#[cfg(unix)]
+#[test]
+fn training_counts_toward_the_time_limit_and_stops_on_a_signal() {
+    use std::process::{Command, Stdio};
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    // About a second of training on an idle machine; all 64 samples take a tenth of it.
+    let cache = "RadianceCache(training_spp: 512)";
+    let err = render_ok(
+        &["--integrator", cache, "--spp", "64", "--time-limit", "0.2"],
+        d,
+    );
+    assert!(err.contains("of 64 spp (time limit"), "{err}");
+    // A million training paths per pixel would take hours: a signal must stop them.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tress"))
+        .args(["render", "scene.ron", "--quiet", "--out", "never.exr"])
+        .args(["--integrator", "RadianceCache(training_spp: 4096)"])
+        .current_dir(d)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    let kill = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let sent = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            sent.elapsed() < Duration::from_secs(10),
+            "training did not stop"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    assert_eq!(status.code(), Some(143), "{err}");
+    assert!(err.contains("nothing written"), "{err}");
+    assert!(!d.join("never.exr").exists());
+}
+
 #[test]
 fn waves_and_partial_images_do_not_change_the_image() {
     let (dir, scene) = scene_dir(SCENE);
