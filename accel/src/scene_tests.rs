@@ -1,6 +1,6 @@
 use super::*;
 use crate::geometry::Rotation;
-use crate::test_util::{hair, line, rng_dir, shared_data};
+use crate::test_util::{hair, hair_file_bytes, line, rng_dir, HairArrays};
 use tress_core::math::Frame;
 use tress_core::rng::Pcg32;
 
@@ -531,50 +531,66 @@ fn bad_objects_are_refused_with_their_name() {
         .is_err());
 }
 
+/// A `.hair` file read as scene files name it (Z-up, converted to Y-up) and built: every strand,
+/// segment and point reaches Embree, the bounds are the Y-up ones padded by the radius, and
+/// rays through the patch hit it while rays beside it miss.
 #[test]
-fn straight_hair_builds_and_is_hit() {
-    let Some(path) = shared_data("straight.hair") else {
-        return;
-    };
+fn a_hair_file_builds_and_is_hit() {
+    // A 20 × 20 patch of straight strands hanging from z = 10 to z = 3, 0.2 apart: the radius
+    // (the header's thickness 0.25, halved) closes the gaps between them.
+    let points: Vec<[f32; 3]> = (0..400)
+        .flat_map(|s| {
+            (0..8).map(move |k| {
+                [
+                    0.2 * (s % 20) as f32,
+                    0.2 * (s / 20) as f32,
+                    10.0 - k as f32,
+                ]
+            })
+        })
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("patch.hair");
+    std::fs::write(
+        &path,
+        hair_file_bytes(400, &points, &HairArrays::default(), 7),
+    )
+    .unwrap();
     let g = crate::HairFile::new(&path).read().unwrap();
-    let start = std::time::Instant::now();
     let accel = SceneBuilder::new()
         .unwrap()
         .add_hair(&g, &HairOptions::default(), 0)
         .unwrap()
         .build()
         .unwrap();
-    println!(
-        "straight.hair: built in {:?}\n{}",
-        start.elapsed(),
-        accel.info()
-    );
     let info = accel.info();
     assert_eq!(
         (info.strands, info.segments, info.points),
-        (10_000, 150_000, 160_000)
+        (400, 2800, 3200)
     );
-    // Y-up after conversion: the head of hair spans y ∈ [−22.71, 63.68] (the file's z).
+    // (x, y, z) → (x, z, −y), padded by the radius 0.125.
+    let (lo, hi) = (
+        Vec3::new(-0.125, 2.875, -3.925),
+        Vec3::new(3.925, 10.125, 0.125),
+    );
     assert!(
-        (info.bounds.min.y - (-22.71 - 0.05)).abs() < 0.02,
+        (info.bounds.min - lo).abs().max_element() < 1e-3
+            && (info.bounds.max - hi).abs().max_element() < 1e-3,
         "{:?}",
         info.bounds
     );
-    assert!(
-        (info.bounds.max.y - (63.68 + 0.05)).abs() < 0.02,
-        "{:?}",
-        info.bounds
-    );
-    let c = info.bounds.center();
-    let hits = (0..100)
-        .filter(|i| {
-            let y = c.y + (*i as f32 - 50.0) * 0.3;
-            accel
-                .intersect(&Ray::new(Vec3::new(c.x, y, 200.0), -Vec3::Z))
-                .is_some()
-        })
-        .count();
-    assert!(hits > 50, "{hits} of 100 rays through the middle hit hair");
+    let hits = |x: f32| {
+        (0..100)
+            .filter(|i| {
+                let y = 3.5 + 0.06 * *i as f32;
+                accel
+                    .intersect(&Ray::new(Vec3::new(x, y, 10.0), -Vec3::Z))
+                    .is_some()
+            })
+            .count()
+    };
+    assert_eq!(hits(1.9), 100);
+    assert_eq!(hits(4.1), 0);
 }
 
 #[test]

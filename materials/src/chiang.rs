@@ -189,8 +189,7 @@ pub struct Chiang {
 /// Everything that depends on (wo, h) only, shared by eval, pdf and sample. Per-lobe values sit
 /// in lane p of an `f32x4`, so the four lobes are evaluated at once.
 struct Geometry {
-    /// wo's direction in the normal plane, (wo.y, wo.z), unnormalised; (1, 0) along the fiber,
-    /// where φ_o is undefined and taken as 0.
+    /// wo's direction in the normal plane, unnormalised ([`normal_plane_direction`]).
     normal_o: (f32, f32),
     /// sin θ_o' and |cos θ_o'| seen by each lobe (tilted for p < 3).
     sin_o: f32x4,
@@ -317,11 +316,7 @@ impl Chiang {
         let [phi_r, phi_tt, phi_trt] =
             [0.0f32, 1.0, 2.0].map(|p| 2.0 * p * gamma_t - 2.0 * gamma_o + p * PI);
         Geometry {
-            normal_o: if wo.y == 0.0 && wo.z == 0.0 {
-                (1.0, 0.0)
-            } else {
-                (wo.y, wo.z)
-            },
+            normal_o: normal_plane_direction(wo),
             sin_o: sin_o * self.tilt_cos + cos_o * self.tilt_sin,
             cos_o: (cos_o * self.tilt_cos - sin_o * self.tilt_sin).abs(),
             phi_exit: f32x4::new([phi_r, phi_tt, phi_trt, 0.0]),
@@ -518,6 +513,24 @@ impl Bcsdf for Chiang {
                 *v = ap * mn;
             }
         }
+    }
+}
+
+/// `w`'s direction in the normal plane, unnormalised, the reference of azimuths: (w.y, w.z), but
+/// scaled up by its larger component where its squared length is not a normal f32 (sideways
+/// parts under ~1e-19, w along the fiber), since that length and the cross and dot products
+/// with wi would lose their precision there and vanish further down (`draw` divided 0 by 0);
+/// (1, 0) on the axis itself, where φ is undefined and taken as 0.
+fn normal_plane_direction(w: Vec3) -> (f32, f32) {
+    let (y, z) = (w.y, w.z);
+    if y * y + z * z >= f32::MIN_POSITIVE {
+        return (y, z);
+    }
+    let m = y.abs().max(z.abs());
+    if m == 0.0 {
+        (1.0, 0.0)
+    } else {
+        (y / m, z / m)
     }
 }
 

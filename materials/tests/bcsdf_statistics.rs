@@ -8,7 +8,8 @@
 //! 5. `sampler_matches_pdf_chi2`: χ² of `sample` against `pdf` over the sphere at four (θ_o, h);
 //!    `sampler_matches_pdf_chi2_full_grid` (ignored, ~3× longer) runs all twelve.
 //! 6. `pdf_integrates_to_one`: quadrature of `pdf` over the sphere, 1 ± 1 %.
-//! 7. `outputs_are_finite_and_non_negative`: edge cases and a random sweep.
+//! 7. `outputs_are_finite_and_non_negative`: edge cases and a random sweep;
+//!    `outputs_are_finite_along_the_fiber`: wo along the fiber with tiny sideways parts.
 //!
 //! `eval_cost` (ignored) prints ns per eval/pdf/sample of every instance.
 //!
@@ -669,29 +670,8 @@ fn pdf_integrates_to_one() {
 fn outputs_are_finite_and_non_negative() {
     let all = instances();
     let problems = par_map(&all, |t| {
-        let b = &t.bcsdf;
+        let b = t.bcsdf.as_ref();
         let mut bad = Vec::new();
-        let mut check = |wo: Vec3, wi: Vec3, h: f32, u: [f32; 4]| {
-            let f = b.eval(wo, wi, h);
-            if !(f.is_finite() && f.min_element() >= 0.0) {
-                bad.push(format!("eval(wo {wo}, wi {wi}, h {h}) = {f}"));
-            }
-            let pdf = b.pdf(wo, wi, h);
-            if !(pdf.is_finite() && pdf >= 0.0) {
-                bad.push(format!("pdf(wo {wo}, wi {wi}, h {h}) = {pdf}"));
-            }
-            if let Some(s) = b.sample(wo, h, u) {
-                let ok = s.wi.is_finite()
-                    && (s.wi.length() - 1.0).abs() < 1e-3
-                    && s.f.is_finite()
-                    && s.f.min_element() >= 0.0
-                    && s.pdf.is_finite()
-                    && s.pdf > 0.0;
-                if !ok {
-                    bad.push(format!("sample(wo {wo}, h {h}, u {u:?}) = {s:?}"));
-                }
-            }
-        };
         // Edges: h at and next to ±1, directions at and next to the fiber axis, extreme u.
         let hs = [-1.0, -0.999_999, 0.0, 0.999_999, 1.0];
         let sins = [-1.0, -0.999_99, -0.5, 0.0, 0.5, 0.999_99, 1.0];
@@ -708,7 +688,7 @@ fn outputs_are_finite_and_non_negative() {
                     for phi in [0.0, 1.0, 3.0, -2.0] {
                         let wi = fiber_direction(si, safe_sqrt(1.0 - si * si), phi);
                         for u in us {
-                            check(wo, wi, h, u);
+                            check_finite(b, wo, wi, h, u, &mut bad);
                         }
                     }
                 }
@@ -720,12 +700,109 @@ fn outputs_are_finite_and_non_negative() {
             let wo = sample_uniform_sphere(rng.next_2d());
             let wi = sample_uniform_sphere(rng.next_2d());
             let h = 2.0 * rng.next_1d() - 1.0;
-            check(wo, wi, h, rng.next_4d());
+            check_finite(b, wo, wi, h, rng.next_4d(), &mut bad);
         }
         bad
     });
     for (t, bad) in all.iter().zip(&problems) {
         assert_none(&t.name, bad, "problems", 10);
+    }
+}
+
+/// Outgoing directions along the fiber with a tiny sideways part, of every size down to the
+/// smallest subnormal and in every sideways direction, across h: every output is finite, and
+/// `sample`'s f and pdf are `eval_pdf`'s at its wi (the azimuth of such a wo is as much a
+/// reference for `pdf` as for `sample`). Along the axis itself φ_o is undefined.
+#[test]
+fn outputs_are_finite_along_the_fiber() {
+    // Down to where y² + z² loses its precision (~1e-19) and vanishes (~3e-23), and beyond.
+    let sideways = [
+        1e-4,
+        1e-8,
+        1e-19,
+        1e-22,
+        3e-23,
+        1e-30,
+        1e-40,
+        f32::from_bits(1),
+    ];
+    let mut wos = Vec::new();
+    for x in [1.0f32, -1.0] {
+        for a in sideways.into_iter().chain([0.0]) {
+            for c in sideways {
+                for (sa, sc) in [(1.0, 1.0), (-1.0, 1.0), (1.0, -1.0), (-1.0, -1.0)] {
+                    wos.push(Vec3::new(x, sa * a, sc * c));
+                    wos.push(Vec3::new(x, sc * c, sa * a));
+                }
+            }
+        }
+    }
+    let all = instances();
+    let problems = par_map(&all, |t| {
+        let b = t.bcsdf.as_ref();
+        let mut bad = Vec::new();
+        let mut rng = Sampler::from_seed(seed(8, &t.name, 0.0, 0.0));
+        for &wo in &wos {
+            for h in [-1.0, -0.999_999, -0.4, 0.0, 0.7, 0.999_999, 1.0] {
+                for _ in 0..3 {
+                    let u = rng.next_4d();
+                    let wi = sample_uniform_sphere(rng.next_2d());
+                    check_finite(b, wo, wi, h, u, &mut bad);
+                    let Some(s) = b.sample(wo, h, u) else {
+                        continue;
+                    };
+                    // As in `sample_returns_eval_and_pdf`: near the axis φ_i is undefined.
+                    if s.wi.x.abs() > 0.9999 {
+                        continue;
+                    }
+                    let (f, pdf) = b.eval_pdf(wo, s.wi, h);
+                    let f_err = (s.f - f).abs().max_element() / f.max_element().max(1e-30);
+                    let pdf_err = (s.pdf - pdf).abs() / pdf.max(1e-30);
+                    if f_err > 1e-3 || pdf_err > 1e-3 {
+                        bad.push(format!(
+                            "wo {wo:?} h {h} wi {}: sample (f {}, pdf {}) vs eval {f}, pdf {pdf}",
+                            s.wi, s.f, s.pdf
+                        ));
+                    }
+                }
+            }
+        }
+        bad
+    });
+    for (t, bad) in all.iter().zip(&problems) {
+        assert_none(&t.name, bad, "problems", 10);
+    }
+}
+
+/// Pushes onto `bad` every output of `b` at (wo, wi, h, u) that is not finite, not
+/// non-negative, or (directions) not of unit length.
+fn check_finite(b: &dyn Bcsdf, wo: Vec3, wi: Vec3, h: f32, u: [f32; 4], bad: &mut Vec<String>) {
+    let unit = |w: Vec3| w.is_finite() && (w.length() - 1.0).abs() < 1e-3;
+    let (f_both, pdf_both) = b.eval_pdf(wo, wi, h);
+    for (what, f, pdf) in [
+        ("eval, pdf", b.eval(wo, wi, h), b.pdf(wo, wi, h)),
+        ("eval_pdf", f_both, pdf_both),
+    ] {
+        if !(f.is_finite() && f.min_element() >= 0.0 && pdf.is_finite() && pdf >= 0.0) {
+            bad.push(format!("{what}(wo {wo:?}, wi {wi:?}, h {h}) = {f}, {pdf}"));
+        }
+    }
+    if let Some(s) = b.sample(wo, h, u) {
+        let ok = unit(s.wi)
+            && s.f.is_finite()
+            && s.f.min_element() >= 0.0
+            && s.pdf.is_finite()
+            && s.pdf > 0.0;
+        if !ok {
+            bad.push(format!("sample(wo {wo:?}, h {h}, u {u:?}) = {s:?}"));
+        }
+    }
+    if let Some((wi, weight)) = b.sample_weight(wo, h, u) {
+        if !(unit(wi) && weight.is_finite() && weight.min_element() >= 0.0) {
+            bad.push(format!(
+                "sample_weight(wo {wo:?}, h {h}, u {u:?}) = ({wi:?}, {weight})"
+            ));
+        }
     }
 }
 

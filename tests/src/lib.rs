@@ -66,20 +66,18 @@ pub fn film(width: u32, height: u32, spp: u32, seed: u64) -> FilmSettings {
     }
 }
 
-/// `shared/data` beside the workspace, if present (tests skip what needs it otherwise).
-pub fn shared_data(rel: &str) -> Option<PathBuf> {
+/// A file of the real data set, `../shared/data` beside the workspace. The tests that read one
+/// are ignored; run without the data, they fail here.
+pub fn shared_data(rel: &str) -> PathBuf {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../../shared/data")
         .join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!(
-            "note: {} not found; skipping the part of the test that needs it",
-            p.display()
-        );
-        None
-    }
+    assert!(
+        p.exists(),
+        "{} is absent: this test needs the real data set beside the workspace (../shared/data)",
+        p.display()
+    );
+    p
 }
 
 /// The hair ball of [`hair_ball_scene`], as geometry.
