@@ -10,7 +10,9 @@
 //! the fiber's own sampling routine. The sample's weight is f over the mixture's exact density
 //! (the fiber's density at a guided direction comes from its `pdf`, the guide's at a
 //! fiber-sampled direction from its bins), and next-event estimation is MIS-weighted against
-//! the same mixture, so the estimator is unbiased whatever was learned.
+//! the same mixture, so the estimator is unbiased whatever was learned. Only the first
+//! `guided_vertices` vertices are guided: a mixture's weights vary where the fiber's own are
+//! nearly constant, and along light hair's long paths their products grow heavy tails.
 //!
 //! A fiber has no normal and scatters into the whole sphere, so the guide is a density over the
 //! whole sphere too, in world space, and is mixed with the fiber's density rather than
@@ -31,11 +33,9 @@ mod guide;
 
 pub use guide::Target;
 use guide::{ChunkRecords, Guide, Records, SphereBins};
-
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::sync::atomic::AtomicBool;
-
 use std::time::Instant;
 use tress_core::film::FilmSettings;
 use tress_core::integrator::{
@@ -272,10 +272,11 @@ struct Trained {
     description: String,
 }
 
-/// What training learned: the directions light comes from, and the radiance leaving each cell.
+/// What training learned: the directions light comes from, and (for adjoint-driven roulette)
+/// the radiance leaving each cell.
 struct Learned {
     guide: Guide,
-    radiance: RadianceCache,
+    radiance: Option<RadianceCache>,
 }
 
 impl std::fmt::Debug for Trained {
@@ -347,6 +348,7 @@ impl Trained {
                     vertices.clear();
                     trace(settings, current, ray, scene, sampler, Some(vertices));
                     let lattices = (&lattice, &radiance_lattice);
+                    let radiance_records = settings.adjoint_roulette.then_some(radiance_records);
                     record(
                         settings.target,
                         lattices,
@@ -361,23 +363,30 @@ impl Trained {
                     radiance_records.merge(&radiance_chunk);
                 },
             )?;
+            // Training paths are neither rouletted nor split by the learned radiance, so only
+            // the render needs it.
             learned = Some(Learned {
                 guide: Guide::new(lattice, &records, settings.min_records),
-                radiance: RadianceCache::new(
-                    radiance_lattice,
-                    radiance_records.clone(),
-                    RADIANCE_MIN_RECORDS,
-                ),
+                radiance: None,
             });
             first = paths.end;
         }
-        let learned = learned.expect("at least one training round");
+        let mut learned = learned.expect("at least one training round");
+        if settings.adjoint_roulette {
+            learned.radiance = Some(RadianceCache::new(
+                radiance_lattice,
+                radiance_records,
+                RADIANCE_MIN_RECORDS,
+            ));
+        }
         let description = format!(
-            "{} ({:.1} MB) and {}, from {total} training paths in {rounds} rounds, built in \
-             {:.2} s",
+            "{} ({:.1} MB){}, from {total} training paths in {rounds} rounds, built in {:.2} s",
             learned.guide.describe(),
             learned.guide.bytes() as f64 / 1e6,
-            learned.radiance.describe(),
+            learned
+                .radiance
+                .as_ref()
+                .map_or(String::new(), |r| format!(" and {}", r.describe())),
             start.elapsed().as_secs_f64()
         );
         Some(Trained {
@@ -412,14 +421,14 @@ struct Vertex {
 
 /// Records a training path's vertices, from the last back: the light each continuation
 /// brought back is the radiance leaving the vertex after it; the radiance leaving each vertex
-/// toward the one before goes into `radiance_records`.
+/// toward the one before goes into `radiance_records`, when given.
 fn record(
     target: Target,
     (lattice, radiance_lattice): (&Lattice, &Lattice),
     bins: &SphereBins,
     vertices: &mut [Vertex],
     records: &mut ChunkRecords,
-    radiance_records: &mut RadianceRecords,
+    mut radiance_records: Option<&mut RadianceRecords>,
 ) {
     let mut after = vertices.last().map_or(Rgb::ZERO, |v| v.incident);
     for v in vertices.iter_mut().rev() {
@@ -441,7 +450,9 @@ fn record(
             records.add(lattice, bins, v.p, wi, value);
             leaving += weight * after;
         }
-        radiance_records.add(radiance_lattice, v.p, v.wo, leaving);
+        if let Some(r) = radiance_records.as_mut() {
+            r.add(radiance_lattice, v.p, v.wo, leaving);
+        }
         after = leaving;
     }
 }
@@ -481,8 +492,8 @@ fn trace(
     };
     let guide = learned.map(|l| &l.guide);
     let adjoint = learned
-        .filter(|_| settings.adjoint_roulette && vertices.is_none())
-        .map(|l| &l.radiance);
+        .filter(|_| vertices.is_none())
+        .and_then(|l| l.radiance.as_ref());
     let Some(hit) = scene.intersect(camera_ray) else {
         return scene
             .lights
