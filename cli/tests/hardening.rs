@@ -459,7 +459,7 @@ fn write_env_exr(path: &Path, w: u32, h: u32) {
     img.pixels
         .iter_mut()
         .for_each(|p| *p = tress_core::Rgb::splat(0.5));
-    tress_core::image_io::write_exr(path, &img, &[]).unwrap();
+    to_file(path, |o| tress_core::image_io::write_exr(o, &img, &[])).unwrap();
 }
 
 #[test]
@@ -825,14 +825,14 @@ fn outputs_onto_directories_fail_cleanly_without_temporary_files() {
             &["render", "scene.ron", "--out", "png_taken.exr", "--quiet"],
             "is a directory",
         ),
-        (&["merge", "taken.exr", "a.exr"], "Is a directory"),
+        (&["merge", "taken.exr", "a.exr"], "is a directory"),
         (
             &["diff", "a.exr", "a.exr", "--map", "taken.png"],
-            "Is a directory",
+            "is a directory",
         ),
         (
             &["bcsdf", "plot", "--model", "Chiang()", "--out", "taken.png"],
-            "Is a directory",
+            "is a directory",
         ),
     ];
     for (args, cause) in cases {
@@ -919,9 +919,15 @@ fn diff_of_nan_images_and_merge_onto_a_piece_are_refused() {
     img.pixels
         .iter_mut()
         .for_each(|p| *p = tress_core::Rgb::splat(0.5));
-    tress_core::image_io::write_exr(d.join("fine.exr"), &img, &[]).unwrap();
+    to_file(d.join("fine.exr"), |o| {
+        tress_core::image_io::write_exr(o, &img, &[])
+    })
+    .unwrap();
     img.pixels[5] = tress_core::Rgb::new(f32::NAN, 0.5, 0.5);
-    tress_core::image_io::write_exr(d.join("nan.exr"), &img, &[]).unwrap();
+    to_file(d.join("nan.exr"), |o| {
+        tress_core::image_io::write_exr(o, &img, &[])
+    })
+    .unwrap();
     for args in [
         ["diff", "nan.exr", "fine.exr"],
         ["diff", "fine.exr", "nan.exr"],
@@ -932,12 +938,12 @@ fn diff_of_nan_images_and_merge_onto_a_piece_are_refused() {
     assert_fails_in(
         d,
         &["merge", "piece.exr", "piece.exr"],
-        &["piece.exr", "one of the pieces"],
+        &["piece.exr", "an input of this command"],
     );
     assert_fails_in(
         d,
         &["merge", "./piece.exr", "piece.exr"],
-        &["one of the pieces"],
+        &["an input of this command"],
     );
 }
 
@@ -1043,12 +1049,14 @@ fn concurrent_renders_to_one_output_leave_a_consistent_pair() {
         assert!(attributes
             .iter()
             .any(|(k, v)| k == "tress:dropped_samples" && v == "0"));
-        tress_core::image_io::write_png_tonemapped(
-            d.join("check.png"),
-            &image,
-            0.0,
-            tress_core::image_io::ToneMap::Filmic,
-        )
+        to_file(d.join("check.png"), |o| {
+            tress_core::image_io::write_png_tonemapped(
+                o,
+                &image,
+                0.0,
+                tress_core::image_io::ToneMap::Filmic,
+            )
+        })
         .unwrap();
         assert_eq!(
             std::fs::read(d.join("same.png")).unwrap(),
@@ -1858,9 +1866,15 @@ fn study_references_holding_nan_are_refused() {
         .iter_mut()
         .for_each(|p| *p = tress_core::Rgb::splat(0.5));
     img.pixels[7] = tress_core::Rgb::new(0.5, f32::NAN, 0.5);
-    tress_core::image_io::write_exr(d.join("ref.exr"), &img, &[]).unwrap();
+    to_file(d.join("ref.exr"), |o| {
+        tress_core::image_io::write_exr(o, &img, &[])
+    })
+    .unwrap();
     img.pixels[7] = tress_core::Rgb::new(0.5, 0.5, f32::INFINITY);
-    tress_core::image_io::write_exr(d.join("inf.exr"), &img, &[]).unwrap();
+    to_file(d.join("inf.exr"), |o| {
+        tress_core::image_io::write_exr(o, &img, &[])
+    })
+    .unwrap();
     for reference in ["ref.exr", "inf.exr"] {
         std::fs::write(
             d.join("study.ron"),

@@ -5,10 +5,10 @@ use super::plan::{Plan, PlanReference};
 use super::results::{RefKind, Results};
 use super::stats::{curve, extrapolated_reach, loglog_at, reach, verdict, Point, Reach, Stat};
 use crate::metrics::REL_EPSILON;
-use crate::output::atomic_write;
 use anyhow::Result;
 use std::fmt::Write as _;
 use std::path::PathBuf;
+use tress_core::output_file;
 
 pub(super) fn write_csv(plan: &Plan, res: &Results) -> Result<PathBuf> {
     let mut s = String::from(
@@ -45,7 +45,7 @@ pub(super) fn write_csv(plan: &Plan, res: &Results) -> Result<PathBuf> {
         s.push('\n');
     }
     let path = plan.out.join("results.csv");
-    atomic_write(&path, s.as_bytes())?;
+    output_file::write_bytes(&path, &plan.inputs, s.as_bytes())?;
     Ok(path)
 }
 
@@ -208,7 +208,7 @@ pub(super) fn write_summary(plan: &Plan, res: &Results) -> Result<PathBuf> {
         }
     }
     let path = plan.out.join("summary.csv");
-    atomic_write(&path, s.as_bytes())?;
+    output_file::write_bytes(&path, &plan.inputs, s.as_bytes())?;
     Ok(path)
 }
 
@@ -323,7 +323,7 @@ pub(super) fn write_report(
         scene_section(&mut s, plan, res, si, figures.map(|f| &f[si]));
     }
     let path = plan.out.join("report.md");
-    atomic_write(&path, s.as_bytes())?;
+    output_file::write_bytes(&path, &plan.inputs, s.as_bytes())?;
     Ok(path)
 }
 
