@@ -70,7 +70,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     tress_core::output_file::write(
         std::path::Path::new(&args[1]),
         &tress_core::output_file::Inputs::default(),
-        |out| tress_core::image_io::write_png(out, &image, 0.0),
+        |out| {
+            tress_core::image_io::write_png(out, &image, 0.0)
+                .map_err(Box::<dyn std::error::Error>::from)
+        },
     )?;
     println!("wrote {}", args[1]);
     Ok(())

@@ -14,7 +14,7 @@
 
 use crate::film::Image;
 use crate::math::{Mat3, Mat4, Rgb};
-use crate::output_file::{OutputError, Sink};
+use crate::output_file::Sink;
 use exr::meta::header::standard_names;
 use exr::meta::header::Header;
 use exr::prelude as ex;
@@ -94,9 +94,6 @@ pub enum ImageError {
         /// What is wrong with the data.
         reason: String,
     },
-    /// The output could not be put in place, or may not be written (a directory, an input).
-    #[error(transparent)]
-    Output(#[from] OutputError),
     /// An environment-map setting is out of range (a non-finite rotation, a negative scale).
     #[error("environment map {name} must be {requirement}, got {value}")]
     InvalidParameter {
@@ -917,8 +914,10 @@ mod tests {
     fn to_file(
         path: impl AsRef<Path>,
         write: impl FnOnce(&mut Sink) -> Result<(), ImageError>,
-    ) -> Result<(), ImageError> {
-        output_file::write(path.as_ref(), &Inputs::default(), write)
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        output_file::write(path.as_ref(), &Inputs::default(), |out| {
+            write(out).map_err(Box::from)
+        })
     }
 
     const SUNSET_DWAB: &str = concat!(

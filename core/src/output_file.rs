@@ -8,9 +8,13 @@
 //!   file or the new one and never half of one, and a failure leaves no output behind. A symbolic
 //!   link to a regular file (or to nothing yet) is followed: the file it points to is replaced
 //!   beside itself, and the link survives.
-//! - **a character device or a FIFO** (directly or through links: `/dev/null`, `/dev/stdout`):
-//!   the finished bytes are written into it; it is never replaced by a file. A FIFO that no
-//!   process is reading is refused at once rather than waited on.
+//! - **a character device or a FIFO** (directly or through links: `/dev/null`, `/dev/stdout`
+//!   at a terminal or into a pipe): the finished bytes are written into it; it is never
+//!   replaced by a file. A FIFO that no process is reading is refused at once rather than
+//!   waited on.
+//! - **a file some process has open, named through /proc** (`/dev/stdout` redirected to a file,
+//!   `/dev/fd/N`): the bytes are appended to it, as that process's own writes would be; renaming
+//!   a new file over its name would leave the process writing into a deleted one.
 //! - **a directory, a block device or a socket**: refused by name.
 //!
 //! An output may not replace a file its own command reads ([`Inputs`]): a path that is an input,
@@ -164,27 +168,53 @@ enum Target {
     /// Renamed over `file`: the path with its symbolic links followed (a regular file, or
     /// nothing yet).
     Replace { file: PathBuf },
-    /// Written into: a character device or a FIFO.
-    Stream,
+    /// Written into, at its end: a character device, a FIFO, or a file open in a process.
+    Stream(Stream),
+}
+
+/// How a [`Target::Stream`] is opened.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Stream {
+    /// By its path.
+    Path,
+    /// Through a copy of this process's own descriptor `fd` (`/dev/stdout`, `/dev/fd/N`,
+    /// `/proc/self/fd/N`), so that the output lands where the process's own writes to it do:
+    /// opening the path again would start at another offset and overwrite them.
+    Descriptor(i32),
+}
+
+/// Where the symbolic links of an output's path lead.
+enum Followed {
+    /// A file, or the name of one yet to be made.
+    File(PathBuf),
+    /// A link in /proc (`/dev/stdout`, `/proc/self/fd/1`): the kernel's handle on a file some
+    /// process has open (this one's descriptor, if it is), which renaming a new file over its
+    /// name would take away from that process.
+    OpenFile(Option<i32>),
 }
 
 /// Symbolic links followed from `path` to what they finally name (which may not exist yet);
 /// relative links resolve against their own folder.
-fn follow_links(path: &Path) -> std::io::Result<PathBuf> {
+fn follow_links(path: &Path) -> std::io::Result<Followed> {
     // As many as Linux follows before giving up with ELOOP.
     const MAX_LINKS: usize = 40;
+    let own_descriptors = Path::new("/proc")
+        .join(std::process::id().to_string())
+        .join("fd");
     let mut p = path.to_path_buf();
     for _ in 0..MAX_LINKS {
         match std::fs::symlink_metadata(&p) {
             Ok(m) if m.file_type().is_symlink() => {
+                let dir = std::fs::canonicalize(folder(&p))?;
+                if dir.starts_with("/proc") {
+                    let fd = p.file_name().and_then(|n| n.to_str()?.parse().ok());
+                    return Ok(Followed::OpenFile(fd.filter(|_| dir == own_descriptors)));
+                }
                 let to = std::fs::read_link(&p)?;
-                p = match p.parent() {
-                    Some(dir) if to.is_relative() => dir.join(to),
-                    _ => to,
-                };
+                p = folder(&p).join(to);
             }
-            Ok(_) => return Ok(p),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(p),
+            Ok(_) => return Ok(Followed::File(p)),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Followed::File(p)),
             Err(e) => return Err(e),
         }
     }
@@ -209,47 +239,54 @@ fn folder(file: &Path) -> &Path {
 
 /// What `path` names and how an output is written there; refuses what may not be written.
 fn target(path: &Path, inputs: &Inputs) -> Result<Target, OutputError> {
-    // The kernel's own resolution first: `/dev/stdout` leads through /proc to a pipe that no
-    // path names.
+    // The kernel's own resolution: `/dev/stdout` may lead through /proc to a pipe that no path
+    // names.
     let meta = match std::fs::metadata(path) {
         Ok(m) => Some(m),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
         Err(e) => return Err(io_error(path, "inspect it")(e)),
     };
-    if let Some(m) = &meta {
-        let kind = m.file_type();
-        if kind.is_dir() {
-            return Err(OutputError::Directory {
-                path: path.to_owned(),
-            });
-        }
-        if !kind.is_file() {
-            return special(path, m);
-        }
-    }
-    let file = follow_links(path).map_err(io_error(path, "follow its symbolic links"))?;
-    if file.file_name().is_none() {
+    if meta.as_ref().is_some_and(|m| m.is_dir()) {
         return Err(OutputError::Directory {
             path: path.to_owned(),
         });
     }
-    let canonical = canonical_file(&file);
+    let followed = follow_links(path).map_err(io_error(path, "follow its symbolic links"))?;
+    let (target, canonical) = match (followed, &meta) {
+        (Followed::OpenFile(Some(fd)), Some(m)) => {
+            (special(path, m, Stream::Descriptor(fd))?, None)
+        }
+        (_, Some(m)) if !m.is_file() => (special(path, m, Stream::Path)?, None),
+        (Followed::OpenFile(_), _) => (Target::Stream(Stream::Path), None),
+        (Followed::File(file), _) => {
+            if file.file_name().is_none() {
+                return Err(OutputError::Directory {
+                    path: path.to_owned(),
+                });
+            }
+            let canonical = canonical_file(&file);
+            (Target::Replace { file }, canonical)
+        }
+    };
     if let Some(input) = inputs.find(canonical.as_deref(), meta.as_ref().and_then(identity)) {
         return Err(OutputError::Input {
             path: path.to_owned(),
             input: input.to_owned(),
         });
     }
-    Ok(Target::Replace { file })
+    Ok(target)
 }
 
-/// A path that is neither a regular file nor a directory: streamed into, or refused.
+/// A path written into as `stream`, if its kind allows: character devices and FIFOs, and
+/// anything but a block device through this process's own descriptor (a redirected stdout may
+/// be a file or a socket); the rest is refused.
 #[cfg(unix)]
-fn special(path: &Path, meta: &Metadata) -> Result<Target, OutputError> {
+fn special(path: &Path, meta: &Metadata, stream: Stream) -> Result<Target, OutputError> {
     use std::os::unix::fs::FileTypeExt;
     let kind = meta.file_type();
-    if kind.is_char_device() || kind.is_fifo() {
-        return Ok(Target::Stream);
+    let own = matches!(stream, Stream::Descriptor(_));
+    if kind.is_char_device() || kind.is_fifo() || (own && !kind.is_block_device()) {
+        return Ok(Target::Stream(stream));
     }
     Err(OutputError::Unwritable {
         path: path.to_owned(),
@@ -264,7 +301,7 @@ fn special(path: &Path, meta: &Metadata) -> Result<Target, OutputError> {
 }
 
 #[cfg(not(unix))]
-fn special(path: &Path, _: &Metadata) -> Result<Target, OutputError> {
+fn special(path: &Path, _: &Metadata, _: Stream) -> Result<Target, OutputError> {
     Err(OutputError::Unwritable {
         path: path.to_owned(),
         kind: "special file",
@@ -291,7 +328,11 @@ enum SinkTo {
         file: PathBuf,
         tmp: BufWriter<tempfile::NamedTempFile>,
     },
-    Memory(Cursor<Vec<u8>>),
+    /// Memory, to be written into a stream once complete.
+    Memory {
+        stream: Stream,
+        bytes: Cursor<Vec<u8>>,
+    },
 }
 
 impl Sink {
@@ -305,14 +346,14 @@ impl Write for Sink {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
         match &mut self.to {
             SinkTo::File { tmp: w, .. } => w.write(buf),
-            SinkTo::Memory(w) => w.write(buf),
+            SinkTo::Memory { bytes: w, .. } => w.write(buf),
         }
     }
 
     fn flush(&mut self) -> std::io::Result<()> {
         match &mut self.to {
             SinkTo::File { tmp: w, .. } => w.flush(),
-            SinkTo::Memory(w) => w.flush(),
+            SinkTo::Memory { bytes: w, .. } => w.flush(),
         }
     }
 }
@@ -321,7 +362,7 @@ impl Seek for Sink {
     fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
         match &mut self.to {
             SinkTo::File { tmp: w, .. } => w.seek(pos),
-            SinkTo::Memory(w) => w.seek(pos),
+            SinkTo::Memory { bytes: w, .. } => w.seek(pos),
         }
     }
 }
@@ -349,6 +390,7 @@ enum Staged {
     },
     Stream {
         path: PathBuf,
+        stream: Stream,
         bytes: Vec<u8>,
     },
 }
@@ -391,7 +433,10 @@ impl<'a> Batch<'a> {
                     tmp: BufWriter::new(tmp),
                 }
             }
-            Target::Stream => SinkTo::Memory(Cursor::new(Vec::new())),
+            Target::Stream(stream) => SinkTo::Memory {
+                stream,
+                bytes: Cursor::new(Vec::new()),
+            },
         };
         let mut sink = Sink {
             path: path.to_owned(),
@@ -410,9 +455,10 @@ impl<'a> Batch<'a> {
                     tmp,
                 }
             }
-            SinkTo::Memory(c) => Staged::Stream {
+            SinkTo::Memory { stream, bytes } => Staged::Stream {
                 path: path.to_owned(),
-                bytes: c.into_inner(),
+                stream,
+                bytes: bytes.into_inner(),
             },
         };
         self.staged.push(staged);
@@ -427,8 +473,16 @@ impl<'a> Batch<'a> {
         let mut renames = Vec::new();
         for staged in self.staged {
             match staged {
-                Staged::Stream { path, bytes } => {
-                    let file = open_stream(&path)?;
+                Staged::Stream {
+                    path,
+                    stream,
+                    bytes,
+                } => {
+                    // Checked again: what the path names may have changed while it was written.
+                    if target(&path, self.inputs)? != Target::Stream(stream) {
+                        return Err(OutputError::Changed { path });
+                    }
+                    let file = open_stream(&path, stream)?;
                     streams.push((path, file, bytes));
                 }
                 Staged::Replace { path, file, tmp } => {
@@ -484,38 +538,40 @@ fn sync_folder(dir: &Path) -> Result<(), OutputError> {
     }
 }
 
-/// Opens a character device or FIFO for writing without blocking: a FIFO without a reader is
-/// refused instead of waited on. Writes into it then block as usual.
+/// Opens a [`Target::Stream`] for writing, at its end and without blocking: a FIFO without a
+/// reader is refused instead of waited on. Writes into it then block as usual. Opened without
+/// `O_CREAT`, so nothing is made where nothing was.
 #[cfg(unix)]
-fn open_stream(path: &Path) -> Result<File, OutputError> {
-    use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
-    use std::os::unix::io::AsRawFd;
-    let file = std::fs::OpenOptions::new()
-        .write(true)
-        .custom_flags(libc::O_NONBLOCK | libc::O_NOCTTY)
-        .open(path)
-        .map_err(|e| match e.raw_os_error() {
-            Some(libc::ENXIO) => OutputError::NoReader {
-                path: path.to_owned(),
-            },
-            _ => io_error(path, "open")(e),
-        })?;
-    // Opened without O_CREAT, so nothing was made; but it must still be what was checked.
-    let kind = file
-        .metadata()
-        .map_err(io_error(path, "inspect it"))?
-        .file_type();
-    if !(kind.is_char_device() || kind.is_fifo()) {
-        return Err(OutputError::Changed {
-            path: path.to_owned(),
-        });
-    }
-    let fd = file.as_raw_fd();
-    // SAFETY: `fd` is the open descriptor `file` owns for the duration of both calls; F_GETFL
+fn open_stream(path: &Path, stream: Stream) -> Result<File, OutputError> {
+    use std::os::unix::fs::OpenOptionsExt;
+    use std::os::unix::io::{AsRawFd, FromRawFd};
+    let file = match stream {
+        Stream::Descriptor(fd) => {
+            // SAFETY: F_DUPFD_CLOEXEC touches no memory; it fails cleanly on a closed `fd`.
+            let copy = unsafe { libc::fcntl(fd, libc::F_DUPFD_CLOEXEC, 0) };
+            if copy < 0 {
+                return Err(io_error(path, "open")(std::io::Error::last_os_error()));
+            }
+            // SAFETY: `copy` is a new descriptor that nothing else owns.
+            return Ok(unsafe { File::from_raw_fd(copy) });
+        }
+        Stream::Path => std::fs::OpenOptions::new()
+            .append(true)
+            .custom_flags(libc::O_NONBLOCK | libc::O_NOCTTY)
+            .open(path)
+            .map_err(|e| match e.raw_os_error() {
+                Some(libc::ENXIO) => OutputError::NoReader {
+                    path: path.to_owned(),
+                },
+                _ => io_error(path, "open")(e),
+            })?,
+    };
+    let raw = file.as_raw_fd();
+    // SAFETY: `raw` is the open descriptor `file` owns for the duration of both calls; F_GETFL
     // and F_SETFL read and set its status flags and touch no memory.
     let blocking = unsafe {
-        let flags = libc::fcntl(fd, libc::F_GETFL);
-        flags >= 0 && libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_NONBLOCK) >= 0
+        let flags = libc::fcntl(raw, libc::F_GETFL);
+        flags >= 0 && libc::fcntl(raw, libc::F_SETFL, flags & !libc::O_NONBLOCK) >= 0
     };
     if !blocking {
         return Err(io_error(path, "open")(std::io::Error::last_os_error()));
@@ -524,7 +580,7 @@ fn open_stream(path: &Path) -> Result<File, OutputError> {
 }
 
 #[cfg(not(unix))]
-fn open_stream(path: &Path) -> Result<File, OutputError> {
+fn open_stream(path: &Path, _: Stream) -> Result<File, OutputError> {
     Err(OutputError::Unwritable {
         path: path.to_owned(),
         kind: "special file",
@@ -701,5 +757,50 @@ mod tests {
             names_in(d),
             ["fifo.csv", "null.csv", "socket.csv", "to_fifo.csv"]
         );
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn files_open_through_proc_are_appended_to_not_replaced() {
+        use std::os::unix::fs::MetadataExt;
+        use std::os::unix::io::AsRawFd;
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        std::fs::write(d.join("log.txt"), "header\n").unwrap();
+        let held = std::fs::OpenOptions::new()
+            .append(true)
+            .open(d.join("log.txt"))
+            .unwrap();
+        let inode = held.metadata().unwrap().ino();
+        // As `/dev/stdout` names a redirected stdout: directly, and through a link of ours.
+        let proc = PathBuf::from(format!("/proc/self/fd/{}", held.as_raw_fd()));
+        std::os::unix::fs::symlink(&proc, d.join("out.csv")).unwrap();
+        write_bytes(&proc, &Inputs::default(), b"one\n").unwrap();
+        write_bytes(&d.join("out.csv"), &Inputs::default(), b"two\n").unwrap();
+        assert_eq!(
+            std::fs::read_to_string(d.join("log.txt")).unwrap(),
+            "header\none\ntwo\n"
+        );
+        assert_eq!(std::fs::metadata(d.join("log.txt")).unwrap().ino(), inode);
+        // Another process's descriptor is opened again, at the file's end.
+        let mut child = std::process::Command::new("sleep")
+            .arg("30")
+            .stdout(held.try_clone().unwrap())
+            .spawn()
+            .unwrap();
+        let theirs = PathBuf::from(format!("/proc/{}/fd/1", child.id()));
+        let written = write_bytes(&theirs, &Inputs::default(), b"three\n");
+        child.kill().unwrap();
+        child.wait().unwrap();
+        written.unwrap();
+        assert_eq!(
+            std::fs::read_to_string(d.join("log.txt")).unwrap(),
+            "header\none\ntwo\nthree\n"
+        );
+        // The open file is an input: refused.
+        let inputs: Inputs = [d.join("log.txt")].into_iter().collect();
+        let err = write_bytes(&proc, &inputs, b"x").unwrap_err();
+        assert!(matches!(err, OutputError::Input { .. }), "{err}");
+        assert_eq!(names_in(d), ["log.txt", "out.csv"]);
     }
 }

@@ -29,8 +29,10 @@ pub fn render_ok(args: &[&str], cwd: &Path) -> String {
 pub fn to_file(
     path: impl AsRef<Path>,
     write: impl FnOnce(&mut Sink) -> Result<(), ImageError>,
-) -> Result<(), ImageError> {
-    tress_core::output_file::write(path.as_ref(), &Inputs::default(), write)
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    tress_core::output_file::write(path.as_ref(), &Inputs::default(), |out| {
+        write(out).map_err(Box::from)
+    })
 }
 
 /// A tiny scene that renders in milliseconds: procedural hair ball, a sphere, sky and sun.

@@ -206,10 +206,10 @@ impl SceneRunner<'_> {
         // Both or neither: a cached EXR is read back on the next run, its PNG is not.
         let mut files = Batch::new(self.inputs);
         files.add(&job.exr, |out| {
-            image_io::write_exr(out, &output.image, &attributes)
+            Ok::<_, anyhow::Error>(image_io::write_exr(out, &output.image, &attributes)?)
         })?;
         files.add(&job.exr.with_extension("png"), |out| {
-            image_io::write_png(out, &output.image, 0.0)
+            Ok::<_, anyhow::Error>(image_io::write_png(out, &output.image, 0.0)?)
         })?;
         files.commit()?;
         self.rendered += 1;
