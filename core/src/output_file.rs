@@ -13,8 +13,9 @@
 //!   replaced by a file. A FIFO that no process is reading is refused at once rather than
 //!   waited on.
 //! - **a file some process has open, named through /proc** (`/dev/stdout` redirected to a file,
-//!   `/dev/fd/N`): the bytes are appended to it, as that process's own writes would be; renaming
-//!   a new file over its name would leave the process writing into a deleted one.
+//!   `/dev/fd/N`): written through this process's own descriptor, where its other writes go, or
+//!   appended to another process's file; renaming a new file over its name would leave the
+//!   process writing into a deleted one.
 //! - **a directory, a block device or a socket**: refused by name.
 //!
 //! An output may not replace a file its own command reads ([`Inputs`]): a path that is an input,
