@@ -67,7 +67,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             image.set(x, y, sum / spp as f32);
         }
     }
-    tress_core::image_io::write_png(&args[1], &image, 0.0)?;
+    tress_core::output_file::write(
+        std::path::Path::new(&args[1]),
+        &tress_core::output_file::Inputs::default(),
+        |out| {
+            tress_core::image_io::write_png(out, &image, 0.0)
+                .map_err(Box::<dyn std::error::Error>::from)
+        },
+    )?;
     println!("wrote {}", args[1]);
     Ok(())
 }

@@ -6,6 +6,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
 use tress_core::math::{fiber_direction, unit, Vec3};
+use tress_core::output_file::{self, Inputs};
 use tress_core::{Bcsdf, Sampler};
 use tress_materials::HairModel;
 
@@ -242,7 +243,10 @@ fn eval(a: EvalArgs) -> Result<()> {
         writeln!(out, "{},{},{},{}", f.x, f.y, f.z, bcsdf.pdf(wo, wi, h))?;
     }
     match a.output {
-        Some(p) => tress_scene::output::atomic_write(&p, out.as_bytes())?,
+        Some(p) => {
+            let inputs: Inputs = [&a.input].into_iter().collect();
+            output_file::write_bytes(&p, &inputs, out.as_bytes())?
+        }
         None => print!("{out}"),
     }
     Ok(())
@@ -347,7 +351,8 @@ fn plot(a: PlotArgs) -> Result<()> {
         },
     ];
     let stem = a.out.with_extension("");
-    write_charts(&stem, &charts, 640, 440)?;
+    // The model is given on the command line: no file is read.
+    write_charts(&stem, &Inputs::default(), &charts, 640, 440)?;
     eprintln!(
         "wrote {} and {}",
         stem.with_extension("png").display(),

@@ -20,13 +20,13 @@ use clap::Args;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use tress_core::film::FilmSettings;
+use tress_core::output_file::{self, Inputs};
 use tress_core::render::render_samples;
 use tress_core::{Hit, HitKind, Image, Integrator, Ray, Rgb, Sampler, Scene};
 use tress_dual_uniform::DualSettings;
 use tress_materials::dual_scattering::{DensityFactors, MultipleScattering};
 use tress_scene::integrators::IntegratorDesc;
 use tress_scene::metrics::REL_EPSILON;
-use tress_scene::output::atomic_write;
 use tress_scene::scene_desc::{self, SceneDesc};
 
 #[derive(Args, Debug)]
@@ -377,6 +377,11 @@ impl Fitting<'_> {
 
 pub fn run(args: CalibrateArgs) -> Result<()> {
     let (desc, target, reference_integrator) = load(&args)?;
+    let inputs = desc.inputs(&args.scene)?;
+    // Refused before the renders, not after.
+    if let Some(out) = &args.out {
+        output_file::check(out, &inputs)?;
+    }
     let pool = args.run.thread_pool()?;
     let built =
         pool.install(|| scene_desc::build(&desc, &args.scene, &crate::limits_from_env()))?;
@@ -428,7 +433,7 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         default: (default_x, default_y),
     };
     let best = fitting.best(&args.path_bounces)?;
-    conclude(&args, &fitting, &best, &reference)
+    conclude(&args, &fitting, &best, &reference, &inputs)
 }
 
 /// Renders the fitted factors to check them, says how well they match, and writes them with
@@ -438,6 +443,7 @@ fn conclude(
     fitting: &Fitting,
     best: &Candidate,
     reference: &Image,
+    inputs: &Inputs,
 ) -> Result<()> {
     let Candidate {
         path_bounces,
@@ -486,7 +492,7 @@ fn conclude(
             tress_scene::ron_options()
                 .to_string_pretty(&fitted, ron::ser::PrettyConfig::default())?
         );
-        atomic_write(out, text.as_bytes())?;
+        output_file::write_bytes(out, inputs, text.as_bytes())?;
         println!("wrote {}", out.display());
     }
     Ok(())

@@ -24,6 +24,7 @@ use clap::Args;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use tress_core::image_io::{self, ToneMap};
+use tress_core::output_file::Inputs;
 use tress_core::Image;
 use tress_scene::metrics::{
     avg3, check_compatible, check_finite, error_map, metrics, resolve_region, MapKind, Metrics,
@@ -308,8 +309,15 @@ fn write_map(
         height: rect.h,
         values,
     };
-    plot::write_heat_maps(map, &[panel], scale, MapKind::from(args.map_kind).label())
-        .with_context(|| format!("writing the error map {}", map.display()))?;
+    let inputs: Inputs = [&args.a, &args.b].into_iter().collect();
+    plot::write_heat_maps(
+        map,
+        &inputs,
+        &[panel],
+        scale,
+        MapKind::from(args.map_kind).label(),
+    )
+    .with_context(|| format!("writing the error map {}", map.display()))?;
     Ok(scale)
 }
 

@@ -140,7 +140,12 @@ fn init(path: &std::path::Path) -> Result<()> {
     if path.exists() {
         anyhow::bail!("{} exists: not overwritten", path.display());
     }
-    tress_scene::output::atomic_write(path, STARTER_SCENE.as_bytes())?;
+    // Written from the binary itself: no file is read.
+    tress_core::output_file::write_bytes(
+        path,
+        &tress_core::output_file::Inputs::default(),
+        STARTER_SCENE.as_bytes(),
+    )?;
     eprintln!(
         "wrote {}; render it with: tress render {}",
         path.display(),

@@ -11,6 +11,7 @@ use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::PathBuf;
 use tress_core::image_io::Attribute;
+use tress_core::output_file::{self, Inputs};
 use tress_core::render::{dyadic_cover, SampleSums};
 /// `tress merge`.
 #[derive(Args, Debug)]
@@ -39,7 +40,9 @@ pub struct MergeArgs {
 }
 
 pub fn run(args: MergeArgs) -> Result<()> {
-    check_output(&args)?;
+    // An input replaced by the merge would be lost.
+    let inputs: Inputs = args.pieces.iter().collect();
+    check_output(&args, &inputs)?;
     let pieces = args
         .pieces
         .iter()
@@ -63,7 +66,8 @@ pub fn run(args: MergeArgs) -> Result<()> {
     }
     args.preview.write_with(
         &args.out,
-        |p| write_render(p, &merged, args.sums, &identity, &attributes),
+        &inputs,
+        |o| write_render(o, &merged, args.sums, &identity, &attributes),
         &merged.image(),
     )?;
     if !args.quiet {
@@ -82,8 +86,9 @@ pub fn run(args: MergeArgs) -> Result<()> {
     Ok(())
 }
 
-/// Refuses an output that is not an EXR, or that is one of the pieces.
-fn check_output(args: &MergeArgs) -> Result<()> {
+/// Refuses, before reading the pieces, an output that is not an EXR or that could not be
+/// written ([`output_file::check`]: a directory, one of the pieces).
+fn check_output(args: &MergeArgs, inputs: &Inputs) -> Result<()> {
     if !args
         .out
         .extension()
@@ -95,20 +100,8 @@ fn check_output(args: &MergeArgs) -> Result<()> {
             args.out.display()
         );
     }
-    // The pieces are read before the output is written, but an input replaced by the merge is
-    // lost: refuse rather than overwrite one.
-    if let Ok(out) = args.out.canonicalize() {
-        if let Some(p) = args
-            .pieces
-            .iter()
-            .find(|p| p.canonicalize().is_ok_and(|p| p == out))
-        {
-            bail!(
-                "{}: the output is one of the pieces ({}); merging would overwrite it",
-                args.out.display(),
-                p.display()
-            );
-        }
+    for path in args.preview.outputs(&args.out) {
+        output_file::check(&path, inputs)?;
     }
     Ok(())
 }

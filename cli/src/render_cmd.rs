@@ -17,6 +17,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 use tress_core::film::{Aov, Outputs};
 use tress_core::image_io::Attribute;
+use tress_core::output_file::{self, Inputs};
 use tress_core::render::{self, RenderStats, SampleSums};
 use tress_core::Integrator;
 use tress_scene::integrators::IntegratorDesc;
@@ -189,6 +190,8 @@ struct OutputFiles<'a> {
     args: &'a RenderArgs,
     desc: &'a SceneDesc,
     out: PathBuf,
+    /// The scene and the files it reads, which the outputs may not replace.
+    inputs: Inputs,
     identity: Identity,
     camera: &'a tress_core::Camera,
 }
@@ -242,7 +245,8 @@ impl OutputFiles<'_> {
             .with_context(|| format!("locking {} for writing", folder.display()))?;
         let written = self.args.preview.write_with(
             &self.out,
-            |p| render_file::write_render(p, sums, self.args.sums, &self.identity, &attributes),
+            &self.inputs,
+            |o| render_file::write_render(o, sums, self.args.sums, &self.identity, &attributes),
             &sums.image(),
         );
         drop(turn);
@@ -252,7 +256,8 @@ impl OutputFiles<'_> {
 
 pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
     let desc = load_with_overrides(&args)?;
-    let out = output_path(&args)?;
+    let inputs = desc.inputs(&args.scene)?;
+    let out = output_path(&args, &inputs)?;
     let pool = args.run.thread_pool()?;
     let verbose = !args.run.quiet;
 
@@ -271,6 +276,7 @@ pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
         args: &args,
         desc: &desc,
         out: out.clone(),
+        inputs,
         identity: Identity {
             seed: desc.film.seed,
             scene_hash: scene_hash(&desc, &args.scene)?,
@@ -335,8 +341,8 @@ pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
 }
 
 /// The EXR to write: `--out`, by default `<scene name>.exr`; refused unless an `.exr`, or when
-/// a directory is in the way of it or its PNG.
-fn output_path(args: &RenderArgs) -> Result<PathBuf> {
+/// it or its PNG could not be written (a directory, one of `inputs`: [`output_file::check`]).
+fn output_path(args: &RenderArgs, inputs: &Inputs) -> Result<PathBuf> {
     let out = match &args.out {
         Some(p) => p.clone(),
         None => PathBuf::from(format!("{}.exr", scene_stem(&args.scene))),
@@ -351,11 +357,9 @@ fn output_path(args: &RenderArgs) -> Result<PathBuf> {
             out.display()
         );
     }
-    // Refused before rendering, not after: a directory in the way of either output.
-    for path in [out.clone(), out.with_extension("png")] {
-        if path.is_dir() {
-            bail!("--out {}: {} is a directory", out.display(), path.display());
-        }
+    // Refused before rendering, not after.
+    for path in args.preview.outputs(&out) {
+        output_file::check(&path, inputs)?;
     }
     Ok(out)
 }
@@ -526,12 +530,7 @@ fn report(args: &RenderArgs, desc: &SceneDesc, out: &Path, rendered: &Rendered, 
         eprintln!("wrote {wrote}");
     }
     // The summary line of `--log-format json`.
-    let outputs = if args.preview.no_preview {
-        vec![out.to_path_buf()]
-    } else {
-        vec![out.to_path_buf(), png.clone()]
-    };
-    log.record("outputs", outputs);
+    log.record("outputs", args.preview.outputs(out));
     log.record("integrator", desc.integrator.name());
     log.record("spp", reached);
     log.record("spp_requested", target);

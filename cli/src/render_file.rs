@@ -26,6 +26,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use tress_core::film::{Aov, Outputs};
 use tress_core::image_io::{self, Attribute, ChannelSamples, ToneMap};
+use tress_core::output_file::{Batch, Inputs, Sink};
 use tress_core::render::{dyadic_cover, quantities, Quantity, SampleSums};
 
 /// Value of the `tress:sums` attribute: the layout of the sum channels. Version 2 sums every
@@ -57,10 +58,10 @@ pub struct Identity {
 }
 
 /// Writes the output channels of `sums` (and with `with_sums` the sums themselves) as an EXR
-/// (ZIP compressed), atomically: display window = the film, data window = the pixel window.
+/// (ZIP compressed) into `out`: display window = the film, data window = the pixel window.
 /// `attributes` are added to the sample range, seed, scene hash, software and sums format.
 pub fn write_render(
-    path: &Path,
+    out: &mut Sink,
     sums: &SampleSums,
     with_sums: bool,
     identity: &Identity,
@@ -111,7 +112,7 @@ pub fn write_render(
     let all: Vec<(&str, Attribute)> = own.into_iter().chain(attributes.iter().cloned()).collect();
     // The message already names the cause; anyhow would print its source a second time.
     image_io::write_exr_channels(
-        path,
+        out,
         sums.window,
         (sums.full_width, sums.full_height),
         channels,
@@ -423,28 +424,34 @@ pub struct PreviewArgs {
 }
 
 impl PreviewArgs {
+    /// The outputs written for the EXR at `exr`: itself and, unless disabled, its preview.
+    pub fn outputs(&self, exr: &Path) -> Vec<PathBuf> {
+        let mut paths = vec![exr.to_owned()];
+        if !self.no_preview {
+            paths.push(exr.with_extension("png"));
+        }
+        paths
+    }
+
     /// Writes the EXR at `exr` with `write_exr` and the preview of `image` beside it (same
-    /// name, `.png`) unless disabled: both or neither ([`tress_scene::output::write_together`]), as an EXR
-    /// without its preview would look like a success.
+    /// name, `.png`) unless disabled: both or neither ([`Batch`]), as an EXR without its
+    /// preview would look like a success. Neither may replace one of `inputs`.
     pub fn write_with(
         &self,
         exr: &Path,
-        write_exr: impl FnOnce(&Path) -> Result<()>,
+        inputs: &Inputs,
+        write_exr: impl FnOnce(&mut Sink) -> Result<()>,
         image: &tress_core::Image,
     ) -> Result<()> {
-        let png = exr.with_extension("png");
-        let mut outputs: Vec<(&Path, tress_scene::output::OutputWriter)> =
-            vec![(exr, Box::new(write_exr))];
+        let mut batch = Batch::new(inputs);
+        batch.add(exr, write_exr)?;
         if !self.no_preview {
-            outputs.push((
-                &png,
-                Box::new(|p: &Path| {
-                    image_io::write_png_tonemapped(p, image, self.exposure, self.tonemap)
-                        .map_err(|e| anyhow!("{e}"))
-                }),
-            ));
+            batch.add(&exr.with_extension("png"), |out| {
+                image_io::write_png_tonemapped(out, image, self.exposure, self.tonemap)
+                    .map_err(|e| anyhow!("{e}"))
+            })?;
         }
-        tress_scene::output::write_together(outputs)
+        Ok(batch.commit()?)
     }
 }
 

@@ -532,7 +532,10 @@ fn incompatible_pieces_are_refused_with_clear_errors() {
         .pixels
         .iter_mut()
         .for_each(|p| *p = tress_core::Rgb::ONE);
-    tress_core::image_io::write_exr(d.join("plain.exr"), &plain, &[]).unwrap();
+    to_file(d.join("plain.exr"), |o| {
+        tress_core::image_io::write_exr(o, &plain, &[])
+    })
+    .unwrap();
     std::fs::write(d.join("junk.exr"), b"not an exr").unwrap();
     // A piece whose pixel values were changed after rendering.
     {

@@ -459,7 +459,7 @@ fn write_env_exr(path: &Path, w: u32, h: u32) {
     img.pixels
         .iter_mut()
         .for_each(|p| *p = tress_core::Rgb::splat(0.5));
-    tress_core::image_io::write_exr(path, &img, &[]).unwrap();
+    to_file(path, |o| tress_core::image_io::write_exr(o, &img, &[])).unwrap();
 }
 
 #[test]
@@ -872,14 +872,14 @@ fn outputs_onto_directories_fail_cleanly_without_temporary_files() {
             &["render", "scene.ron", "--out", "png_taken.exr", "--quiet"],
             "is a directory",
         ),
-        (&["merge", "taken.exr", "a.exr"], "Is a directory"),
+        (&["merge", "taken.exr", "a.exr"], "is a directory"),
         (
             &["diff", "a.exr", "a.exr", "--map", "taken.png"],
-            "Is a directory",
+            "is a directory",
         ),
         (
             &["bcsdf", "plot", "--model", "Chiang()", "--out", "taken.png"],
-            "Is a directory",
+            "is a directory",
         ),
     ];
     for (args, cause) in cases {
@@ -966,9 +966,15 @@ fn diff_of_nan_images_and_merge_onto_a_piece_are_refused() {
     img.pixels
         .iter_mut()
         .for_each(|p| *p = tress_core::Rgb::splat(0.5));
-    tress_core::image_io::write_exr(d.join("fine.exr"), &img, &[]).unwrap();
+    to_file(d.join("fine.exr"), |o| {
+        tress_core::image_io::write_exr(o, &img, &[])
+    })
+    .unwrap();
     img.pixels[5] = tress_core::Rgb::new(f32::NAN, 0.5, 0.5);
-    tress_core::image_io::write_exr(d.join("nan.exr"), &img, &[]).unwrap();
+    to_file(d.join("nan.exr"), |o| {
+        tress_core::image_io::write_exr(o, &img, &[])
+    })
+    .unwrap();
     for args in [
         ["diff", "nan.exr", "fine.exr"],
         ["diff", "fine.exr", "nan.exr"],
@@ -979,12 +985,12 @@ fn diff_of_nan_images_and_merge_onto_a_piece_are_refused() {
     assert_fails_in(
         d,
         &["merge", "piece.exr", "piece.exr"],
-        &["piece.exr", "one of the pieces"],
+        &["piece.exr", "an input of this command"],
     );
     assert_fails_in(
         d,
         &["merge", "./piece.exr", "piece.exr"],
-        &["one of the pieces"],
+        &["an input of this command"],
     );
 }
 
@@ -1090,12 +1096,14 @@ fn concurrent_renders_to_one_output_leave_a_consistent_pair() {
         assert!(attributes
             .iter()
             .any(|(k, v)| k == "tress:dropped_samples" && v == "0"));
-        tress_core::image_io::write_png_tonemapped(
-            d.join("check.png"),
-            &image,
-            0.0,
-            tress_core::image_io::ToneMap::Filmic,
-        )
+        to_file(d.join("check.png"), |o| {
+            tress_core::image_io::write_png_tonemapped(
+                o,
+                &image,
+                0.0,
+                tress_core::image_io::ToneMap::Filmic,
+            )
+        })
         .unwrap();
         assert_eq!(
             std::fs::read(d.join("same.png")).unwrap(),
@@ -1905,9 +1913,15 @@ fn study_references_holding_nan_are_refused() {
         .iter_mut()
         .for_each(|p| *p = tress_core::Rgb::splat(0.5));
     img.pixels[7] = tress_core::Rgb::new(0.5, f32::NAN, 0.5);
-    tress_core::image_io::write_exr(d.join("ref.exr"), &img, &[]).unwrap();
+    to_file(d.join("ref.exr"), |o| {
+        tress_core::image_io::write_exr(o, &img, &[])
+    })
+    .unwrap();
     img.pixels[7] = tress_core::Rgb::new(0.5, 0.5, f32::INFINITY);
-    tress_core::image_io::write_exr(d.join("inf.exr"), &img, &[]).unwrap();
+    to_file(d.join("inf.exr"), |o| {
+        tress_core::image_io::write_exr(o, &img, &[])
+    })
+    .unwrap();
     for reference in ["ref.exr", "inf.exr"] {
         std::fs::write(
             d.join("study.ron"),
@@ -2023,4 +2037,285 @@ fn ply_properties_are_read_as_declared_or_refused() {
     .unwrap();
     let o = tress(&["info", "scene.ron"], dir.path());
     assert!(o.status.success(), "{}", stderr(&o));
+}
+
+/// Makes a FIFO at `path`.
+#[cfg(unix)]
+fn mkfifo(path: &Path) {
+    let made = std::process::Command::new("mkfifo")
+        .arg(path)
+        .status()
+        .unwrap();
+    assert!(made.success());
+}
+
+#[cfg(unix)]
+fn is_symlink(path: &Path) -> bool {
+    std::fs::symlink_metadata(path)
+        .unwrap()
+        .file_type()
+        .is_symlink()
+}
+
+/// What an output path names decides how it is written, for every command: a character device
+/// or FIFO, directly or through links, is written into and never replaced by a file (run as
+/// root, `render --out /dev/null` replaced the machine's /dev/null); a FIFO nobody reads, and
+/// a socket, are refused by name without blocking; a link to a file (or to nothing yet) is
+/// followed, so the link survives. /dev/null is only ever reached through a link in the test's
+/// folder, so a regression replaces the link, not the device.
+#[cfg(unix)]
+#[test]
+fn outputs_write_into_devices_and_fifos_and_through_links_never_over_them() {
+    use std::os::unix::fs::{symlink, FileTypeExt, OpenOptionsExt};
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    let null_is_a_device = || {
+        std::fs::metadata("/dev/null")
+            .unwrap()
+            .file_type()
+            .is_char_device()
+    };
+    assert!(null_is_a_device());
+    // A render into links to /dev/null (EXR and PNG): done, links and device unchanged.
+    symlink("/dev/null", d.join("null.exr")).unwrap();
+    symlink("/dev/null", d.join("null.png")).unwrap();
+    render_ok(&["--out", "null.exr", "--quiet"], d);
+    assert!(is_symlink(&d.join("null.exr")) && is_symlink(&d.join("null.png")));
+    assert!(null_is_a_device());
+    std::fs::write(d.join("dirs.csv"), "0.2,0,0,1,0.5,0,1\n").unwrap();
+    let eval = |output: &str| {
+        tress(
+            &[
+                "bcsdf", "eval", "--model", "Chiang()", "--input", "dirs.csv", "--output", output,
+            ],
+            d,
+        )
+    };
+    // A FIFO without a reader, directly or through a link, as eval's and merge's output:
+    // refused at once, by name, and still a FIFO.
+    mkfifo(&d.join("fifo.csv"));
+    symlink("fifo.csv", d.join("to_fifo.csv")).unwrap();
+    mkfifo(&d.join("fifo.exr"));
+    render_ok(&["--out", "piece.exr", "--sums", "--quiet"], d);
+    let eval_into = |output| {
+        vec![
+            "bcsdf", "eval", "--model", "Chiang()", "--input", "dirs.csv", "--output", output,
+        ]
+    };
+    for (args, name) in [
+        (eval_into("fifo.csv"), "fifo.csv"),
+        (eval_into("to_fifo.csv"), "to_fifo.csv"),
+        (
+            vec!["merge", "fifo.exr", "piece.exr", "--no-preview", "--quiet"],
+            "fifo.exr",
+        ),
+    ] {
+        assert_fails_in(d, &args, &[name, "no process is reading"]);
+    }
+    for fifo in ["fifo.csv", "fifo.exr"] {
+        assert!(std::fs::metadata(d.join(fifo))
+            .unwrap()
+            .file_type()
+            .is_fifo());
+    }
+    assert!(is_symlink(&d.join("to_fifo.csv")));
+    // With a reader, the reader gets the whole output through the link.
+    let mut reader = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(d.join("fifo.csv"))
+        .unwrap();
+    let o = eval("to_fifo.csv");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut got = String::new();
+    std::io::Read::read_to_string(&mut reader, &mut got).unwrap();
+    assert!(
+        got.starts_with("f_r,f_g,f_b,pdf\n") && got.lines().count() == 2,
+        "{got}"
+    );
+    // `/dev/stdout` redirected to a file: written where the shell's own writes go, between
+    // them (a rename, or opening the path again, lost or overwrote them).
+    let log = d.join("log.txt");
+    let ran = std::process::Command::new("sh")
+        .arg("-c")
+        .arg(
+            "echo before; \"$0\" bcsdf eval --model 'Chiang()' --input dirs.csv \
+             --output /dev/stdout; echo after",
+        )
+        .arg(env!("CARGO_BIN_EXE_tress"))
+        .current_dir(d)
+        .stdout(std::fs::File::create(&log).unwrap())
+        .status()
+        .unwrap();
+    assert!(ran.success());
+    let text = std::fs::read_to_string(&log).unwrap();
+    assert!(
+        text.starts_with("before\nf_r,f_g,f_b,pdf\n") && text.ends_with("\nafter\n"),
+        "{text}"
+    );
+    assert_eq!(text.lines().count(), 4, "{text}");
+    // A socket is refused by name.
+    let _socket = std::os::unix::net::UnixListener::bind(d.join("socket.csv")).unwrap();
+    assert_fails_in(
+        d,
+        &[
+            "bcsdf",
+            "eval",
+            "--model",
+            "Chiang()",
+            "--input",
+            "dirs.csv",
+            "--output",
+            "socket.csv",
+        ],
+        &["socket.csv", "is a socket"],
+    );
+    // A link to a file replaces the file it names, beside it; a link to nothing yet creates it.
+    std::fs::create_dir(d.join("kept")).unwrap();
+    std::fs::write(d.join("kept/old.csv"), "old").unwrap();
+    symlink("kept/old.csv", d.join("to_old.csv")).unwrap();
+    symlink("kept/new.csv", d.join("to_new.csv")).unwrap();
+    for link in ["to_old.csv", "to_new.csv"] {
+        let o = eval(link);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(is_symlink(&d.join(link)));
+    }
+    for file in ["kept/old.csv", "kept/new.csv"] {
+        let text = std::fs::read_to_string(d.join(file)).unwrap();
+        assert!(text.starts_with("f_r,f_g,f_b,pdf\n"), "{file}: {text}");
+    }
+    assert_eq!(files_in(&d.join("kept")), ["new.csv", "old.csv"]);
+    assert!(null_is_a_device());
+}
+
+/// No output replaces a file its own command reads, whatever the name it is given under: the
+/// same path, `..` segments, a symbolic link or a hard link. Refused by name, before the work,
+/// with the input unchanged and nothing written.
+#[test]
+fn outputs_never_replace_an_input_of_their_command() {
+    let scene = SCENE
+        .replace("Sky()", "Environment(file: \"maps/sky.exr\")")
+        .replace(
+            "Procedural(style: Ball, strands: 300, radius: 0.01)",
+            "File(\"ball.hair\")",
+        );
+    let (dir, _) = scene_dir(&scene);
+    let d = dir.path();
+    std::fs::create_dir_all(d.join("maps/sub")).unwrap();
+    write_env_exr(&d.join("maps/sky.exr"), 8, 4);
+    let points = [
+        [0.0, 0.0, 0.0],
+        [0.0, 0.5, 0.0],
+        [0.2, 0.0, 0.0],
+        [0.2, 0.5, 0.0],
+    ];
+    let hair = write_hair(b"HAIR", 2, &points, Some(&[1, 1]), None, 0.01);
+    std::fs::write(d.join("ball.hair"), hair).unwrap();
+    std::fs::write(d.join("dirs.csv"), "0.2,0,0,1,0.5,0,1\n").unwrap();
+    let o = tress(&["info", "scene.ron"], d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    render_ok(&["--out", "piece.exr", "--sums", "--quiet"], d);
+    #[cfg(unix)]
+    {
+        std::fs::hard_link(d.join("scene.ron"), d.join("hard.csv")).unwrap();
+        std::fs::hard_link(d.join("piece.exr"), d.join("twin.exr")).unwrap();
+        std::os::unix::fs::symlink("scene.ron", d.join("scene_link.exr")).unwrap();
+        std::os::unix::fs::symlink("ball.hair", d.join("hair_link.ron")).unwrap();
+        std::os::unix::fs::symlink("piece.exr", d.join("piece_link.png")).unwrap();
+    }
+    let before: Vec<(&str, Vec<u8>)> = [
+        "scene.ron",
+        "maps/sky.exr",
+        "ball.hair",
+        "dirs.csv",
+        "piece.exr",
+    ]
+    .into_iter()
+    .map(|f| (f, std::fs::read(d.join(f)).unwrap()))
+    .collect();
+    let model = "Chiang()";
+    let mut cases: Vec<(Vec<&str>, &str)> = vec![
+        // The environment map, through `..`.
+        (
+            vec![
+                "render",
+                "scene.ron",
+                "--out",
+                "maps/sub/../sky.exr",
+                "--quiet",
+            ],
+            "maps/sky.exr",
+        ),
+        (
+            vec!["calibrate", "scene.ron", "--out", "scene.ron"],
+            "scene.ron",
+        ),
+        (
+            vec!["calibrate", "scene.ron", "--out", "./maps/../ball.hair"],
+            "ball.hair",
+        ),
+        (
+            vec!["bench", "--scene", "scene.ron", "--csv", "scene.ron"],
+            "scene.ron",
+        ),
+        (
+            vec![
+                "bcsdf", "eval", "--model", model, "--input", "dirs.csv", "--output", "dirs.csv",
+            ],
+            "dirs.csv",
+        ),
+        (
+            vec![
+                "bcsdf",
+                "eval",
+                "--model",
+                model,
+                "--input",
+                "maps/../dirs.csv",
+                "--output",
+                "./dirs.csv",
+            ],
+            "dirs.csv",
+        ),
+        (vec!["merge", "piece.exr", "piece.exr"], "piece.exr"),
+        (
+            vec!["merge", "./maps/../piece.exr", "piece.exr"],
+            "piece.exr",
+        ),
+    ];
+    #[cfg(unix)]
+    cases.extend([
+        // A hard link to the scene as bench's CSV, links to the scene, the hair and a piece.
+        (
+            vec!["bench", "--scene", "scene.ron", "--csv", "hard.csv"],
+            "scene.ron",
+        ),
+        (
+            vec!["render", "scene.ron", "--out", "scene_link.exr", "--quiet"],
+            "scene.ron",
+        ),
+        (
+            vec!["calibrate", "scene.ron", "--out", "hair_link.ron"],
+            "ball.hair",
+        ),
+        (vec!["merge", "twin.exr", "piece.exr"], "piece.exr"),
+        (
+            vec!["diff", "piece.exr", "piece.exr", "--map", "piece_link.png"],
+            "piece.exr",
+        ),
+    ]);
+    for (args, input) in cases {
+        let out = args[args
+            .iter()
+            .position(|a| a.starts_with("--out") || *a == "--csv" || *a == "--map")
+            .map_or(1, |i| i + 1)];
+        assert_fails_in(d, &args, &[out, input, "an input of this command"]);
+        for (file, bytes) in &before {
+            assert_eq!(
+                &std::fs::read(d.join(file)).unwrap(),
+                bytes,
+                "{args:?} changed {file}"
+            );
+        }
+    }
 }

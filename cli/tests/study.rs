@@ -1,7 +1,7 @@
 //! `tress study` and `tress diff` end to end: outputs, resumption, determinism, convergence,
 //! hand-computed metrics and clear errors for bad input.
 
-use crate::common::{stderr, tress};
+use crate::common::{stderr, to_file, tress};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Output;
@@ -523,8 +523,8 @@ fn diff_metrics() {
     let mut a = b.clone();
     a.set(0, 0, glam::Vec3::new(1.5, 1.0, 1.0));
     a.set(0, 1, glam::Vec3::new(1.5, 1.0, 1.0));
-    image_io::write_exr(p("a.exr"), &a, &[]).unwrap();
-    image_io::write_exr(p("b.exr"), &b, &[]).unwrap();
+    to_file(p("a.exr"), |o| image_io::write_exr(o, &a, &[])).unwrap();
+    to_file(p("b.exr"), |o| image_io::write_exr(o, &b, &[])).unwrap();
 
     let o = tress(&["diff", "b.exr", "b.exr"], dir.path());
     assert!(o.status.success(), "{}", stderr(&o));
@@ -575,7 +575,10 @@ fn diff_metrics() {
     assert_eq!(diff_all(&o)[0], 0.0);
 
     // Mismatches name both files.
-    image_io::write_exr(p("c.exr"), &constant_image(3, 2, [1.0; 3]), &[]).unwrap();
+    to_file(p("c.exr"), |o| {
+        image_io::write_exr(o, &constant_image(3, 2, [1.0; 3]), &[])
+    })
+    .unwrap();
     let o = tress(&["diff", "a.exr", "c.exr"], dir.path());
     assert!(!o.status.success());
     let e = stderr(&o);
@@ -658,7 +661,10 @@ fn the_cache_follows_the_contents_of_referenced_files() {
         img.pixels
             .iter_mut()
             .for_each(|p| *p = tress_core::Rgb::splat(radiance));
-        image_io::write_exr(dir.path().join("env.exr"), &img, &[]).unwrap();
+        to_file(dir.path().join("env.exr"), |o| {
+            image_io::write_exr(o, &img, &[])
+        })
+        .unwrap();
     };
     write_env(1.0);
     let scene = SCENE.replace(
@@ -716,6 +722,6 @@ fn the_cache_follows_the_contents_of_referenced_files() {
     let (mut img, attrs) = image_io::read_exr(edited).unwrap();
     img.pixels[0] *= 2.0;
     let attrs: Vec<(&str, String)> = attrs.iter().map(|(k, v)| (k.as_str(), v.clone())).collect();
-    image_io::write_exr(edited, &img, &attrs).unwrap();
+    to_file(edited, |o| image_io::write_exr(o, &img, &attrs)).unwrap();
     assert_eq!(run().0, 1, "the edited render, and only it, is redone");
 }

@@ -1,7 +1,7 @@
 //! Reading and writing images: HDR/EXR environment maps in, float EXR and tone-mapped PNG out.
 //!
-//! Every error names the file and the problem. Outputs are written atomically: the bytes go to a
-//! temporary file in the target's directory, which is synced and then renamed over the target,
+//! Every error names the file and the problem. Images are written into a [`Sink`] of
+//! [`crate::output_file`], which puts them in place atomically (or streams them into a device),
 //! so an interrupted render never leaves a truncated image behind.
 //!
 //! EXR header attributes keep their types ([`Attribute`]: text, int, float, double, 4×4
@@ -14,12 +14,13 @@
 
 use crate::film::Image;
 use crate::math::{Mat3, Mat4, Rgb};
+use crate::output_file::Sink;
 use exr::meta::header::standard_names;
 use exr::meta::header::Header;
 use exr::prelude as ex;
 use exr::prelude::{AttributeValue, Compression, ReadChannels, ReadLayers, Text, WritableImage};
 use std::fs::File;
-use std::io::{BufReader, BufWriter, Read, Write};
+use std::io::{BufReader, Read};
 use std::path::{Path, PathBuf};
 
 /// What can go wrong reading or writing an image.
@@ -384,11 +385,11 @@ pub fn read_exr_attributes(path: impl AsRef<Path>) -> Result<Vec<(String, Attrib
 /// full film and the data window the image's pixel window, so a crop shows in place. `attributes`
 /// become text attributes of the header (scene, integrator, spp, seed, render time, …).
 pub fn write_exr(
-    path: impl AsRef<Path>,
+    out: &mut Sink,
     image: &Image,
     attributes: &[(&str, String)],
 ) -> Result<(), ImageError> {
-    let path = path.as_ref();
+    let path = out.path();
     check_image(image).map_err(|reason| ImageError::InvalidData {
         origin: path.display().to_string(),
         reason,
@@ -404,7 +405,7 @@ pub fn write_exr(
         .map(|(n, v)| (*n, Attribute::Text(v.clone())))
         .collect();
     write_exr_channels(
-        path,
+        out,
         [
             image.x0,
             image.y0,
@@ -417,19 +418,19 @@ pub fn write_exr(
     )
 }
 
-/// Writes a single-part EXR of named channels (lossless ZIP compression), atomically: the
-/// display window is the `film` (width, height) and the data window `window` = `[x0, y0, x1,
+/// Writes a single-part EXR of named channels (lossless ZIP compression): the display window is the `film` (width, height) and the data window `window` = `[x0, y0, x1,
 /// y1)`, whose pixels every channel holds row by row. Names follow OpenEXR's layer convention
 /// (`R`, `A`, `depth.Z`, `albedo.R`). `attributes` keep their types; the standard ones go to
 /// their header fields (module notes).
 pub fn write_exr_channels(
-    path: impl AsRef<Path>,
+    out: &mut Sink,
     window: [u32; 4],
     film: (u32, u32),
     channels: Vec<(String, ChannelSamples)>,
     attributes: &[(&str, Attribute)],
 ) -> Result<(), ImageError> {
-    let path = path.as_ref();
+    let path = out.path().to_owned();
+    let path = path.as_path();
     let invalid = |reason: String| ImageError::InvalidData {
         origin: path.display().to_string(),
         reason,
@@ -517,15 +518,13 @@ pub fn write_exr_channels(
     let mut exr_image = ex::Image::from_layer(layer);
     exr_image.attributes.display_window =
         ex::IntegerBounds::new(ex::Vec2(0, 0), (full_width as usize, full_height as usize));
-    write_atomically(path, |w| {
-        exr_image.write().to_buffered(w).map_err(|e| match e {
-            exr::error::Error::Io(source) => ImageError::Io {
-                path: path.to_owned(),
-                action: "write",
-                source,
-            },
-            e => invalid(format!("cannot encode EXR: {e}")),
-        })
+    exr_image.write().to_buffered(out).map_err(|e| match e {
+        exr::error::Error::Io(source) => ImageError::Io {
+            path: path.to_owned(),
+            action: "write",
+            source,
+        },
+        e => invalid(format!("cannot encode EXR: {e}")),
     })
 }
 
@@ -638,24 +637,20 @@ fn agx(c: Rgb) -> Rgb {
 
 /// Writes an 8-bit sRGB PNG preview of the image's pixel window, each channel scaled by
 /// 2^`exposure_stops` and clamped to [0, 1] ([`ToneMap::Clamp`]).
-pub fn write_png(
-    path: impl AsRef<Path>,
-    image: &Image,
-    exposure_stops: f32,
-) -> Result<(), ImageError> {
-    write_png_tonemapped(path, image, exposure_stops, ToneMap::Clamp)
+pub fn write_png(out: &mut Sink, image: &Image, exposure_stops: f32) -> Result<(), ImageError> {
+    write_png_tonemapped(out, image, exposure_stops, ToneMap::Clamp)
 }
 
 /// Writes an 8-bit PNG preview of the image's pixel window: the radiance scaled by
 /// 2^`exposure_stops`, mapped to display values by `tonemap`, encoded with the sRGB curve, and
 /// marked as sRGB (the `sRGB` chunk, perceptual intent).
 pub fn write_png_tonemapped(
-    path: impl AsRef<Path>,
+    out: &mut Sink,
     image: &Image,
     exposure_stops: f32,
     tonemap: ToneMap,
 ) -> Result<(), ImageError> {
-    let path = path.as_ref();
+    let path = out.path().to_owned();
     let invalid = |reason: String| ImageError::InvalidData {
         origin: path.display().to_string(),
         reason,
@@ -673,23 +668,36 @@ pub fn write_png_tonemapped(
         .flat_map(|p| tonemap.apply(*p * gain).to_array())
         .map(srgb_byte)
         .collect();
+    write_srgb_png(out, image.width, image.height, &bytes)
+}
+
+/// Writes 8-bit sRGB pixels (`rgb`: R, G, B per pixel, rows top to bottom) as a PNG marked as
+/// sRGB (the `sRGB` chunk, perceptual intent).
+pub fn write_srgb_png(
+    out: &mut Sink,
+    width: u32,
+    height: u32,
+    rgb: &[u8],
+) -> Result<(), ImageError> {
+    let path = out.path().to_owned();
     let encode_error = |e: png::EncodingError| match e {
         png::EncodingError::IoError(source) => ImageError::Io {
-            path: path.to_owned(),
+            path: path.clone(),
             action: "write",
             source,
         },
-        e => invalid(format!("cannot encode PNG: {e}")),
+        e => ImageError::InvalidData {
+            origin: path.display().to_string(),
+            reason: format!("cannot encode PNG: {e}"),
+        },
     };
-    write_atomically(path, |w| {
-        let mut encoder = png::Encoder::new(w, image.width, image.height);
-        encoder.set_color(png::ColorType::Rgb);
-        encoder.set_depth(png::BitDepth::Eight);
-        encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
-        let mut writer = encoder.write_header().map_err(encode_error)?;
-        writer.write_image_data(&bytes).map_err(encode_error)?;
-        writer.finish().map_err(encode_error)
-    })
+    let mut encoder = png::Encoder::new(out, width, height);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+    let mut writer = encoder.write_header().map_err(encode_error)?;
+    writer.write_image_data(rgb).map_err(encode_error)?;
+    writer.finish().map_err(encode_error)
 }
 
 /// Display-linear value in [0, 1] → 8-bit sRGB code (clamped; NaN becomes 0).
@@ -726,49 +734,6 @@ fn check_image(image: &Image) -> Result<(), String> {
             image.x0, image.y0, image.full_width, image.full_height
         ));
     }
-    Ok(())
-}
-
-/// A temporary file in `dir` (name ending in `suffix`) for an output to be renamed into
-/// place. Created with the mode of an ordinary new file (0666 less the umask) instead of
-/// tempfile's private 0600, so the renamed output is readable like any other.
-pub fn output_temp_file(dir: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
-    let mut builder = tempfile::Builder::new();
-    builder.suffix(suffix);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o666));
-    }
-    builder.tempfile_in(dir)
-}
-
-/// Runs `write` on a temporary file next to `path`, then syncs it and renames it onto `path`.
-/// On any error the temporary file is removed (dropping `NamedTempFile` deletes it).
-fn write_atomically(
-    path: &Path,
-    write: impl FnOnce(&mut BufWriter<&File>) -> Result<(), ImageError>,
-) -> Result<(), ImageError> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let io = |action: &'static str| {
-        move |source: std::io::Error| ImageError::Io {
-            path: path.to_owned(),
-            action,
-            source,
-        }
-    };
-    let tmp = output_temp_file(dir, ".tmp").map_err(io("create a temporary file next to it"))?;
-    {
-        let mut w = BufWriter::new(tmp.as_file());
-        write(&mut w)?;
-        w.flush().map_err(io("write"))?;
-    }
-    tmp.as_file().sync_all().map_err(io("sync"))?;
-    tmp.persist(path)
-        .map_err(|e| io("move the finished temporary file into place")(e.error))?;
     Ok(())
 }
 
@@ -943,6 +908,17 @@ fn text_string(t: &Text) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::output_file::{self, Inputs};
+
+    /// Writes one output at `path` with `write`, as every caller does.
+    fn to_file(
+        path: impl AsRef<Path>,
+        write: impl FnOnce(&mut Sink) -> Result<(), ImageError>,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        output_file::write(path.as_ref(), &Inputs::default(), |out| {
+            write(out).map_err(Box::from)
+        })
+    }
 
     const SUNSET_DWAB: &str = concat!(
         env!("CARGO_MANIFEST_DIR"),
@@ -1001,7 +977,7 @@ mod tests {
                 "x".to_string(),
             ),
         ];
-        write_exr(&path, &img, &attrs).unwrap();
+        to_file(&path, |o| write_exr(o, &img, &attrs)).unwrap();
         assert_eq!(
             files_in(dir.path()),
             ["render.exr"],
@@ -1043,29 +1019,38 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("out.exr");
         let img = test_image();
-        write_exr(&path, &Image::new(2, 2), &[]).unwrap();
-        write_exr(&path, &img, &[]).unwrap();
+        to_file(&path, |o| write_exr(o, &Image::new(2, 2), &[])).unwrap();
+        to_file(&path, |o| write_exr(o, &img, &[])).unwrap();
         assert!(same_bits(&read_exr(&path).unwrap().0, &img));
         let before = std::fs::read(&path).unwrap();
 
-        let reserved = write_exr(&path, &Image::new(2, 2), &[("channels", "x".into())]);
+        let reserved = to_file(&path, |o| {
+            write_exr(o, &Image::new(2, 2), &[("channels", "x".into())])
+        });
         let msg = reserved.unwrap_err().to_string();
         assert!(
             msg.contains("out.exr") && msg.contains("\"channels\""),
             "{msg}"
         );
         let long = "n".repeat(300);
-        assert!(write_exr(&path, &Image::new(2, 2), &[(long.as_str(), "x".into())]).is_err());
+        assert!(to_file(&path, |o| write_exr(
+            o,
+            &Image::new(2, 2),
+            &[(long.as_str(), "x".into())]
+        ))
+        .is_err());
         let mut short = Image::new(4, 4);
         short.pixels.pop();
-        let msg = write_exr(&path, &short, &[]).unwrap_err().to_string();
+        let msg = to_file(&path, |o| write_exr(o, &short, &[]))
+            .unwrap_err()
+            .to_string();
         assert!(
             msg.contains("out.exr") && msg.contains("15 pixels"),
             "{msg}"
         );
         let mut outside = Image::window([0, 0, 4, 4], 8, 8);
         outside.x0 = 6;
-        assert!(write_exr(&path, &outside, &[]).is_err());
+        assert!(to_file(&path, |o| write_exr(o, &outside, &[])).is_err());
         assert_eq!(
             std::fs::read(&path).unwrap(),
             before,
@@ -1084,7 +1069,9 @@ mod tests {
         }
 
         let nowhere = dir.path().join("missing-dir/out.exr");
-        let msg = write_exr(&nowhere, &img, &[]).unwrap_err().to_string();
+        let msg = to_file(&nowhere, |o| write_exr(o, &img, &[]))
+            .unwrap_err()
+            .to_string();
         assert!(msg.contains("missing-dir/out.exr"), "{msg}");
     }
 
@@ -1094,7 +1081,7 @@ mod tests {
         // 16-line block keeps the chunk table valid for both (ZIP: 16 lines, HTJ2K32: 32).
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("htj2k.exr");
-        write_exr(&path, &Image::new(16, 16), &[]).unwrap();
+        to_file(&path, |o| write_exr(o, &Image::new(16, 16), &[])).unwrap();
         let mut bytes = std::fs::read(&path).unwrap();
         let key = b"compression\0compression\0\x01\0\0\0";
         let at = bytes.windows(key.len()).position(|w| w == key).unwrap() + key.len();
@@ -1187,7 +1174,7 @@ mod tests {
             assert!(matches!(err, ImageError::Corrupt { .. }), "{err:?}");
         }
         let cut = dir.path().join("cut.exr");
-        write_exr(&cut, &Image::new(64, 64), &[]).unwrap();
+        to_file(&cut, |o| write_exr(o, &Image::new(64, 64), &[])).unwrap();
         let exr_bytes = std::fs::read(&cut).unwrap();
         std::fs::write(&cut, &exr_bytes[..exr_bytes.len() * 2 / 3]).unwrap();
         let err = read_rgb(&cut).unwrap_err();
@@ -1242,18 +1229,20 @@ mod tests {
             Rgb::new(0.001, 0.25, 0.18),
             Rgb::ONE,
         ];
-        write_png(&path, &img, 0.0).unwrap();
+        to_file(&path, |o| write_png(o, &img, 0.0)).unwrap();
         let back = image::open(&path).unwrap().into_rgb8();
         assert_eq!(back.dimensions(), (4, 1));
         assert_eq!(back.get_pixel(0, 0).0, [188, 0, 255]);
         assert_eq!(back.get_pixel(1, 0).0, [255, 0, 0]);
         assert_eq!(back.get_pixel(2, 0).0, [3, 137, 118]);
         // One stop up doubles the linear value: 0.25 → 0.5.
-        write_png(&path, &img, 1.0).unwrap();
+        to_file(&path, |o| write_png(o, &img, 1.0)).unwrap();
         let back = image::open(&path).unwrap().into_rgb8();
         assert_eq!(back.get_pixel(2, 0).0[1], 188);
         assert_eq!(files_in(dir.path()), ["preview.png"]);
-        let msg = write_png(&path, &img, f32::NAN).unwrap_err().to_string();
+        let msg = to_file(&path, |o| write_png(o, &img, f32::NAN))
+            .unwrap_err()
+            .to_string();
         assert!(msg.contains("preview.png"), "{msg}");
     }
 
@@ -1289,7 +1278,10 @@ mod tests {
             ("tress:gain", Attribute::Float(0.25)),
             ("tress:scene", Attribute::Text("scènes/a.ron".into())),
         ];
-        write_exr_channels(&path, [4, 1, 7, 3], (10, 5), channels, &attributes).unwrap();
+        to_file(&path, |o| {
+            write_exr_channels(o, [4, 1, 7, 3], (10, 5), channels, &attributes)
+        })
+        .unwrap();
 
         let back = read_exr_attributes(&path).unwrap();
         let mut expected: Vec<(String, Attribute)> = attributes
@@ -1358,9 +1350,11 @@ mod tests {
         let path = dir.path().join("bad.exr");
         let one = || vec![("R".to_string(), ChannelSamples::F32(vec![0.0; 4]))];
         let write = |channels, attributes: &[(&str, Attribute)]| {
-            write_exr_channels(&path, [0, 0, 2, 2], (2, 2), channels, attributes)
-                .unwrap_err()
-                .to_string()
+            to_file(&path, |o| {
+                write_exr_channels(o, [0, 0, 2, 2], (2, 2), channels, attributes)
+            })
+            .unwrap_err()
+            .to_string()
         };
         let msg = write(one(), &[("worldToNDC", Attribute::Text("identity".into()))]);
         assert!(
@@ -1378,9 +1372,11 @@ mod tests {
             "{msg}"
         );
         assert!(write(Vec::new(), &[]).contains("at least one channel"));
-        let msg = write_exr_channels(&path, [0, 0, 3, 2], (2, 2), one(), &[])
-            .unwrap_err()
-            .to_string();
+        let msg = to_file(&path, |o| {
+            write_exr_channels(o, [0, 0, 3, 2], (2, 2), one(), &[])
+        })
+        .unwrap_err()
+        .to_string();
         assert!(msg.contains("not inside the 2x2 film"), "{msg}");
         assert!(!path.exists());
     }
@@ -1444,7 +1440,7 @@ mod tests {
         img.pixels = (0..6).map(|i| Rgb::splat(i as f32 * 0.5)).collect();
         for tonemap in ToneMap::ALL {
             let path = dir.path().join(format!("{tonemap}.png"));
-            write_png_tonemapped(&path, &img, 0.0, tonemap).unwrap();
+            to_file(&path, |o| write_png_tonemapped(o, &img, 0.0, tonemap)).unwrap();
             let file = BufReader::new(File::open(&path).unwrap());
             let reader = png::Decoder::new(file).read_info().unwrap();
             let info = reader.info();

@@ -18,6 +18,7 @@ pub mod light;
 pub mod light_sample;
 pub mod limits;
 pub mod math;
+pub mod output_file;
 pub mod prepare;
 pub mod render;
 pub mod rng;

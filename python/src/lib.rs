@@ -13,19 +13,23 @@ mod study;
 
 use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
+use tress_core::output_file::OutputError;
 
 /// A Rust error as a Python exception, with the message the command line would print: an
 /// `OSError` when a file could not be read or written (with the OS error code, so Python raises
-/// `FileNotFoundError`, `PermissionError`, …), else a `ValueError` (bad input: a scene, a
-/// parameter, a setting).
+/// `FileNotFoundError`, `PermissionError`, …) or an output was refused (a folder, an input of
+/// the study, a FIFO nobody reads), else a `ValueError` (bad input: a scene, a parameter, a
+/// setting).
 fn to_py_err(e: anyhow::Error) -> PyErr {
     let message = format!("{e:#}");
     let io = e
         .chain()
         .find_map(|cause| cause.downcast_ref::<std::io::Error>());
+    let refused = e.chain().any(|cause| cause.is::<OutputError>());
     match (io.and_then(std::io::Error::raw_os_error), io) {
         (Some(code), _) => PyOSError::new_err((code, message)),
         (None, Some(_)) => PyOSError::new_err(message),
+        (None, None) if refused => PyOSError::new_err(message),
         (None, None) => match os_error_code(&message) {
             Some(code) => PyOSError::new_err((code, message)),
             None => PyValueError::new_err(message),

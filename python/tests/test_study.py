@@ -1,5 +1,8 @@
 """tress.study: a tiny study runs, writes its report, reads back as rows, and resumes."""
 
+import os
+import stat
+
 import pytest
 
 import tress
@@ -82,3 +85,32 @@ def test_study_errors(tmp_path, study_file):
     typo.write_text(STUDY.replace("spp: [1, 2, 4]", "sp: [1, 2, 4]"))
     with pytest.raises(ValueError, match=r"typo\.ron:\d+:\d+: .*sp"):
         tress.study(typo, out=tmp_path / "typo")
+
+
+@pytest.mark.parametrize("link", [os.symlink, os.link], ids=["symlink", "hard link"])
+def test_study_tables_never_replace_an_input(study_file, tmp_path, link):
+    out = tmp_path / "guarded"
+    out.mkdir()
+    link(study_file, out / "report.md")
+    before = study_file.read_text()
+    # Refused by name before any render, the study file untouched.
+    with pytest.raises(OSError, match="report.md: is .*smoke.ron, an input of this command"):
+        tress.study(study_file, out=out, quick=True)
+    assert study_file.read_text() == before
+    assert [p.name for p in out.iterdir()] == ["report.md"]
+
+
+def test_study_tables_go_into_devices_and_refuse_fifos_nobody_reads(study_file, tmp_path):
+    out = tmp_path / "special"
+    out.mkdir()
+    os.mkfifo(out / "results.csv")
+    with pytest.raises(OSError, match="results.csv: is a FIFO that no process is reading"):
+        tress.study(study_file, out=out, quick=True)
+    assert stat.S_ISFIFO(os.lstat(out / "results.csv").st_mode)
+    # A link to /dev/null is written into: the link stays, and so does the device.
+    (out / "results.csv").unlink()
+    (out / "results.csv").symlink_to("/dev/null")
+    result = tress.study(study_file, out=out, quick=True)
+    assert result.rendered == 0 and result.summary
+    assert (out / "results.csv").is_symlink()
+    assert stat.S_ISCHR(os.stat("/dev/null").st_mode)

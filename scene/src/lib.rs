@@ -12,7 +12,6 @@ pub mod integrators;
 pub mod lights;
 pub mod materials;
 pub mod metrics;
-pub mod output;
 pub mod paths;
 pub mod picture;
 pub mod placeholders;

@@ -19,6 +19,7 @@ use std::time::Instant;
 use tress_accel::{EmbreeAccel, SceneBuilder};
 use tress_core::film::FilmSettings;
 use tress_core::limits::Limits;
+use tress_core::output_file::Inputs;
 use tress_core::{Accel, Camera, Material, Scene};
 
 /// A whole scene file.
@@ -71,6 +72,15 @@ impl SceneDesc {
             }
         }
         Ok(files)
+    }
+
+    /// The scene file at `scene_path` and every file it reads
+    /// ([`referenced_files`](Self::referenced_files)): what the outputs of a command rendering
+    /// it may not replace.
+    pub fn inputs(&self, scene_path: &Path) -> Result<Inputs> {
+        let mut inputs: Inputs = self.referenced_files(scene_path)?.into_iter().collect();
+        inputs.add(scene_path);
+        Ok(inputs)
     }
 
     /// A hash of the contents of every file the scene reads

@@ -15,12 +15,16 @@
 //! 3. **No process-wide mutable state.** No `static mut`, no `static` of an interior-mutable
 //!    type (atomics, `Cell`s, locks, `OnceLock`, `LazyLock`, …) and no `thread_local!`: state
 //!    lives in values their owners pass in, never beside them. Constant statics are fine.
+//! 4. **One writer.** Library code creates or replaces no file (`fs::write`, `fs::rename`,
+//!    `fs::copy`, `File::create`, `File::create_new`, the `tempfile` crate, `.persist(…)`) outside
+//!    [`WRITER`], `tress_core::output_file`, which every output goes through: there a file is
+//!    synced and renamed into place, and devices, links and the command's inputs are respected.
 //!
 //! The library crates are the workspace members named in the root `Cargo.toml` except the
 //! front ends `cli` and `python`; their modules are found by following `mod` declarations
 //! (and `#[path]`) from `src/lib.rs`, and a file under `src/` that is no module fails the
 //! check (the rules would not see it). Test code — `#[cfg(test)]` items and modules, and the
-//! files of `#[cfg(test)] mod x;` — is not library code and is skipped by all three rules.
+//! files of `#[cfg(test)] mod x;` — is not library code and is skipped by all four rules.
 
 use crate::workspace;
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
@@ -29,6 +33,9 @@ use std::path::{Path, PathBuf};
 /// The workspace members that are front ends (may read the environment); every other member
 /// is a library crate.
 const FRONT_ENDS: [&str; 2] = ["cli", "python"];
+
+/// The one file of library code that writes files: (member, file).
+const WRITER: (&str, &str) = ("core", "src/output_file.rs");
 
 // ---------------------------------------------------------------------------------------------
 // Lexing: identifiers, `::` and punctuation with their lines; comments, literals and
@@ -276,6 +283,8 @@ struct FileScan {
     mods: Vec<ModDecl>,
     /// Mutable process-wide state: (line, what).
     state: Vec<(u32, String)>,
+    /// Method calls: (line, name).
+    methods: Vec<(u32, String)>,
 }
 
 /// Interior-mutable types: a `static` of one is process-wide mutable state.
@@ -528,6 +537,11 @@ fn scan(src: &str) -> FileScan {
                         None => break,
                     }
                     j += 2;
+                }
+                if prev.is_some_and(|p| p.is_punct('.'))
+                    && t.get(i + 1).is_some_and(|x| x.is_punct('('))
+                {
+                    s.methods.push((t[i].line, first.clone()));
                 }
                 if segments.len() > 1 && !tail && (!after_dollar || first == "crate") {
                     s.paths.push(PathRef {
@@ -914,6 +928,50 @@ impl Crate {
     }
 }
 
+impl Crate {
+    /// Files created or replaced outside [`WRITER`].
+    fn file_writes(&self) -> Vec<String> {
+        const WRITES: [[&str; 2]; 5] = [
+            ["fs", "write"],
+            ["fs", "rename"],
+            ["fs", "copy"],
+            ["File", "create"],
+            ["File", "create_new"],
+        ];
+        const PERSIST: [&str; 2] = ["persist", "persist_noclobber"];
+        let mut out = Vec::new();
+        for file in self.files.iter().filter(|f| !f.test) {
+            if (self.member.as_str(), file.rel.as_str()) == WRITER {
+                continue;
+            }
+            let paths = file.scan.paths.iter().filter(|p| {
+                p.segments.first().is_some_and(|s| s == "tempfile")
+                    || p.segments
+                        .windows(2)
+                        .any(|w| WRITES.iter().any(|[a, b]| w[0] == *a && w[1] == *b))
+            });
+            let found = paths
+                .map(|p| (p.line, format!("`{}`", p.segments.join("::"))))
+                .chain(
+                    file.scan
+                        .methods
+                        .iter()
+                        .filter(|(_, m)| PERSIST.contains(&m.as_str()))
+                        .map(|(line, m)| (*line, format!("`.{m}(…)`"))),
+                );
+            for (line, what) in found {
+                out.push(format!(
+                    "{}/{}:{line}: {what} writes a file in library code: write it through \
+                     tress_core::output_file ({}/{}), which syncs and renames it and respects \
+                     devices, links and the command's inputs",
+                    self.member, file.rel, WRITER.0, WRITER.1
+                ));
+            }
+        }
+        out
+    }
+}
+
 /// Runs `rule` over every library crate of the workspace at `root`; the problems found.
 fn check_workspace(root: &Path, rule: impl Fn(&Crate) -> Vec<String>) -> Vec<String> {
     let members = match library_members(root) {
@@ -950,6 +1008,11 @@ fn library_crates_read_no_environment() {
 #[test]
 fn library_crates_keep_no_process_wide_mutable_state() {
     assert_none(check_workspace(&workspace::root(), Crate::mutable_statics));
+}
+
+#[test]
+fn library_crates_write_files_only_through_the_writer() {
+    assert_none(check_workspace(&workspace::root(), Crate::file_writes));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1174,6 +1237,56 @@ fn mutable_statics_are_found_and_constant_ones_pass() {
             "core/src/lib.rs:8: `static CACHE` of type OnceLock",
             "core/src/lib.rs:9: `thread_local!`",
             "core/src/lib.rs:9: `static RAYS` of type Cell",
+        ],
+        "{found:#?}"
+    );
+}
+
+#[test]
+fn file_writes_are_found_however_written_and_the_writer_may_write() {
+    let ws = workspace(
+        &["core", "scene"],
+        &[
+            (
+                "core/src/lib.rs",
+                "pub mod output_file;
+use std::fs;
+pub fn a() { fs::write(\"a\", \"\"); }
+",
+            ),
+            (
+                "core/src/output_file.rs",
+                "pub fn w(t: tempfile::NamedTempFile) { t.persist(\"o\"); std::fs::write(\"o\", \"\"); }
+",
+            ),
+            (
+                "scene/src/lib.rs",
+                "use std::fs::{File, rename as mv};
+use tempfile::Builder;
+                 pub fn b(t: T) {
+    File::create(\"b\");
+    t.persist(\"b\");
+                     std::fs::read(\"b\");
+}
+                 #[cfg(test)]
+fn t() { std::fs::write(\"t\", \"\"); }
+",
+            ),
+        ],
+    );
+    let found = check_workspace(ws.path(), Crate::file_writes);
+    let what: Vec<&str> = found
+        .iter()
+        .map(|f| f.split(" writes a file").next().unwrap())
+        .collect();
+    assert_eq!(
+        what,
+        [
+            "core/src/lib.rs:3: `fs::write`",
+            "scene/src/lib.rs:1: `std::fs::rename`",
+            "scene/src/lib.rs:2: `tempfile::Builder`",
+            "scene/src/lib.rs:4: `File::create`",
+            "scene/src/lib.rs:5: `.persist(…)`",
         ],
         "{found:#?}"
     );

@@ -44,6 +44,7 @@ use tress_accel::{
 use tress_core::film::FilmSettings;
 use tress_core::light::{EnvironmentMap, Light};
 use tress_core::math::{Aabb, Vec2, Vec3};
+use tress_core::output_file::{self, Inputs};
 use tress_core::prepare::Preparation;
 use tress_core::rng::Pcg32;
 use tress_core::sampling::sample_uniform_sphere;
@@ -51,6 +52,7 @@ use tress_core::{Bcsdf, Camera, Integrator, Material, Scene};
 use tress_materials::dual_scattering::{fingerprint, DualScatteringTables};
 use tress_materials::HairModel;
 use tress_scene::integrators::IntegratorDesc;
+use tress_scene::scene_desc;
 
 mod plan;
 mod raw;
@@ -94,9 +96,17 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let plan = Plan::new(args.quick);
     let pools = thread_pools(args.threads)?;
     let mut table = Table::default();
+    let inputs = match &args.scene {
+        Some(path) => scene_desc::load(path)?.inputs(path)?,
+        None => [&args.hair_file].into_iter().collect(),
+    };
+    // Refused before measuring, not after.
+    if let Some(csv) = &args.csv {
+        output_file::check(csv, &inputs)?;
+    }
     if let Some(path) = &args.scene {
         scene::bench_scene(path, args.spp, &plan, &pools, &mut table)?;
-        return finish(&table, args.csv.as_deref());
+        return finish(&table, args.csv.as_deref(), &inputs);
     }
     let material = HairModel::Chiang(Default::default());
     let bcsdf = material
@@ -124,14 +134,14 @@ pub fn run(args: BenchArgs) -> Result<()> {
         .with_context(|| format!("model {}", spec.name))?;
     }
     scaling(&mut table, &plan, &per_sample, &pools);
-    finish(&table, args.csv.as_deref())
+    finish(&table, args.csv.as_deref(), &inputs)
 }
 
-/// Prints the table, and writes it to `csv` when given.
-fn finish(table: &Table, csv: Option<&std::path::Path>) -> Result<()> {
+/// Prints the table, and writes it to `csv` when given (replacing none of `inputs`).
+fn finish(table: &Table, csv: Option<&std::path::Path>, inputs: &Inputs) -> Result<()> {
     print!("{}", table.text());
     if let Some(path) = csv {
-        tress_scene::output::atomic_write(path, table.csv().as_bytes())?;
+        output_file::write_bytes(path, inputs, table.csv().as_bytes())?;
         eprintln!("wrote {}", path.display());
     }
     Ok(())

@@ -1,4 +1,4 @@
-//! Bitmaps being drawn: their text, pictures and atomic writing.
+//! Bitmaps being drawn: their text, pictures and writing them as PNG.
 
 use super::text::{self, Typeset};
 use anyhow::{anyhow, bail, Context, Result};
@@ -6,6 +6,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
 use tress_core::image_io;
+use tress_core::output_file::{self, Inputs, Sink};
 use tress_scene::picture::Picture;
 
 /// The drawing area of a PNG being drawn.
@@ -43,34 +44,41 @@ pub(super) fn text_style(size: u32) -> TextStyle<'static> {
     ("sans-serif", size).into_font().color(&BLACK)
 }
 
-/// Draws `root` into `path` (PNG) through a temporary file, so readers never see a partial image.
+/// Draws a bitmap of `size` with `draw` and writes it to `path` (PNG), creating its folder;
+/// it may replace none of `inputs`.
 pub(super) fn write_bitmap(
     path: &Path,
+    inputs: &Inputs,
+    size: (u32, u32),
+    draw: impl FnOnce(&Bitmap) -> Result<()>,
+) -> Result<()> {
+    if path.extension().and_then(|e| e.to_str()) != Some("png") {
+        bail!("{}: expected a .png file name", path.display());
+    }
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    output_file::write(path, inputs, |out| draw_bitmap(out, size, draw))
+}
+
+/// Draws a bitmap of `size` with `draw` and writes it into `out` as a PNG.
+pub(super) fn draw_bitmap(
+    out: &mut Sink,
     size: (u32, u32),
     draw: impl FnOnce(&Bitmap) -> Result<()>,
 ) -> Result<()> {
     text::face()?;
-    if path.extension().and_then(|e| e.to_str()) != Some("png") {
-        bail!("{}: expected a .png file name", path.display());
-    }
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let tmp = image_io::output_temp_file(dir, ".png")?;
+    let (w, h) = size;
+    let mut rgb = vec![0u8; w as usize * h as usize * 3];
     {
-        let root = Typeset::raster(BitMapBackend::new(tmp.path(), size)).into_drawing_area();
+        let root = Typeset::raster(BitMapBackend::with_buffer(&mut rgb, size)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| anyhow!("{e:?}"))?;
         draw(&root)?;
         root.present()
-            .map_err(|e| anyhow!("drawing {}: {e}", path.display()))?;
+            .map_err(|e| anyhow!("drawing {}: {e}", out.path().display()))?;
     }
-    // The bare io::Error: the PersistError would keep the temporary file alive with it.
-    tmp.persist(path)
-        .map_err(|e| e.error)
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    // The message names the file and its cause: anyhow would print the cause a second time.
+    image_io::write_srgb_png(out, w, h, &rgb).map_err(|e| anyhow!("{e}"))
 }
 
 /// Draws `pic` with its top left corner at `pos`.

@@ -1,13 +1,15 @@
 //! Line charts: series on linear or log axes, with optional shaded intervals, in panels side by
 //! side; the legend goes under each panel, so it never hides a curve.
 
-use super::canvas::write_bitmap;
+use super::canvas::draw_bitmap;
 use super::text::{self, Typeset};
 use anyhow::{anyhow, bail, Context, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor;
+use std::io::Write as _;
 use std::path::Path;
+use tress_core::output_file::{Batch, Inputs};
 
 /// One curve of a chart.
 pub struct Series {
@@ -34,8 +36,15 @@ pub struct Chart {
     pub band_label: Option<String>,
 }
 
-/// A row of charts drawn side by side into `<stem>.png` and `<stem>.svg`, written atomically.
-pub fn write_charts(stem: &Path, charts: &[Chart], panel_width: u32, height: u32) -> Result<()> {
+/// A row of charts drawn side by side into `<stem>.png` and `<stem>.svg`, which may replace
+/// none of `inputs`.
+pub fn write_charts(
+    stem: &Path,
+    inputs: &Inputs,
+    charts: &[Chart],
+    panel_width: u32,
+    height: u32,
+) -> Result<()> {
     text::face()?;
     if charts.is_empty() {
         bail!("nothing to plot");
@@ -57,19 +66,15 @@ pub fn write_charts(stem: &Path, charts: &[Chart], panel_width: u32, height: u32
             .map_err(|e| anyhow!("drawing {}: {e}", svg.display()))?;
     }
     // Both or neither: a PNG left without its SVG looked like a finished plot.
-    tress_scene::output::write_together(vec![
-        (
-            &png,
-            Box::new(|p: &Path| write_bitmap(p, size, |root| draw(root, charts))),
-        ),
-        (
-            &svg,
-            Box::new(|p: &Path| {
-                std::fs::write(p, svg_text.as_bytes())
-                    .with_context(|| format!("writing {}", svg.display()))
-            }),
-        ),
-    ])
+    let mut files = Batch::new(inputs);
+    files.add(&png, |out| {
+        draw_bitmap(out, size, |root| draw(root, charts))
+    })?;
+    files.add(&svg, |out| {
+        out.write_all(svg_text.as_bytes())
+            .with_context(|| format!("writing {}", svg.display()))
+    })?;
+    Ok(files.commit()?)
 }
 
 /// The chart's bands match their series and are labelled.
@@ -803,17 +808,25 @@ mod tests {
         let stem = dir.path().join("c");
         let e = write_charts(
             &stem,
+            &Inputs::default(),
             &[chart(Some(vec![(0.5, 2.0)]), Some("CI"))],
             300,
             200,
         )
         .unwrap_err();
         assert!(format!("{e:#}").contains("2 points but 1 band"), "{e:#}");
-        let e =
-            write_charts(&stem, &[chart(Some(vec![(0.5, 2.0); 2]), None)], 300, 200).unwrap_err();
+        let e = write_charts(
+            &stem,
+            &Inputs::default(),
+            &[chart(Some(vec![(0.5, 2.0); 2]), None)],
+            300,
+            200,
+        )
+        .unwrap_err();
         assert!(format!("{e:#}").contains("no legend label"), "{e:#}");
         write_charts(
             &stem,
+            &Inputs::default(),
             &[chart(Some(vec![(0.5, 2.0); 2]), Some("CI"))],
             300,
             200,

@@ -7,6 +7,7 @@ use anyhow::{anyhow, bail, Result};
 use plotters::prelude::*;
 use plotters::style::text_anchor;
 use std::path::Path;
+use tress_core::output_file::Inputs;
 use tress_scene::picture::Picture;
 
 /// A logarithmic colour scale `[lo, hi]` (values outside are clamped to its ends).
@@ -90,9 +91,11 @@ pub struct HeatPanel {
 }
 
 /// Heat maps side by side, one per panel, colour-mapped on the shared logarithmic `scale`, with a
-/// colour bar labelled in powers of ten and `label` (what the values are) underneath; PNG.
+/// colour bar labelled in powers of ten and `label` (what the values are) underneath; PNG, which
+/// may replace none of `inputs`.
 pub fn write_heat_maps(
     path: &Path,
+    inputs: &Inputs,
     panels: &[HeatPanel],
     scale: LogScale,
     label: &str,
@@ -121,7 +124,7 @@ pub fn write_heat_maps(
     let width = (MARGIN + slots.iter().map(|w| w + GAP).sum::<u32>() + BAR_W + BAR_LABELS)
         .max(2 * MARGIN + text_width(&caption, 13)?);
     let height = MARGIN + TITLE_H + max_h + 8 + 20 + MARGIN;
-    write_bitmap(path, (width, height), |root| {
+    write_bitmap(path, inputs, (width, height), |root| {
         let mut x = MARGIN as i32;
         let top = (MARGIN + TITLE_H) as i32;
         for ((panel, &(dw, dh)), slot) in panels.iter().zip(&sizes).zip(&slots) {

@@ -4,13 +4,15 @@ use super::canvas::{blit, display_size, draw_text, text_width, write_bitmap};
 use super::canvas::{MARGIN, TITLE_H};
 use anyhow::Result;
 use std::path::Path;
+use tress_core::output_file::Inputs;
 use tress_scene::picture::Picture;
 
 /// A grid of pictures with a title, row labels on the left and column labels on top (an empty
-/// cell is left white); PNG. All pictures are shown at the size of the largest one, enlarged by
+/// cell is left white); PNG, which may replace none of `inputs`. All pictures are shown at the size of the largest one, enlarged by
 /// an integer factor when small so single pixels stay visible.
 pub fn write_image_sheet(
     path: &Path,
+    inputs: &Inputs,
     title: &str,
     row_labels: &[String],
     col_labels: &[String],
@@ -35,7 +37,7 @@ pub fn write_image_sheet(
     let width = (MARGIN + label_w + cols * (cw + CELL_GAP) + MARGIN)
         .max(2 * MARGIN + text_width(title, 15)?);
     let height = top + rows * (ch + CELL_GAP) + MARGIN;
-    write_bitmap(path, (width, height), |root| {
+    write_bitmap(path, inputs, (width, height), |root| {
         draw_text(root, title, 15, (MARGIN as i32, MARGIN as i32))?;
         let x_of = |c: u32| (MARGIN + label_w + c * (cw + CELL_GAP)) as i32;
         let y_of = |r: u32| (top + r * (ch + CELL_GAP)) as i32;

@@ -106,7 +106,13 @@ fn write_plots(plan: &Plan, res: &Results, si: usize) -> Result<Vec<String>> {
         for c in &mut charts {
             c.band_label = Some(band_label.clone());
         }
-        plot::write_charts(&plan.out.join(&stem), &charts, PANEL_W, PANEL_H)?;
+        plot::write_charts(
+            &plan.out.join(&stem),
+            &plan.inputs,
+            &charts,
+            PANEL_W,
+            PANEL_H,
+        )?;
         written.push(stem);
         Ok(())
     };
@@ -227,7 +233,13 @@ fn write_figures(
         .collect();
     let scale = plot::LogScale::fit(&all);
     let heat = format!("plots/{}_heatmap_{}spp.png", scene.name, plan.heatmap_spp);
-    plot::write_heat_maps(&plan.out.join(&heat), &panels, scale, MapKind::Rel.label())?;
+    plot::write_heat_maps(
+        &plan.out.join(&heat),
+        &plan.inputs,
+        &panels,
+        scale,
+        MapKind::Rel.label(),
+    )?;
 
     let mut sheets = Vec::new();
     for (g, (region, rect)) in sheet_regions(plan, scene).iter().enumerate() {
@@ -250,6 +262,7 @@ fn write_figures(
         let file = format!("sheets/{}_{region}.png", scene.name);
         plot::write_image_sheet(
             &plan.out.join(&file),
+            &plan.inputs,
             &format!(
                 "{} / {region} ({rect}), repetition 0, exposure {:+.1} stops",
                 scene.name,

@@ -3,6 +3,8 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+use tress_core::image_io::ImageError;
+use tress_core::output_file::{Inputs, Sink};
 
 pub fn tress(args: &[&str], cwd: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_tress"))
@@ -21,6 +23,16 @@ pub fn render_ok(args: &[&str], cwd: &Path) -> String {
     let o = tress(&[&["render", "scene.ron"], args].concat(), cwd);
     assert!(o.status.success(), "{}", stderr(&o));
     stderr(&o)
+}
+
+/// Writes one file at `path` with `write`, through tress's own writer.
+pub fn to_file(
+    path: impl AsRef<Path>,
+    write: impl FnOnce(&mut Sink) -> Result<(), ImageError>,
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    tress_core::output_file::write(path.as_ref(), &Inputs::default(), |out| {
+        write(out).map_err(Box::from)
+    })
 }
 
 /// A tiny scene that renders in milliseconds: procedural hair ball, a sphere, sky and sun.

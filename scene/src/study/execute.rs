@@ -11,7 +11,6 @@ use crate::metrics::{self, Rect};
 use crate::picture::Picture;
 use anyhow::{bail, Context, Result};
 use std::collections::HashMap;
-use std::path::Path;
 use tress_core::image_io;
 use tress_core::Image;
 
@@ -71,6 +70,7 @@ pub(super) fn execute(
             integrators: HashMap::new(),
             prep: &prep,
             pool,
+            inputs: &plan.inputs,
             progress,
             verbose,
             rendered: 0,
@@ -130,10 +130,7 @@ fn common_reference(plan: &Plan, scene: &PlanScene, runner: &mut SceneRunner) ->
         }
         PlanReference::Exr(template) => template,
     };
-    let file = crate::paths::resolve(
-        &plan.study_path,
-        Path::new(&template.replace("{scene}", &scene.name)),
-    );
+    let file = plan.reference_exr(template, scene);
     let (img, _) = image_io::read_exr(&file).with_context(|| {
         format!(
             "{}: reference of scene '{}'",

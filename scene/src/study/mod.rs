@@ -85,6 +85,7 @@ pub fn run(
     let plan = Plan::new(study, settings)?;
     std::fs::create_dir_all(&plan.out)
         .with_context(|| format!("creating output folder {}", plan.out.display()))?;
+    tables::check_outputs(&plan)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(settings.threads.unwrap_or(0))
         .build()

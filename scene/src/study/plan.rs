@@ -8,6 +8,7 @@ use crate::paths::resolve;
 use crate::scene_desc::{self, SceneDesc};
 use anyhow::{anyhow, Context, Result};
 use std::path::{Path, PathBuf};
+use tress_core::output_file::Inputs;
 use tress_core::rng::hash_words;
 
 /// How to run a study: what `tress study` takes on its command line.
@@ -103,6 +104,9 @@ pub struct Plan {
     pub target_relmse: f64,
     /// Exposure of the crops, as a factor (2^stops).
     pub gain: f32,
+    /// Every file the study reads (the study, its scenes and what they read, EXR references),
+    /// which none of its outputs may replace.
+    pub inputs: Inputs,
 }
 
 pub(super) fn valid_name(s: &str) -> bool {
@@ -592,6 +596,16 @@ impl Plan {
             (None, Some(o)) => suffix(resolve(path, o), quick),
             (None, None) => suffix(PathBuf::from(format!("{stem}_study")), quick),
         };
+        let mut inputs = Inputs::default();
+        inputs.add(path);
+        for scene in &scenes {
+            // The scene file (or, for an inline scene, the study again) and what it reads.
+            inputs.add(&scene.base);
+            inputs.extend(scene.desc.referenced_files(&scene.base)?);
+            if let PlanReference::Exr(template) = &reference {
+                inputs.add(reference_exr(path, template, &scene.name));
+            }
+        }
         let command = format!(
             "tress study {}{}",
             path.display(),
@@ -613,7 +627,13 @@ impl Plan {
             heatmap_spp,
             target_relmse: study.target_relmse,
             gain: study.exposure.exp2(),
+            inputs,
         })
+    }
+
+    /// The EXR reference of `scene`: `template` with `{scene}` replaced, relative to the study.
+    pub(super) fn reference_exr(&self, template: &str, scene: &PlanScene) -> PathBuf {
+        reference_exr(&self.study_path, template, &scene.name)
     }
 
     /// Samples of all renders, for the progress bar.
@@ -630,6 +650,12 @@ impl Plan {
             .map(|s| s.desc.film.width as u64 * s.desc.film.height as u64 * per_pixel)
             .sum()
     }
+}
+
+/// The EXR reference of scene `name` of the study at `study`: `template` with `{scene}`
+/// replaced, relative to the study.
+fn reference_exr(study: &Path, template: &str, name: &str) -> PathBuf {
+    resolve(study, Path::new(&template.replace("{scene}", name)))
 }
 
 pub(super) fn suffix(p: PathBuf, quick: bool) -> PathBuf {

@@ -10,6 +10,7 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use tress_core::film::FilmSettings;
 use tress_core::image_io;
+use tress_core::output_file::{Batch, Inputs};
 use tress_core::rng::hash_words;
 use tress_core::{Image, Integrator};
 
@@ -50,6 +51,8 @@ pub(super) struct SceneRunner<'a> {
     /// The study's preparation context (tables shared by all its integrators).
     pub(super) prep: &'a tress_core::prepare::Preparation,
     pub(super) pool: &'a rayon::ThreadPool,
+    /// The files the study reads, which its renders may not replace.
+    pub(super) inputs: &'a Inputs,
     pub(super) progress: &'a dyn Progress,
     pub(super) verbose: bool,
     pub(super) rendered: usize,
@@ -200,8 +203,15 @@ impl SceneRunner<'_> {
             std::fs::create_dir_all(dir)
                 .with_context(|| format!("creating output folder {}", dir.display()))?;
         }
-        image_io::write_exr(&job.exr, &output.image, &attributes)?;
-        image_io::write_png(job.exr.with_extension("png"), &output.image, 0.0)?;
+        // Both or neither: a cached EXR is read back on the next run, its PNG is not.
+        let mut files = Batch::new(self.inputs);
+        files.add(&job.exr, |out| {
+            Ok::<_, anyhow::Error>(image_io::write_exr(out, &output.image, &attributes)?)
+        })?;
+        files.add(&job.exr.with_extension("png"), |out| {
+            Ok::<_, anyhow::Error>(image_io::write_png(out, &output.image, 0.0)?)
+        })?;
+        files.commit()?;
         self.rendered += 1;
         self.render_seconds += time_s;
         Ok(Rendered {

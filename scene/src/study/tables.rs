@@ -5,10 +5,23 @@ use super::plan::{Plan, PlanReference};
 use super::results::{RefKind, Results};
 use super::stats::{curve, extrapolated_reach, loglog_at, reach, verdict, Point, Reach, Stat};
 use crate::metrics::REL_EPSILON;
-use crate::output::atomic_write;
 use anyhow::Result;
 use std::fmt::Write as _;
 use std::path::PathBuf;
+use tress_core::output_file;
+
+const RESULTS_CSV: &str = "results.csv";
+const SUMMARY_CSV: &str = "summary.csv";
+const REPORT: &str = "report.md";
+
+/// Refuses, before any render, tables that could not be written ([`output_file::check`]: a
+/// directory in the way, one of the study's inputs).
+pub(super) fn check_outputs(plan: &Plan) -> Result<()> {
+    for name in [RESULTS_CSV, SUMMARY_CSV, REPORT] {
+        output_file::check(&plan.out.join(name), &plan.inputs)?;
+    }
+    Ok(())
+}
 
 pub(super) fn write_csv(plan: &Plan, res: &Results) -> Result<PathBuf> {
     let mut s = String::from(
@@ -44,8 +57,8 @@ pub(super) fn write_csv(plan: &Plan, res: &Results) -> Result<PathBuf> {
         }
         s.push('\n');
     }
-    let path = plan.out.join("results.csv");
-    atomic_write(&path, s.as_bytes())?;
+    let path = plan.out.join(RESULTS_CSV);
+    output_file::write_bytes(&path, &plan.inputs, s.as_bytes())?;
     Ok(path)
 }
 
@@ -207,8 +220,8 @@ pub(super) fn write_summary(plan: &Plan, res: &Results) -> Result<PathBuf> {
             }
         }
     }
-    let path = plan.out.join("summary.csv");
-    atomic_write(&path, s.as_bytes())?;
+    let path = plan.out.join(SUMMARY_CSV);
+    output_file::write_bytes(&path, &plan.inputs, s.as_bytes())?;
     Ok(path)
 }
 
@@ -322,8 +335,8 @@ pub(super) fn write_report(
     for si in 0..plan.scenes.len() {
         scene_section(&mut s, plan, res, si, figures.map(|f| &f[si]));
     }
-    let path = plan.out.join("report.md");
-    atomic_write(&path, s.as_bytes())?;
+    let path = plan.out.join(REPORT);
+    output_file::write_bytes(&path, &plan.inputs, s.as_bytes())?;
     Ok(path)
 }
 
