@@ -1685,6 +1685,108 @@ fn memory_blowups_are_refused_before_allocating() {
     }
 }
 
+/// The memory limit holds for the whole scene: objects that each fit but together do not are
+/// refused at the one that crosses it, by name and with the totals, whatever their kind (four
+/// 0.68 GiB objects passed a 1 GiB limit), and pbrt instances count their points.
+#[test]
+fn memory_limit_holds_for_the_whole_scene() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    // 0.01 GiB is 83 886 hair points at 128 bytes: 1500 strands × 24 points is 0.0043 GiB.
+    let low = [("TRESS_MEMORY_LIMIT_GIB", "0.01")];
+    let hair = "Hair(source: Procedural(style: Straight, strands: 1500), material: \"hair\")";
+    let with_objects = |objects: &[String]| {
+        let text = SCENE.replace(
+            "Hair(source: Procedural(style: Ball, strands: 300, radius: 0.01), material: \"hair\"),",
+            &format!("{},", objects.join(",\n")),
+        );
+        std::fs::write(d.join("scene.ron"), text).unwrap();
+    };
+    with_objects(&[hair.into(), hair.into()]);
+    let o = tress_within(&["info", "scene.ron"], d, &low, 60);
+    assert!(o.status.success(), "two fit: {}", stderr(&o));
+    with_objects(&[hair.into(), hair.into(), hair.into()]);
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &low,
+        &[
+            "objects[2]",
+            "GiB of the objects before it",
+            "0.01 GiB limit for the whole scene",
+        ],
+    );
+    // A mesh after the hair: 20 000 triangles.
+    let mut obj = String::new();
+    for i in 0..20_000 {
+        let x = i as f32 * 1e-4;
+        obj.push_str(&format!(
+            "v {x} 0 0\nv {x} 1 0\nv {x} 0 1\nf {} {} {}\n",
+            3 * i + 1,
+            3 * i + 2,
+            3 * i + 3
+        ));
+    }
+    std::fs::write(d.join("m.obj"), obj).unwrap();
+    with_objects(&[
+        hair.into(),
+        hair.into(),
+        "Mesh(file: \"m.obj\", material: \"grey\")".into(),
+    ]);
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &low,
+        &[
+            "objects[2]",
+            "m.obj",
+            "20000 triangles",
+            "GiB of the objects before it",
+        ],
+    );
+    // Spheres, many small objects: each counts.
+    let spheres: Vec<String> = (0..20_000)
+        .map(|i| format!("Sphere(center: ({i}, 0, 0), radius: 0.5, material: \"grey\")"))
+        .collect();
+    with_objects(&spheres);
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &[("TRESS_MEMORY_LIMIT_GIB", "0.001")],
+        &["sphere #", "0.001 GiB limit for the whole scene"],
+    );
+    // pbrt instances count against what the objects before them left: alone the groom fits.
+    let control: Vec<String> = (0..31)
+        .map(|i| format!("0 {} 0", i as f32 * 0.01))
+        .collect();
+    let mut pbrt = format!(
+        "ObjectBegin \"tuft\"\nShape \"curve\" \"point3 P\" [{}] \"float width\" 0.01\nObjectEnd\n",
+        control.join(" ")
+    );
+    pbrt.push_str(&"ObjectInstance \"tuft\"\n".repeat(5000));
+    std::fs::write(d.join("inst.pbrt"), pbrt).unwrap();
+    let instanced = "Hair(source: File(\"inst.pbrt\"), material: \"hair\")".to_string();
+    with_objects(&[instanced.clone()]);
+    let o = tress_within(&["info", "scene.ron"], d, &low, 60);
+    assert!(
+        o.status.success(),
+        "the instances alone fit: {}",
+        stderr(&o)
+    );
+    with_objects(&[hair.into(), instanced]);
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &low,
+        &[
+            "objects[1]",
+            "inst.pbrt (line",
+            "ObjectInstance \"tuft\"",
+            "objects before it",
+        ],
+    );
+}
+
 /// Errors that used to mislead: pbrt `nan`/`inf` tokens, tiny non-zero directions called zero,
 /// nested placeholder defaults, and a `-D` name given twice.
 #[test]
