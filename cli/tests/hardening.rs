@@ -1517,7 +1517,7 @@ fn outputs_that_belong_together_are_all_or_nothing() {
 }
 
 /// Study caches and merged pieces are keyed on the content of every file a scene reads,
-/// the files a pbrt groom includes among them (the scene hash covered only the scene's text,
+/// the files a pbrt groom includes and the layers a USD groom composes among them (the scene hash covered only the scene's text,
 /// and the study cache only the files the scene names).
 #[test]
 fn caches_and_merges_key_on_every_file_read() {
@@ -1561,6 +1561,43 @@ fn caches_and_merges_key_on_every_file_read() {
         made,
         "a changed included file redoes every render"
     );
+    // A USD groom whose curves sit in a sublayer and in a referenced layer: changing either
+    // changes the renders (they were left out of every hash).
+    let usd_curve = |x: f32| {
+        format!(
+            "#usda 1.0\ndef BasisCurves \"Hair\"\n{{\n    uniform token type = \"linear\"\n    \
+             int[] curveVertexCounts = [2]\n    point3f[] points = [({x}, -50, 0), ({x}, 50, 0)]\n    \
+             float[] widths = [5, 5]\n}}\n"
+        )
+        .into_bytes()
+    };
+    std::fs::write(d.join("sub.usda"), usd_curve(0.0)).unwrap();
+    std::fs::write(d.join("ref.usda"), usd_curve(0.0)).unwrap();
+    std::fs::write(
+        d.join("groom.usda"),
+        "#usda 1.0\n(\n    subLayers = [@./sub.usda@]\n)\n\
+         def Xform \"Other\" (\n    references = @./ref.usda@</Hair>\n)\n{\n}\n",
+    )
+    .unwrap();
+    let usd_scene = SCENE.replace(
+        "Procedural(style: Ball, strands: 300, radius: 0.01)",
+        "File(\"groom.usda\")",
+    );
+    std::fs::write(
+        d.join("study.ron"),
+        format!(
+            "(scenes: [Inline(name: \"usd\", scene: {usd_scene})], integrators: [Path(max_depth: 3)], \
+             spp: [1, 2], repetitions: 1, reference: Render(integrator: Path(max_depth: 3), spp: 4))"
+        ),
+    )
+    .unwrap();
+    let made = rendered();
+    assert!(made > 0);
+    for layer in ["sub.usda", "ref.usda"] {
+        assert_eq!(rendered(), 0, "an unchanged study reuses its renders");
+        std::fs::write(d.join(layer), usd_curve(0.2)).unwrap();
+        assert_eq!(rendered(), made, "a changed {layer} redoes every render");
+    }
 
     // Tiles rendered against different contents of one hair file are not merged, whether the
     // file is named by the scene or included by it.
@@ -1594,6 +1631,18 @@ fn caches_and_merges_key_on_every_file_read() {
             "strand.pbrt",
             strand(0.0).into_bytes(),
             strand(0.3).into_bytes(),
+        ),
+        (
+            usd_scene.as_str(),
+            "sub.usda",
+            usd_curve(0.0),
+            usd_curve(0.3),
+        ),
+        (
+            usd_scene.as_str(),
+            "ref.usda",
+            usd_curve(0.0),
+            usd_curve(0.3),
         ),
     ] {
         std::fs::write(d.join("scene.ron"), scene).unwrap();
