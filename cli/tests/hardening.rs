@@ -1815,7 +1815,7 @@ fn memory_limit_holds_for_the_whole_scene() {
     pbrt.push_str(&"ObjectInstance \"tuft\"\n".repeat(5000));
     std::fs::write(d.join("inst.pbrt"), pbrt).unwrap();
     let instanced = "Hair(source: File(\"inst.pbrt\"), material: \"hair\")".to_string();
-    with_objects(&[instanced.clone()]);
+    with_objects(std::slice::from_ref(&instanced));
     let o = tress_within(&["info", "scene.ron"], d, &low, 60);
     assert!(
         o.status.success(),
