@@ -11,9 +11,9 @@ use tress_core::rng::Pcg32;
 /// Embree's curve segment and BVH share (a pbrt groom of 20.5 M segments took 2.5 GB).
 pub const BYTES_PER_POINT: f64 = 128.0;
 
-/// Refuses hair that `points` points would make too large for the memory limit of `limits`
-/// (the films' limit), before any is allocated. `how` says what makes that many
-/// (`strands × points_per_strand`) for the message.
+/// Refuses hair that `points` points would make too large for the memory limit of `limits`,
+/// with what the scene's objects before it take ([`Limits::scene_gib`]), before any is
+/// allocated. `how` says what makes that many (`strands × points_per_strand`) for the message.
 pub fn check_point_memory(
     object: &str,
     field: &'static str,
@@ -22,19 +22,13 @@ pub fn check_point_memory(
     limits: &Limits,
 ) -> Result<()> {
     let need_gib = points * BYTES_PER_POINT / (1u64 << 30) as f64;
-    let limit_gib = limits.memory_gib;
-    if need_gib > limit_gib {
-        return Err(Error::InvalidOption {
+    limits
+        .check_scene_memory(need_gib)
+        .map_err(|reason| Error::InvalidOption {
             object: object.to_owned(),
             field,
-            reason: format!(
-                "{how} makes {points:.3e} hair points, about {need_gib:.1} GiB, over the \
-                 {limit_gib} GiB limit: use fewer, or set {} to more GiB",
-                tress_core::limits::MEMORY_LIMIT_VAR
-            ),
-        });
-    }
-    Ok(())
+            reason: format!("{how} makes {points:.3e} hair points, {reason}"),
+        })
 }
 
 /// A per-hair-object attribute that a file may store once, per strand or per point.

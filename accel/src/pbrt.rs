@@ -36,9 +36,10 @@
 //! the one at their definition, as in pbrt), widths scaled by its determinant's cube root. As in
 //! pbrt-v4, an object may be instanced before it is defined; the copies follow the other
 //! strands, in the order of the `ObjectInstance` statements. Nested definitions, instances
-//! inside a definition, redefinitions and instances of undefined objects are errors. The
-//! instances together may make at most 2^26 points (about 1 GiB with their radii), counted
-//! before anything is copied, so a file instancing an object millions of times is refused.
+//! inside a definition, redefinitions and instances of undefined objects are errors. Every
+//! instance's points count against the memory limit, with the rest of the scene, like the
+//! strands read (a short file can ask for any number of copies): they are counted before
+//! anything is copied, and the instance that passes the limit is named.
 //!
 //! **Ignored.** Curve `type` (`flat`, `cylinder`, `ribbon`: the object's `curve` option decides
 //! between ray-facing ribbons and tubes) and ribbon normals `N`; `splitdepth`; materials (the
@@ -61,10 +62,6 @@ const MAX_INCLUDE_DEPTH: usize = 32;
 const MAX_INCLUDES: usize = 10_000;
 /// pbrt's cap on the refinement depth of one curve segment (2^10 pieces).
 const MAX_REFINE_DEPTH: u32 = 10;
-/// The most points the strands and their instances may make: 2^26, about 1 GiB with the
-/// radii. Without instancing every point costs the file some text; with it a short file can
-/// ask for any number of copies.
-const MAX_INSTANCED_POINTS: u64 = 1 << 26;
 
 /// A pbrt scene file whose curves to load.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -130,6 +127,7 @@ impl PbrtFile {
             named: HashMap::new(),
             defining: None,
             objects: HashMap::new(),
+            object_points: 0,
             instances: Vec::new(),
             includes: 0,
             bytes_read: 0,
@@ -203,6 +201,15 @@ struct Lexer<'a> {
     at: usize,
     line: u32,
     line_start: usize,
+    /// Characters of the current line before byte `counted_to` (at or after `line_start`):
+    /// columns are counted on from there, so every byte is counted once. Counting each
+    /// token's column from the start of its line made a one-line curve of n points load in
+    /// O(n²) (100 000 segments: minutes).
+    counted_chars: usize,
+    counted_to: usize,
+    /// Bytes counted for columns in all, for the test that this stays linear.
+    #[cfg(test)]
+    bytes_counted: usize,
     peeked: Option<Token<'a>>,
 }
 
@@ -213,14 +220,28 @@ impl<'a> Lexer<'a> {
             at: 0,
             line: 1,
             line_start: 0,
+            counted_chars: 0,
+            counted_to: 0,
+            #[cfg(test)]
+            bytes_counted: 0,
             peeked: None,
         }
     }
 
-    fn pos(&self) -> Pos {
+    fn pos(&mut self) -> Pos {
+        if self.counted_to < self.line_start {
+            self.counted_chars = 0;
+            self.counted_to = self.line_start;
+        }
+        self.counted_chars += self.text[self.counted_to..self.at].chars().count();
+        #[cfg(test)]
+        {
+            self.bytes_counted += self.at - self.counted_to;
+        }
+        self.counted_to = self.at;
         Pos {
             line: self.line,
-            column: (self.text[self.line_start..self.at].chars().count() + 1) as u32,
+            column: (self.counted_chars + 1) as u32,
         }
     }
 
@@ -383,6 +404,8 @@ struct CurveReader {
     defining: Option<Definition>,
     /// The defined objects' strands, each in the frame of its definition.
     objects: HashMap<String, HairGeometry>,
+    /// Points of the objects defined so far.
+    object_points: usize,
     instances: Vec<InstanceUse>,
     /// `Include`/`Import` statements run so far, in every file.
     includes: usize,
@@ -610,6 +633,7 @@ impl CurveReader {
                     .ok_or_else(|| err("ObjectEnd without ObjectBegin".into()))?;
                 self.close_strand();
                 let object = std::mem::replace(&mut self.hair, d.outside);
+                self.object_points += object.points.len();
                 self.objects.insert(d.name, object);
                 self.state = self
                     .saved
@@ -687,7 +711,7 @@ impl CurveReader {
     }
 
     /// Appends every `ObjectInstance`'s copy of its object, once all are known to exist and
-    /// to fit within [`MAX_INSTANCED_POINTS`] together.
+    /// to fit within the memory limit together.
     fn instantiate(&mut self) -> Result<()> {
         let mut total = self.hair.points.len() as u64;
         for u in &self.instances {
@@ -702,18 +726,17 @@ impl CurveReader {
                 )
             })?;
             total += object.points.len() as u64;
-            if total > MAX_INSTANCED_POINTS {
-                return Err(at(
-                    &u.path,
-                    u.pos,
-                    format!(
-                        "ObjectInstance \"{}\": the strands and instances up to here make \
-                         {total} points, more than {MAX_INSTANCED_POINTS} (2^26): is the object \
-                         instanced more often than meant?",
-                        u.name
-                    ),
-                ));
-            }
+            crate::geometry::check_point_memory(
+                &format!("{} (line {})", u.path.display(), u.pos.line),
+                "ObjectInstance",
+                &format!(
+                    "ObjectInstance \"{}\": the strands and instances up to here (is the \
+                     object instanced more often than meant?)",
+                    u.name
+                ),
+                total as f64,
+                &self.limits,
+            )?;
         }
         self.hair
             .points
@@ -844,8 +867,10 @@ impl CurveReader {
                 (cps, w0, w1, pieces)
             })
             .collect();
-        // Thin curved curves split up to 1024-fold: counted before they are stored.
-        let points = self.hair.points.len() as f64
+        // Thin curved curves split up to 1024-fold: counted before they are stored, with the
+        // points of the objects defined and of the strands set aside while defining one.
+        let outside = self.defining.as_ref().map_or(0, |d| d.outside.points.len());
+        let points = (self.hair.points.len() + outside + self.object_points) as f64
             + 1.0
             + refined.iter().map(|r| f64::from(r.3)).sum::<f64>();
         crate::geometry::check_point_memory(
@@ -1420,22 +1445,33 @@ mod tests {
             );
         }
         // An object of 101 points (100 straight Bézier segments) instanced a million times
-        // would make 101 million points: refused, before any is copied, at the instance that
-        // passes 2^26.
+        // would make 101 million points, 12 GiB: under a 1 GiB limit it is refused before any
+        // is copied, at the instance that passes it; with 0.5 GiB of the scene taken by other
+        // objects, at the instance that passes what is left.
         let control: Vec<String> = (0..301).map(|i| format!("0 {i} 0")).collect();
         let mut text = format!(
             "ObjectBegin \"tuft\"\nShape \"curve\" \"point3 P\" [{}]\nObjectEnd\n",
             control.join(" ")
         );
         text.push_str(&"ObjectInstance \"tuft\"\n".repeat(1_000_000));
-        let e = read(&text).unwrap_err().to_string();
-        let line = 3 + (MAX_INSTANCED_POINTS / 101 + 1);
-        assert!(
-            e.contains("scene.pbrt")
-                && e.contains(&format!("line {line}, column 1: ObjectInstance \"tuft\""))
-                && e.contains("more than 67108864"),
-            "{e}"
-        );
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.pbrt");
+        std::fs::write(&path, text).unwrap();
+        for (scene_gib, instances) in [(0.0, 83_056), (0.5, 41_528)] {
+            let limits = Limits {
+                memory_gib: 1.0,
+                scene_gib,
+                ..Limits::default()
+            };
+            let e = PbrtFile::new(&path).read(&limits).unwrap_err().to_string();
+            let line = 3 + instances;
+            assert!(
+                e.contains(&format!("scene.pbrt (line {line})"))
+                    && e.contains("ObjectInstance \"tuft\"")
+                    && e.contains("1 GiB limit for the whole scene"),
+                "{e}"
+            );
+        }
     }
 
     #[test]
@@ -1487,5 +1523,29 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("hair.pbrt.gz") && e.contains("gzip"), "{e}");
+    }
+
+    /// Columns are counted on from the last token, each byte once: a one-line curve of many
+    /// points loaded in quadratic time (100 000 segments: minutes) when every token's column
+    /// was counted from the start of its line. Columns stay in characters, past non-ASCII text.
+    #[test]
+    fn columns_cost_one_count_per_byte() {
+        let points: String = (0..69_997).map(|i| format!("0.5 {i} -2 ")).collect();
+        let text = format!("Shape \"curve\" \"point3 P\" [{points}]\n# é\n  é x");
+        let mut lexer = Lexer::new(&text);
+        let mut tokens = 0;
+        let error = loop {
+            match lexer.next() {
+                Ok(Some(_)) => tokens += 1,
+                Ok(None) => panic!("the stray `é` lexed"),
+                Err(e) => break e,
+            }
+        };
+        assert_eq!(tokens, 5 + 3 * 69_997);
+        assert!(lexer.bytes_counted <= text.len(), "{}", lexer.bytes_counted);
+        assert_eq!(error.0, Pos { line: 3, column: 3 });
+        // The whole curve loads (its 70 000 points make 23 333 cubic segments).
+        let hair = read(&format!("Shape \"curve\" \"point3 P\" [{points}]")).unwrap();
+        assert_eq!(hair.strand_count(), 1);
     }
 }

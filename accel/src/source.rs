@@ -82,20 +82,23 @@ impl HairSource {
         }
     }
 
-    /// Every file [`load`](Self::load) reads: the source's file and, for pbrt files, those
-    /// it includes. Empty for generated hair.
+    /// Every file [`load`](Self::load) reads: the source's file, those a pbrt file includes
+    /// and the layers a USD stage composes (sublayers, references, payloads). Empty for
+    /// generated hair.
     pub fn files(&self) -> Result<Vec<PathBuf>> {
-        let pbrt = match self {
-            HairSource::Pbrt(f) => f.clone(),
-            HairSource::File(p)
-                if p.extension()
-                    .is_some_and(|e| e.eq_ignore_ascii_case("pbrt")) =>
-            {
-                PbrtFile::new(p)
-            }
-            other => return Ok(other.path().map(Path::to_path_buf).into_iter().collect()),
+        let extension = |p: &Path, of: &[&str]| {
+            p.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| of.iter().any(|x| e.eq_ignore_ascii_case(x)))
         };
-        pbrt.files()
+        match self {
+            HairSource::Pbrt(f) => f.files(),
+            HairSource::File(p) if extension(p, &["pbrt"]) => PbrtFile::new(p).files(),
+            HairSource::File(p) if extension(p, &["usda", "usdc", "usd"]) => {
+                UsdFile::new(p).files()
+            }
+            other => Ok(other.path().map(Path::to_path_buf).into_iter().collect()),
+        }
     }
 
     /// Reads or generates the hair (validated), within the memory limit of `limits`.

@@ -84,8 +84,8 @@ impl UsdFile {
         UsdFile { path: path.into() }
     }
 
-    /// Reads the stage's `BasisCurves` and validates them.
-    pub fn read(&self) -> Result<HairGeometry> {
+    /// The stage composed, and the paths of the prims its default traversal reaches.
+    fn compose(&self) -> Result<(usd::Stage, Vec<sdf::Path>)> {
         let path = &self.path;
         // The usual messages for a missing file or a folder, before openusd's own.
         let io = |source| crate::Error::Io {
@@ -107,6 +107,42 @@ impl UsdFile {
         if let Some(e) = stage.composition_errors().first() {
             return Err(fail(format!("composing the stage: {e}")));
         }
+        let mut paths = Vec::new();
+        stage
+            .traverse(
+                usd::PrimPredicate::DEFAULT.with_instance_proxies(true),
+                |p| paths.push(p.clone()),
+            )
+            .map_err(|e| fail(format!("traversing the stage: {e:#}")))?;
+        Ok((stage, paths))
+    }
+
+    /// Every file [`read`](Self::read) reads: this one and the layers its composition loads
+    /// (sublayers, references, payloads, each once; a layer inside a `.usdz` package is its
+    /// package), so that caches can key on their contents.
+    pub fn files(&self) -> Result<Vec<PathBuf>> {
+        let (stage, _) = self.compose()?;
+        let mut files = vec![self.path.clone()];
+        let root = std::fs::canonicalize(&self.path).ok();
+        for id in stage.layer_identifiers() {
+            let file = match openusd::ar::split_package_relative_path_outer(&id) {
+                Some((package, _)) => PathBuf::from(package),
+                None => PathBuf::from(id),
+            };
+            // Session and anonymous layers are not files; the root is listed as given.
+            let is_root = root.is_some() && std::fs::canonicalize(&file).ok() == root;
+            if file.is_file() && !is_root && !files.contains(&file) {
+                files.push(file);
+            }
+        }
+        Ok(files)
+    }
+
+    /// Reads the stage's `BasisCurves` and validates them.
+    pub fn read(&self) -> Result<HairGeometry> {
+        let path = &self.path;
+        let fail = |reason: String| format_error(path, reason);
+        let (stage, paths) = self.compose()?;
         let metadata = |field: &str| {
             stage
                 .stage_metadata(field)
@@ -128,13 +164,6 @@ impl UsdFile {
                 _ => return Err(fail("upAxis must be \"Y\" or \"Z\"".into())),
             },
         };
-        let mut paths = Vec::new();
-        stage
-            .traverse(
-                usd::PrimPredicate::DEFAULT.with_instance_proxies(true),
-                |p| paths.push(p.clone()),
-            )
-            .map_err(|e| fail(format!("traversing the stage: {e:#}")))?;
         let mut reader = Reader {
             hair: HairGeometry::empty(path.display().to_string()),
             colors: Colors::None,

@@ -1525,7 +1525,7 @@ fn outputs_that_belong_together_are_all_or_nothing() {
 }
 
 /// Study caches and merged pieces are keyed on the content of every file a scene reads,
-/// the files a pbrt groom includes among them (the scene hash covered only the scene's text,
+/// the files a pbrt groom includes and the layers a USD groom composes among them (the scene hash covered only the scene's text,
 /// and the study cache only the files the scene names).
 #[test]
 fn caches_and_merges_key_on_every_file_read() {
@@ -1569,6 +1569,43 @@ fn caches_and_merges_key_on_every_file_read() {
         made,
         "a changed included file redoes every render"
     );
+    // A USD groom whose curves sit in a sublayer and in a referenced layer: changing either
+    // changes the renders (they were left out of every hash).
+    let usd_curve = |x: f32| {
+        format!(
+            "#usda 1.0\ndef BasisCurves \"Hair\"\n{{\n    uniform token type = \"linear\"\n    \
+             int[] curveVertexCounts = [2]\n    point3f[] points = [({x}, -50, 0), ({x}, 50, 0)]\n    \
+             float[] widths = [5, 5]\n}}\n"
+        )
+        .into_bytes()
+    };
+    std::fs::write(d.join("sub.usda"), usd_curve(0.0)).unwrap();
+    std::fs::write(d.join("ref.usda"), usd_curve(0.0)).unwrap();
+    std::fs::write(
+        d.join("groom.usda"),
+        "#usda 1.0\n(\n    subLayers = [@./sub.usda@]\n)\n\
+         def Xform \"Other\" (\n    references = @./ref.usda@</Hair>\n)\n{\n}\n",
+    )
+    .unwrap();
+    let usd_scene = SCENE.replace(
+        "Procedural(style: Ball, strands: 300, radius: 0.01)",
+        "File(\"groom.usda\")",
+    );
+    std::fs::write(
+        d.join("study.ron"),
+        format!(
+            "(scenes: [Inline(name: \"usd\", scene: {usd_scene})], integrators: [Path(max_depth: 3)], \
+             spp: [1, 2], repetitions: 1, reference: Render(integrator: Path(max_depth: 3), spp: 4))"
+        ),
+    )
+    .unwrap();
+    let made = rendered();
+    assert!(made > 0);
+    for layer in ["sub.usda", "ref.usda"] {
+        assert_eq!(rendered(), 0, "an unchanged study reuses its renders");
+        std::fs::write(d.join(layer), usd_curve(0.2)).unwrap();
+        assert_eq!(rendered(), made, "a changed {layer} redoes every render");
+    }
 
     // Tiles rendered against different contents of one hair file are not merged, whether the
     // file is named by the scene or included by it.
@@ -1602,6 +1639,18 @@ fn caches_and_merges_key_on_every_file_read() {
             "strand.pbrt",
             strand(0.0).into_bytes(),
             strand(0.3).into_bytes(),
+        ),
+        (
+            usd_scene.as_str(),
+            "sub.usda",
+            usd_curve(0.0),
+            usd_curve(0.3),
+        ),
+        (
+            usd_scene.as_str(),
+            "ref.usda",
+            usd_curve(0.0),
+            usd_curve(0.3),
         ),
     ] {
         std::fs::write(d.join("scene.ron"), scene).unwrap();
@@ -1691,6 +1740,108 @@ fn memory_blowups_are_refused_before_allocating() {
         assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
         assert!(stderr(&o).contains("zero.hair") && stderr(&o).contains("not a regular file"));
     }
+}
+
+/// The memory limit holds for the whole scene: objects that each fit but together do not are
+/// refused at the one that crosses it, by name and with the totals, whatever their kind (four
+/// 0.68 GiB objects passed a 1 GiB limit), and pbrt instances count their points.
+#[test]
+fn memory_limit_holds_for_the_whole_scene() {
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    // 0.01 GiB is 83 886 hair points at 128 bytes: 1500 strands × 24 points is 0.0043 GiB.
+    let low = [("TRESS_MEMORY_LIMIT_GIB", "0.01")];
+    let hair = "Hair(source: Procedural(style: Straight, strands: 1500), material: \"hair\")";
+    let with_objects = |objects: &[String]| {
+        let text = SCENE.replace(
+            "Hair(source: Procedural(style: Ball, strands: 300, radius: 0.01), material: \"hair\"),",
+            &format!("{},", objects.join(",\n")),
+        );
+        std::fs::write(d.join("scene.ron"), text).unwrap();
+    };
+    with_objects(&[hair.into(), hair.into()]);
+    let o = tress_within(&["info", "scene.ron"], d, &low, 60);
+    assert!(o.status.success(), "two fit: {}", stderr(&o));
+    with_objects(&[hair.into(), hair.into(), hair.into()]);
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &low,
+        &[
+            "objects[2]",
+            "GiB of the objects before it",
+            "0.01 GiB limit for the whole scene",
+        ],
+    );
+    // A mesh after the hair: 20 000 triangles.
+    let mut obj = String::new();
+    for i in 0..20_000 {
+        let x = i as f32 * 1e-4;
+        obj.push_str(&format!(
+            "v {x} 0 0\nv {x} 1 0\nv {x} 0 1\nf {} {} {}\n",
+            3 * i + 1,
+            3 * i + 2,
+            3 * i + 3
+        ));
+    }
+    std::fs::write(d.join("m.obj"), obj).unwrap();
+    with_objects(&[
+        hair.into(),
+        hair.into(),
+        "Mesh(file: \"m.obj\", material: \"grey\")".into(),
+    ]);
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &low,
+        &[
+            "objects[2]",
+            "m.obj",
+            "20000 triangles",
+            "GiB of the objects before it",
+        ],
+    );
+    // Spheres, many small objects: each counts.
+    let spheres: Vec<String> = (0..20_000)
+        .map(|i| format!("Sphere(center: ({i}, 0, 0), radius: 0.5, material: \"grey\")"))
+        .collect();
+    with_objects(&spheres);
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &[("TRESS_MEMORY_LIMIT_GIB", "0.001")],
+        &["sphere #", "0.001 GiB limit for the whole scene"],
+    );
+    // pbrt instances count against what the objects before them left: alone the groom fits.
+    let control: Vec<String> = (0..31)
+        .map(|i| format!("0 {} 0", i as f32 * 0.01))
+        .collect();
+    let mut pbrt = format!(
+        "ObjectBegin \"tuft\"\nShape \"curve\" \"point3 P\" [{}] \"float width\" 0.01\nObjectEnd\n",
+        control.join(" ")
+    );
+    pbrt.push_str(&"ObjectInstance \"tuft\"\n".repeat(5000));
+    std::fs::write(d.join("inst.pbrt"), pbrt).unwrap();
+    let instanced = "Hair(source: File(\"inst.pbrt\"), material: \"hair\")".to_string();
+    with_objects(std::slice::from_ref(&instanced));
+    let o = tress_within(&["info", "scene.ron"], d, &low, 60);
+    assert!(
+        o.status.success(),
+        "the instances alone fit: {}",
+        stderr(&o)
+    );
+    with_objects(&[hair.into(), instanced]);
+    assert_fails_within(
+        d,
+        &["info", "scene.ron"],
+        &low,
+        &[
+            "objects[1]",
+            "inst.pbrt (line",
+            "ObjectInstance \"tuft\"",
+            "objects before it",
+        ],
+    );
 }
 
 /// Errors that used to mislead: pbrt `nan`/`inf` tokens, tiny non-zero directions called zero,

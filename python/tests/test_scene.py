@@ -211,3 +211,18 @@ def test_ctrl_c_stops_a_render(scene):
     assert time.monotonic() - start < 10
     # The scene still renders afterwards.
     assert scene.render().shape == (16, 16, 3)
+
+
+def test_the_memory_limit_holds_for_the_whole_scene(scene_dict, monkeypatch):
+    # 100 000 objects each far below the limit aborted the interpreter: together they are
+    # refused at the one that crosses it, by name and with the totals.
+    monkeypatch.setenv("TRESS_MEMORY_LIMIT_GIB", "0.1")
+    hair = scene_dict["objects"][0]
+    hair["Hair"]["source"]["Procedural"]["strands"] = 1
+    scene_dict["objects"] = [hair] * 100_000
+    with pytest.raises(
+        ValueError,
+        match=r"objects\[\d+\]: .*GiB of the objects before it, over the 0\.1 GiB limit "
+        r"for the whole scene",
+    ):
+        tress.Scene.from_dict(scene_dict)

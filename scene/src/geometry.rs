@@ -78,7 +78,6 @@ pub fn build_accel(
     materials: &mut Vec<Material>,
     mut builder: SceneBuilder,
 ) -> Result<(EmbreeAccel, String)> {
-    let limits = *builder.limits();
     let here = |i: usize, what: String| anyhow!("{}: objects[{i}]: {what}", scene_path.display());
     let mut notes = Vec::new();
     for (i, object) in objects.iter().enumerate() {
@@ -111,7 +110,10 @@ pub fn build_accel(
                 if let Some(p) = source.path_mut() {
                     *p = resolve(scene_path, p);
                 }
-                let hair = source.load(&limits).map_err(|e| here(i, e.to_string()))?;
+                // Loaded within what the objects before it leave of the memory limit.
+                let hair = source
+                    .load(&builder.limits())
+                    .map_err(|e| here(i, e.to_string()))?;
                 match variation {
                     None => builder
                         .add_hair(&hair, options, material)
