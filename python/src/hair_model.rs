@@ -8,7 +8,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyFloat;
 use rayon::prelude::*;
 use std::sync::Arc;
-use tress_core::math::Vec3;
+use tress_core::math::{unit, Vec3};
 use tress_core::Bcsdf;
 
 /// A hair scattering model (BCSDF), written as in scene files:
@@ -30,6 +30,10 @@ pub struct HairModel {
     bcsdf: Arc<dyn Bcsdf>,
 }
 
+/// An array argument, read as f64 so that range checks see the value as given: f64 numbers
+/// just below 1 round to 1.0 in f32.
+type Input<'py> = PyArrayLikeDyn<'py, f64, AllowTypeChange>;
+
 /// One argument's rows: a single value applying to every row, or one per row.
 struct Rows<T> {
     values: Vec<T>,
@@ -44,10 +48,7 @@ impl<T: Copy> Rows<T> {
 
 /// The rows of `array`: vectors of `K` components (shape (N, K) or (K,)), or numbers (K = 1:
 /// shape (N,) or a scalar).
-fn rows<const K: usize>(
-    name: &str,
-    array: &PyArrayLikeDyn<'_, f32, AllowTypeChange>,
-) -> PyResult<Rows<[f32; K]>> {
+fn rows<const K: usize>(name: &str, array: &Input<'_>) -> PyResult<Rows<[f64; K]>> {
     let view = array.as_array();
     let shape = view.shape();
     let (count, batched) = match (K, shape) {
@@ -66,7 +67,7 @@ fn rows<const K: usize>(
             )));
         }
     };
-    let flat: Vec<f32> = view.iter().copied().collect();
+    let flat: Vec<f64> = view.iter().copied().collect();
     let values = flat
         .chunks_exact(K)
         .map(|c| std::array::from_fn(|j| c[j]))
@@ -75,28 +76,23 @@ fn rows<const K: usize>(
     Ok(Rows { values, batched })
 }
 
-/// Unit directions from `array`; zero-length or non-finite vectors are refused.
-fn directions(
-    name: &str,
-    array: &PyArrayLikeDyn<'_, f32, AllowTypeChange>,
-) -> PyResult<Rows<Vec3>> {
+/// Unit directions from `array`; zero-length or non-finite vectors are refused. Rounded to
+/// f32 first and normalised by `tress_core::math::unit`, as `tress bcsdf eval` reads them, so
+/// both accept the same directions.
+fn directions(name: &str, array: &Input<'_>) -> PyResult<Rows<Vec3>> {
     let r = rows::<3>(name, array)?;
     let values = r
         .values
         .iter()
         .enumerate()
         .map(|(i, &v)| {
-            let d = Vec3::from_array(v);
-            let length = d.length();
-            if length.is_finite() && length > 0.0 {
-                Ok(d / length)
-            } else {
-                Err(PyValueError::new_err(format!(
+            unit(Vec3::from_array(v.map(|x| x as f32))).ok_or_else(|| {
+                PyValueError::new_err(format!(
                     "{}{} = {v:?} is not a direction (zero length or not finite)",
                     name,
                     index(r.batched, i)
-                )))
-            }
+                ))
+            })
         })
         .collect::<PyResult<_>>()?;
     Ok(Rows {
@@ -105,10 +101,12 @@ fn directions(
     })
 }
 
-/// Offsets `h`, each in [-1, 1].
-fn offsets(array: &PyArrayLikeDyn<'_, f32, AllowTypeChange>) -> PyResult<Rows<f32>> {
+/// Offsets `h`, each in [-1, 1] once rounded to f32, as `tress bcsdf eval` checks them: the
+/// interval is closed, so rounding keeps every accepted value inside it.
+fn offsets(array: &Input<'_>) -> PyResult<Rows<f32>> {
     let r = rows::<1>("h", array)?;
-    if let Some(i) = r.values.iter().position(|v| !(-1.0..=1.0).contains(&v[0])) {
+    let values: Vec<f32> = r.values.iter().map(|v| v[0] as f32).collect();
+    if let Some(i) = values.iter().position(|v| !(-1.0..=1.0).contains(v)) {
         return Err(PyValueError::new_err(format!(
             "h{} = {} must lie in [-1, 1]",
             index(r.batched, i),
@@ -116,13 +114,17 @@ fn offsets(array: &PyArrayLikeDyn<'_, f32, AllowTypeChange>) -> PyResult<Rows<f3
         )));
     }
     Ok(Rows {
-        values: r.values.iter().map(|v| v[0]).collect(),
+        values,
         batched: r.batched,
     })
 }
 
-/// Random numbers `u`, each in [0, 1).
-fn randoms(array: &PyArrayLikeDyn<'_, f32, AllowTypeChange>) -> PyResult<Rows<[f32; 4]>> {
+/// The largest f32 below 1.
+const BELOW_ONE: f32 = 1.0 - f32::EPSILON / 2.0;
+
+/// Random numbers `u`, each in [0, 1) as given (f64). A number just below 1 that rounds to 1.0
+/// in f32 becomes the largest f32 below 1, so that `rng.uniform(0, 1)` is always accepted.
+fn randoms(array: &Input<'_>) -> PyResult<Rows<[f32; 4]>> {
     let r = rows::<4>("u", array)?;
     if let Some(i) = r
         .values
@@ -135,7 +137,14 @@ fn randoms(array: &PyArrayLikeDyn<'_, f32, AllowTypeChange>) -> PyResult<Rows<[f
             r.values[i]
         )));
     }
-    Ok(r)
+    Ok(Rows {
+        values: r
+            .values
+            .iter()
+            .map(|u| u.map(|x| (x as f32).min(BELOW_ONE)))
+            .collect(),
+        batched: r.batched,
+    })
 }
 
 /// `[i]` for a row of a batched argument, nothing for a single value.
@@ -150,11 +159,7 @@ fn index(batched: bool, i: usize) -> String {
 /// The arguments of `eval` and `pdf` (`wo`, `wi`, `h`) and their common row count.
 type DirectionPairs = (Rows<Vec3>, Rows<Vec3>, Rows<f32>, Option<usize>);
 
-fn direction_pairs(
-    wo: &PyArrayLikeDyn<'_, f32, AllowTypeChange>,
-    wi: &PyArrayLikeDyn<'_, f32, AllowTypeChange>,
-    h: &PyArrayLikeDyn<'_, f32, AllowTypeChange>,
-) -> PyResult<DirectionPairs> {
+fn direction_pairs(wo: &Input<'_>, wi: &Input<'_>, h: &Input<'_>) -> PyResult<DirectionPairs> {
     let (wo, wi, h) = (directions("wo", wo)?, directions("wi", wi)?, offsets(h)?);
     let n = row_count(&[
         ("wo", wo.batched, wo.values.len()),
@@ -167,11 +172,7 @@ fn direction_pairs(
 /// The arguments of `sample` and `sample_weight` (`wo`, `h`, `u`) and their common row count.
 type SampleInputs = (Rows<Vec3>, Rows<f32>, Rows<[f32; 4]>, Option<usize>);
 
-fn sample_inputs(
-    wo: &PyArrayLikeDyn<'_, f32, AllowTypeChange>,
-    h: &PyArrayLikeDyn<'_, f32, AllowTypeChange>,
-    u: &PyArrayLikeDyn<'_, f32, AllowTypeChange>,
-) -> PyResult<SampleInputs> {
+fn sample_inputs(wo: &Input<'_>, h: &Input<'_>, u: &Input<'_>) -> PyResult<SampleInputs> {
     let (wo, h, u) = (directions("wo", wo)?, offsets(h)?, randoms(u)?);
     let n = row_count(&[
         ("wo", wo.batched, wo.values.len()),
@@ -267,9 +268,9 @@ impl HairModel {
     fn eval<'py>(
         &self,
         py: Python<'py>,
-        wo: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
-        wi: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
-        h: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
+        wo: Input<'py>,
+        wi: Input<'py>,
+        h: Input<'py>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let (wo, wi, h, n) = direction_pairs(&wo, &wi, &h)?;
         let bcsdf = self.bcsdf.as_ref();
@@ -285,9 +286,9 @@ impl HairModel {
     fn pdf<'py>(
         &self,
         py: Python<'py>,
-        wo: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
-        wi: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
-        h: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
+        wo: Input<'py>,
+        wi: Input<'py>,
+        h: Input<'py>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let (wo, wi, h, n) = direction_pairs(&wo, &wi, &h)?;
         let bcsdf = self.bcsdf.as_ref();
@@ -306,9 +307,9 @@ impl HairModel {
     fn sample<'py>(
         &self,
         py: Python<'py>,
-        wo: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
-        h: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
-        u: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
+        wo: Input<'py>,
+        h: Input<'py>,
+        u: Input<'py>,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>)> {
         let (wo, h, u, n) = sample_inputs(&wo, &h, &u)?;
         let bcsdf = self.bcsdf.as_ref();
@@ -338,9 +339,9 @@ impl HairModel {
     fn sample_weight<'py>(
         &self,
         py: Python<'py>,
-        wo: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
-        h: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
-        u: PyArrayLikeDyn<'py, f32, AllowTypeChange>,
+        wo: Input<'py>,
+        h: Input<'py>,
+        u: Input<'py>,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
         let (wo, h, u, n) = sample_inputs(&wo, &h, &u)?;
         let bcsdf = self.bcsdf.as_ref();

@@ -179,3 +179,24 @@ def test_bad_arguments_raise_valueerror(inputs):
         m.eval(wo, wi[:, :2], h)
     with pytest.raises(ValueError, match=r"u must have shape \(N, 4\) or \(4,\)"):
         m.sample(wo, h, u[:, :3])
+
+
+def test_float64_random_numbers_below_one_are_accepted():
+    # rng.uniform(0, 1) can return numbers above 1 - 2**-25, which round to 1.0 in f32: the
+    # documented albedo example must not fail for them.
+    m = tress.HairModel(BROWN)
+    below_one = np.nextafter(1.0, 0.0)
+    u = np.array([[below_one, 1 - 2.0**-25, 0.5, below_one]])
+    wi, f, pdf = m.sample(direction(0.3), [0.1], u)
+    assert np.all(np.isfinite(wi)) and np.all(np.isfinite(f)) and np.all(np.isfinite(pdf))
+    with pytest.raises(ValueError, match=r"u\[0\] = .*must lie in \[0, 1\)"):
+        m.sample(direction(0.3), [0.1], [[1.0, 0.5, 0.5, 0.5]])
+
+
+def test_directions_and_offsets_get_the_verdict_of_bcsdf_eval():
+    # `tress bcsdf eval` reads f32 and normalises with `tress_core::math::unit`: 1e-30 (whose
+    # square is 0 in f32) is a direction, 1e-46 (0 in f32) is not; h rounding to 1 is in range.
+    m = tress.HairModel(BROWN)
+    assert np.isfinite(m.pdf([1e-30, 0, 0], [0, 0, 1e-30], 1 + 1e-9))
+    with pytest.raises(ValueError, match=r"wi = .* is not a direction"):
+        m.pdf([1, 0, 0], [0, 0, 1e-46], 0.2)

@@ -179,7 +179,7 @@ impl GuidedSettings {
                 (
                     "levels",
                     s.levels as f64,
-                    (1..=s.finest_cells_log2.min(12) + 1).contains(&s.levels),
+                    (1..=s.finest_cells_log2.saturating_add(1)).contains(&s.levels),
                     "must lie in 1..=finest_cells_log2 + 1",
                 ),
                 (
@@ -711,5 +711,33 @@ impl Mixture<'_> {
         // resampling drew `wi` with about the target over the mean ratio as its density.
         let scale = mean / ratio;
         Some((wi, weight * scale, pdf / scale))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn levels_bound_is_the_one_stated() {
+        for finest_cells_log2 in [1, 6, 12] {
+            let with = |levels| GuidedSettings {
+                finest_cells_log2,
+                levels,
+                ..GuidedSettings::default()
+            };
+            assert!(with(finest_cells_log2 + 1).check().is_ok());
+            let e = with(finest_cells_log2 + 2).check().unwrap_err();
+            assert_eq!(e.field, "levels");
+            assert_eq!(e.why, "must lie in 1..=finest_cells_log2 + 1");
+        }
+        // An out-of-range finest_cells_log2 is named, not an overflow.
+        let e = GuidedSettings {
+            finest_cells_log2: u32::MAX,
+            ..GuidedSettings::default()
+        }
+        .check()
+        .unwrap_err();
+        assert_eq!(e.field, "finest_cells_log2");
     }
 }

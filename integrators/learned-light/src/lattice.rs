@@ -19,6 +19,9 @@ pub struct Lattice {
 }
 
 impl Lattice {
+    /// Levels a key can name: the level takes its top 4 bits.
+    pub const MAX_LEVELS: u32 = 16;
+
     /// A lattice over `bounds` with `2^finest` cells along their longest side, `levels`
     /// levels and `bins × bins` direction bins.
     pub fn new(bounds: Aabb, finest: u32, levels: u32, bins: u32) -> Self {

@@ -133,8 +133,9 @@ impl CacheSettings {
                 (
                     "levels",
                     self.levels as f64,
-                    (1..=self.finest_cells_log2.min(15) + 1).contains(&self.levels),
-                    "must lie in 1..=finest_cells_log2 + 1",
+                    (1..=(self.finest_cells_log2.saturating_add(1)).min(Lattice::MAX_LEVELS))
+                        .contains(&self.levels),
+                    "must lie in 1..=finest_cells_log2 + 1 and at most 16",
                 ),
                 (
                     "direction_bins",
@@ -545,6 +546,22 @@ fn trace(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn levels_bound_is_the_one_stated() {
+        let with = |finest_cells_log2, levels| CacheSettings {
+            finest_cells_log2,
+            levels,
+            ..CacheSettings::default()
+        };
+        assert!(with(7, 8).check().is_ok());
+        assert!(with(7, 9).check().is_err());
+        // At 16 cells log2 the 4 bits of a cache key, not finest_cells_log2 + 1, bound it.
+        assert!(with(16, 16).check().is_ok());
+        let e = with(16, 17).check().unwrap_err();
+        assert_eq!(e.field, "levels");
+        assert!(e.why.contains("at most 16"), "{}", e.why);
+    }
 
     #[test]
     fn sample_blocks_double_in_length() {
