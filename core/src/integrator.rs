@@ -1,5 +1,6 @@
 //! The integrator interface: radiance along one camera ray.
 
+use crate::accel::Hit;
 use crate::film::FilmSettings;
 use crate::light::Light;
 use crate::math::{Ray, Rgb, Vec2, Vec3};
@@ -120,6 +121,104 @@ pub fn scatter(
     }
     *throughput *= weight;
     Some((sp.spawn(wi), pdf))
+}
+
+/// A path arriving at one of its vertices.
+#[derive(Clone, Copy, Debug)]
+pub struct PathVertex {
+    /// The ray that found the vertex.
+    pub ray: Ray,
+    /// The vertex.
+    pub hit: Hit,
+    /// The path's weight on arriving.
+    pub throughput: Rgb,
+    /// The vertex's number along the path: the camera ray's hit is 0.
+    pub depth: u32,
+}
+
+/// The path tracer's estimate of the radiance along `camera_ray`: at every vertex next-event
+/// estimation toward one light, MIS-weighted against the scattering-sampled continuation, which
+/// also finds the lights at infinity; Russian roulette after `rr_depth` bounces; no vertex
+/// shaded past `max_depth`. `end_at` is asked on arriving at each vertex and may end the path
+/// there with the radiance it returns, throughput included (a cache's final gather); `|_| None`
+/// traces every path to its end.
+pub fn trace_path(
+    scene: &Scene,
+    camera_ray: &Ray,
+    max_depth: u32,
+    rr_depth: u32,
+    sampler: &mut Sampler,
+    end_at: impl FnMut(&PathVertex) -> Option<Rgb>,
+) -> Rgb {
+    let Some(hit) = scene.intersect(camera_ray) else {
+        let mut radiance = Rgb::ZERO;
+        for light in scene.lights.infinite() {
+            let select_pdf = scene.lights.select_pdf_of(light);
+            radiance += escaped_light(light, camera_ray.dir, None, select_pdf, Rgb::ONE);
+        }
+        return radiance;
+    };
+    let first = PathVertex {
+        ray: *camera_ray,
+        hit,
+        throughput: Rgb::ONE,
+        depth: 0,
+    };
+    continue_path(scene, first, max_depth, rr_depth, sampler, end_at)
+}
+
+/// [`trace_path`] from a vertex the path has reached: the radiance the rest of the path brings
+/// back to the camera through it (its throughput included).
+pub fn continue_path(
+    scene: &Scene,
+    mut vertex: PathVertex,
+    max_depth: u32,
+    rr_depth: u32,
+    sampler: &mut Sampler,
+    mut end_at: impl FnMut(&PathVertex) -> Option<Rgb>,
+) -> Rgb {
+    let mut radiance = Rgb::ZERO;
+    let density_needed = scene.lights.weighs_escapes();
+    loop {
+        if let Some(end) = end_at(&vertex) {
+            radiance += end;
+            break;
+        }
+        if vertex.depth >= max_depth {
+            break;
+        }
+        let sp = ShadingPoint::new(&vertex.hit, &vertex.ray, &scene.materials);
+        let u_select = sampler.next_1d();
+        let u_light = sampler.next_2d();
+        if let Some((light, select_pdf)) = scene.lights.choose(u_select) {
+            radiance += direct_light(scene, &sp, light, u_light, select_pdf, vertex.throughput);
+        }
+        // The density of the continuation, for the MIS weight of the lights at infinity it may
+        // find, when that weight needs it.
+        let Some((next, scatter_pdf)) =
+            scatter(&sp, sampler, &mut vertex.throughput, density_needed)
+        else {
+            break;
+        };
+        if roulette(vertex.depth, rr_depth, &mut vertex.throughput, sampler).is_none() {
+            break;
+        }
+        let Some(hit) = scene.intersect(&next) else {
+            for light in scene.lights.infinite() {
+                let select_pdf = scene.lights.select_pdf_of(light);
+                radiance +=
+                    escaped_light(light, next.dir, scatter_pdf, select_pdf, vertex.throughput);
+            }
+            break;
+        };
+        vertex = PathVertex {
+            ray: next,
+            hit,
+            throughput: vertex.throughput,
+            depth: vertex.depth + 1,
+        };
+    }
+    radiance
 }
 
 /// Russian roulette after a path's scattering event number `depth` (from 0), from `rr_depth`

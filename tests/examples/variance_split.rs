@@ -15,14 +15,11 @@
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use std::path::PathBuf;
-use tress_core::integrator::{direct_light, escaped_light, roulette, scatter};
+use tress_core::integrator::{continue_path, trace_path};
 use tress_core::render::camera_sample;
 use tress_core::rng::hash_words;
-use tress_core::{Hit, Ray, Rgb, Sampler, Scene, ShadingPoint};
-
-/// The path tracer's settings (`Path()`'s defaults).
-const MAX_DEPTH: u32 = 100;
-const RR_DEPTH: u32 = 5;
+use tress_core::{Ray, Rgb, Sampler, Scene};
+use tress_path::PathSettings;
 
 struct Args {
     scene: PathBuf,
@@ -68,54 +65,9 @@ fn parse() -> Result<Args> {
     })
 }
 
-/// The path tracer's estimate of the radiance leaving `hit` back along `ray`, for a path of
-/// weight `throughput` arriving there at vertex number `depth` (the camera's vertex is 0);
-/// `scatter_pdf` as the path tracer keeps it. Returns it with the rays traced.
-fn continue_path(
-    scene: &Scene,
-    mut ray: Ray,
-    mut hit: Hit,
-    mut throughput: Rgb,
-    mut depth: u32,
-    sampler: &mut Sampler,
-) -> (Rgb, u64) {
-    let mut radiance = Rgb::ZERO;
-    let mut rays = 0;
-    let density_needed = scene.lights.weighs_escapes();
-    loop {
-        if depth >= MAX_DEPTH {
-            break;
-        }
-        let sp = ShadingPoint::new(&hit, &ray, &scene.materials);
-        let u_select = sampler.next_1d();
-        let u_light = sampler.next_2d();
-        if let Some((light, select_pdf)) = scene.lights.choose(u_select) {
-            radiance += direct_light(scene, &sp, light, u_light, select_pdf, throughput);
-            rays += 1;
-        }
-        let Some((next, pdf)) = scatter(&sp, sampler, &mut throughput, density_needed) else {
-            break;
-        };
-        if roulette(depth, RR_DEPTH, &mut throughput, sampler).is_none() {
-            break;
-        }
-        rays += 1;
-        let Some(next_hit) = scene.intersect(&next) else {
-            for light in scene.lights.infinite() {
-                let select_pdf = scene.lights.select_pdf_of(light);
-                radiance += escaped_light(light, next.dir, pdf, select_pdf, throughput);
-            }
-            break;
-        };
-        ray = next;
-        hit = next_hit;
-        depth += 1;
-    }
-    (radiance, rays)
-}
-
 /// One camera sample: its path traced to vertex `split`, then `branches` continuations from
-/// there averaged. Returns the estimate, and the rays traced before and beyond the split.
+/// there averaged (each the path tracer's, with a sampler of its own). Returns the estimate,
+/// and the rays traced before and beyond the split.
 fn sample(
     scene: &Scene,
     camera_ray: Ray,
@@ -124,52 +76,28 @@ fn sample(
     branches: u32,
     stream: u64,
 ) -> (Rgb, u64, u64) {
-    let Some(mut hit) = scene.intersect(&camera_ray) else {
-        let sky: Rgb = scene
-            .lights
-            .infinite()
-            .map(|l| escaped_light(l, camera_ray.dir, None, 1.0, Rgb::ONE))
-            .sum();
-        return (sky, 1, 0);
-    };
-    let (mut radiance, mut throughput, mut ray) = (Rgb::ZERO, Rgb::ONE, camera_ray);
-    let mut prefix_rays = 1;
-    let density_needed = scene.lights.weighs_escapes();
-    for depth in 0..split {
-        let sp = ShadingPoint::new(&hit, &ray, &scene.materials);
-        let u_select = sampler.next_1d();
-        let u_light = sampler.next_2d();
-        if let Some((light, select_pdf)) = scene.lights.choose(u_select) {
-            radiance += direct_light(scene, &sp, light, u_light, select_pdf, throughput);
-            prefix_rays += 1;
+    // The path tracer's settings: `Path()`'s defaults.
+    let PathSettings {
+        max_depth,
+        rr_depth,
+    } = PathSettings::default();
+    let before = scene.rays_traced_on_this_thread();
+    let mut beyond = 0;
+    let radiance = trace_path(scene, &camera_ray, max_depth, rr_depth, &mut sampler, |v| {
+        if v.depth < split {
+            return None;
         }
-        let Some((next, pdf)) = scatter(&sp, &mut sampler, &mut throughput, density_needed) else {
-            return (radiance, prefix_rays, 0);
-        };
-        if roulette(depth, RR_DEPTH, &mut throughput, &mut sampler).is_none() {
-            return (radiance, prefix_rays, 0);
+        let start = scene.rays_traced_on_this_thread();
+        let mut sum = Rgb::ZERO;
+        for b in 0..branches {
+            let mut branch = Sampler::from_seed(hash_words(&[stream, b as u64]));
+            sum += continue_path(scene, *v, max_depth, rr_depth, &mut branch, |_| None);
         }
-        prefix_rays += 1;
-        match scene.intersect(&next) {
-            Some(h) => (hit, ray) = (h, next),
-            None => {
-                for light in scene.lights.infinite() {
-                    let select_pdf = scene.lights.select_pdf_of(light);
-                    radiance += escaped_light(light, next.dir, pdf, select_pdf, throughput);
-                }
-                return (radiance, prefix_rays, 0);
-            }
-        }
-    }
-    let mut sum = Rgb::ZERO;
-    let mut branch_rays = 0;
-    for b in 0..branches {
-        let mut branch = Sampler::from_seed(hash_words(&[stream, b as u64]));
-        let (l, rays) = continue_path(scene, ray, hit, throughput, split, &mut branch);
-        sum += l;
-        branch_rays += rays;
-    }
-    (radiance + sum / branches as f32, prefix_rays, branch_rays)
+        beyond = scene.rays_traced_on_this_thread() - start;
+        Some(sum / branches as f32)
+    });
+    let total = scene.rays_traced_on_this_thread() - before;
+    (radiance, total - beyond, beyond)
 }
 
 /// relMSE over `window` of `image` (rows of the full film) against `reference`.

@@ -10,10 +10,10 @@
 #![warn(missing_docs)]
 
 use serde::{Deserialize, Serialize};
+use tress_core::integrator::trace_path;
 use tress_core::integrator::BuildError;
-use tress_core::integrator::{direct_light, escaped_light, roulette, scatter};
 use tress_core::prepare::Preparation;
-use tress_core::{Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint};
+use tress_core::{Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene};
 
 /// Path tracer settings.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
@@ -73,44 +73,10 @@ impl IntegratorKind for PathTracer {
 
 impl Integrator for PathTracer {
     fn li(&self, camera_ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb {
-        let mut radiance = Rgb::ZERO;
-        let mut throughput = Rgb::ONE;
-        let mut ray = *camera_ray;
-        // Density of the scattering sample that produced `ray`, when its MIS weight needs it;
-        // None for the camera ray.
-        let mut scatter_pdf: Option<f32> = None;
-
-        for depth in 0.. {
-            let Some(hit) = scene.intersect(&ray) else {
-                for light in scene.lights.infinite() {
-                    let select_pdf = scene.lights.select_pdf_of(light);
-                    radiance += escaped_light(light, ray.dir, scatter_pdf, select_pdf, throughput);
-                }
-                break;
-            };
-            if depth >= self.settings.max_depth {
-                break;
-            }
-            let sp = ShadingPoint::new(&hit, &ray, &scene.materials);
-
-            // Next-event estimation.
-            let u_select = sampler.next_1d();
-            let u_light = sampler.next_2d();
-            if let Some((light, select_pdf)) = scene.lights.choose(u_select) {
-                radiance += direct_light(scene, &sp, light, u_light, select_pdf, throughput);
-            }
-
-            let density_needed = scene.lights.weighs_escapes();
-            let Some((next, pdf)) = scatter(&sp, sampler, &mut throughput, density_needed) else {
-                break;
-            };
-            scatter_pdf = pdf;
-            ray = next;
-
-            if roulette(depth, self.settings.rr_depth, &mut throughput, sampler).is_none() {
-                break;
-            }
-        }
-        radiance
+        let PathSettings {
+            max_depth,
+            rr_depth,
+        } = self.settings;
+        trace_path(scene, camera_ray, max_depth, rr_depth, sampler, |_| None)
     }
 }

@@ -32,7 +32,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 use tress_core::film::FilmSettings;
 use tress_core::integrator::{
-    direct_light, escaped_light, roulette, scatter, BuildError, FilmIntegrator,
+    direct_light, escaped_light, roulette, scatter, trace_path, BuildError, FilmIntegrator,
 };
 use tress_core::math::Vec3;
 use tress_core::prepare::Preparation;
@@ -502,45 +502,13 @@ fn trace(
     scene: &Scene,
     sampler: &mut Sampler,
 ) -> Rgb {
-    let mut radiance = Rgb::ZERO;
-    let mut throughput = Rgb::ONE;
-    let mut ray = *camera_ray;
-    let mut scatter_pdf: Option<f32> = None;
-    for depth in 0.. {
-        let Some(hit) = scene.intersect(&ray) else {
-            for light in scene.lights.infinite() {
-                let select_pdf = scene.lights.select_pdf_of(light);
-                radiance += escaped_light(light, ray.dir, scatter_pdf, select_pdf, throughput);
-            }
-            break;
-        };
-        if depth >= settings.handoff(block) {
-            let class = settings.depth_class(depth);
-            if let Some(cached) = cache.and_then(|c| c.lookup(class, hit.p, -ray.dir)) {
-                radiance += throughput * cached;
-                break;
-            }
-        }
-        if depth >= settings.max_depth {
-            break;
-        }
-        let sp = ShadingPoint::new(&hit, &ray, &scene.materials);
-        let u_select = sampler.next_1d();
-        let u_light = sampler.next_2d();
-        if let Some((light, select_pdf)) = scene.lights.choose(u_select) {
-            radiance += direct_light(scene, &sp, light, u_light, select_pdf, throughput);
-        }
-        let density_needed = scene.lights.weighs_escapes();
-        let Some((next, pdf)) = scatter(&sp, sampler, &mut throughput, density_needed) else {
-            break;
-        };
-        scatter_pdf = pdf;
-        ray = next;
-        if roulette(depth, settings.rr_depth, &mut throughput, sampler).is_none() {
-            break;
-        }
-    }
-    radiance
+    let handoff = settings.handoff(block);
+    let (max_depth, rr_depth) = (settings.max_depth, settings.rr_depth);
+    trace_path(scene, camera_ray, max_depth, rr_depth, sampler, |v| {
+        let cache = cache.filter(|_| v.depth >= handoff)?;
+        let cached = cache.lookup(settings.depth_class(v.depth), v.hit.p, -v.ray.dir)?;
+        Some(v.throughput * cached)
+    })
 }
 
 #[cfg(test)]
