@@ -909,6 +909,7 @@ fn text_string(t: &Text) -> String {
 mod tests {
     use super::*;
     use crate::output_file::{self, Inputs};
+    use crate::test_util::files_in;
 
     /// Writes one output at `path` with `write`, as every caller does.
     fn to_file(
@@ -949,15 +950,6 @@ mod tests {
                 .iter()
                 .zip(&b.pixels)
                 .all(|(p, q)| p.to_array().map(f32::to_bits) == q.to_array().map(f32::to_bits))
-    }
-
-    fn files_in(dir: &Path) -> Vec<String> {
-        let mut names: Vec<String> = std::fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        names.sort();
-        names
     }
 
     #[test]

@@ -26,6 +26,8 @@ pub mod sampling;
 pub mod scene;
 pub mod shading;
 pub mod stats;
+#[cfg(test)]
+mod test_util;
 
 pub use accel::{Accel, FiberDensity, Hit, HitKind, PrimId};
 pub use bcsdf::{Bcsdf, BcsdfSample, FiberFrame};

@@ -609,15 +609,7 @@ pub fn write_bytes(path: &Path, inputs: &Inputs, bytes: &[u8]) -> Result<(), Out
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn names_in(dir: &Path) -> Vec<String> {
-        let mut names: Vec<String> = std::fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        names.sort();
-        names
-    }
+    use crate::test_util::files_in;
 
     #[cfg(unix)]
     fn mkfifo(path: &Path) {
@@ -651,10 +643,10 @@ mod tests {
             std::os::unix::fs::symlink("real/later.csv", d.join("dangling.csv")).unwrap();
             write_bytes(&d.join("dangling.csv"), &none, b"made").unwrap();
             assert_eq!(std::fs::read(d.join("real/later.csv")).unwrap(), b"made");
-            assert_eq!(names_in(&d.join("real")), ["later.csv", "target.csv"]);
+            assert_eq!(files_in(&d.join("real")), ["later.csv", "target.csv"]);
         }
         assert_eq!(
-            names_in(d).iter().filter(|n| n.starts_with('.')).count(),
+            files_in(d).iter().filter(|n| n.starts_with('.')).count(),
             0,
             "temporary files left"
         );
@@ -679,7 +671,7 @@ mod tests {
         });
         assert!(failed.is_err());
         drop(batch);
-        assert!(names_in(d).is_empty(), "{:?}", names_in(d));
+        assert!(files_in(d).is_empty(), "{:?}", files_in(d));
         std::fs::create_dir(d.join("taken.csv")).unwrap();
         let err = write_bytes(&d.join("taken.csv"), &none, b"x").unwrap_err();
         assert!(matches!(err, OutputError::Directory { .. }), "{err}");
@@ -755,7 +747,7 @@ mod tests {
         assert!(err.to_string().contains("is a socket"), "{err}");
         assert!(std::fs::metadata(&socket).unwrap().file_type().is_socket());
         assert_eq!(
-            names_in(d),
+            files_in(d),
             ["fifo.csv", "null.csv", "socket.csv", "to_fifo.csv"]
         );
     }
@@ -802,6 +794,6 @@ mod tests {
         let inputs: Inputs = [d.join("log.txt")].into_iter().collect();
         let err = write_bytes(&proc, &inputs, b"x").unwrap_err();
         assert!(matches!(err, OutputError::Input { .. }), "{err}");
-        assert_eq!(names_in(d), ["log.txt", "out.csv"]);
+        assert_eq!(files_in(d), ["log.txt", "out.csv"]);
     }
 }

@@ -118,13 +118,7 @@ impl Lattice {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn unit_box() -> Aabb {
-        Aabb {
-            min: Vec3::ZERO,
-            max: Vec3::ONE,
-        }
-    }
+    use crate::test_util::unit_box;
 
     /// Directions spread over the sphere (a Fibonacci lattice).
     fn directions(n: usize) -> impl Iterator<Item = Vec3> {

@@ -9,6 +9,8 @@
 mod lattice;
 mod radiance;
 mod settings;
+#[cfg(test)]
+mod test_util;
 mod training;
 
 pub use lattice::Lattice;

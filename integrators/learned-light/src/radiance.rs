@@ -184,14 +184,7 @@ impl RadianceCache {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tress_core::math::Aabb;
-
-    fn unit_box() -> Aabb {
-        Aabb {
-            min: Vec3::ZERO,
-            max: Vec3::ONE,
-        }
-    }
+    use crate::test_util::unit_box;
 
     #[test]
     fn a_lookup_takes_the_finest_level_with_enough_records() {
