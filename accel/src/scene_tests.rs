@@ -803,8 +803,8 @@ fn chained_hits_count_every_fiber_of_a_dense_layer() {
 }
 
 /// Where two fibers interpenetrate, a ray leaving one from inside the other scatters off the
-/// second where it leaves it (`Overlaps::Scatter`, the default), or passes through it to the
-/// next fiber (`Overlaps::PassThrough`, Mitsuba 3's convention); a fiber entered from outside
+/// second where it leaves it (`Overlaps::Scatter`), or passes through it to the next fiber
+/// (`Overlaps::PassThrough`, the default and Mitsuba 3's convention); a fiber entered from outside
 /// is hit either way — for every basis, ribbons and tubes, intersection and occlusion.
 #[test]
 fn rays_starting_inside_another_fiber_follow_the_overlap_convention() {

@@ -148,9 +148,10 @@ pub struct HairOptions {
     pub basis: CurveBasis,
     /// Ray-facing ribbons (`Flat`, the default) or tubes (`Round`).
     pub curve: CurveShape,
-    /// What a ray that starts inside another fiber meets of it: `Scatter` (the default: it
-    /// scatters where it leaves that fiber) or `PassThrough` (Mitsuba 3's convention, for
-    /// matching its images).
+    /// What a ray that starts inside another fiber meets of it: `PassThrough` (the default: it
+    /// passes through that fiber, which conserves energy where fibers interpenetrate, as
+    /// Mitsuba 3 does) or `Scatter` (it scatters where it leaves that fiber: the convention
+    /// before, which traps light in the overlaps).
     pub overlaps: Overlaps,
     /// Multiplies every radius.
     pub radius_scale: f32,
@@ -173,7 +174,7 @@ impl Default for HairOptions {
         HairOptions {
             basis: CurveBasis::Linear,
             curve: CurveShape::Flat,
-            overlaps: Overlaps::Scatter,
+            overlaps: Overlaps::PassThrough,
             radius_scale: 1.0,
             tip_scale: 1.0,
             transform: Transform::default(),
