@@ -13,7 +13,7 @@ use crate::render_file::{self, parse_crop, Identity, PreviewArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 use tress_core::film::{Aov, Outputs};
 use tress_core::image_io::Attribute;
@@ -285,47 +285,15 @@ pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
     };
 
     let interrupt = Interrupt::install()?;
-    // The integrator's per-film precomputation (a radiance cache), with its own bar; it counts
-    // as render time.
-    let t_prepare = Instant::now();
-    let prepare_bar = progress_bar(1000, verbose, "precomputing ");
-    let samples = args.spp_offset..args.spp_offset + desc.film.spp as u64;
-    let prepared = pool.install(|| {
-        integrator.for_film(
-            &built.scene,
-            &desc.film,
-            samples,
-            interrupt.cancel_flag(),
-            &|done| prepare_bar.set_position((done * 1000.0) as u64),
-        )
-    });
-    prepare_bar.finish_and_clear();
-    let prepare_time = t_prepare.elapsed();
-    let stats = RenderStats {
-        wall: prepare_time,
-        precompute: prepare_time,
-        precompute_note: prepared.as_ref().map(|p| p.note.clone()),
-        ..Default::default()
-    };
-    let integrator: &dyn Integrator = match &prepared {
-        Some(p) => {
-            if verbose {
-                eprintln!("{}", p.note);
-            }
-            p.integrator.as_ref()
-        }
-        None => integrator.as_ref(),
-    };
-
     let render = Waves {
         args: &args,
         desc: &desc,
         scene: &built.scene,
-        integrator,
+        integrator: integrator.as_ref(),
         pool: &pool,
         files: &files,
     };
-    let rendered = render.run(interrupt.cancel_flag(), stats, verbose)?;
+    let rendered = render.run(interrupt.cancel_flag(), verbose)?;
     if rendered.reached == 0 {
         eprintln!(
             "interrupted before the first sample of every pixel was finished: nothing written"
@@ -421,8 +389,11 @@ struct Rendered {
 
 impl Waves<'_> {
     /// Renders waves of cumulative 1, 2, 4, … spp, writing the partial image after each with
-    /// `--partial`; `stats` holds the precomputation's time.
-    fn run(&self, cancel: &AtomicBool, mut stats: RenderStats, verbose: bool) -> Result<Rendered> {
+    /// `--partial`. Before each wave the integrator prepares for the wave's samples
+    /// ([`Integrator::for_film`]: a radiance cache trains the caches of the sample blocks the
+    /// wave reaches, going on from the blocks before, whose caches it lets go), with a bar of
+    /// its own; that time counts as render time.
+    fn run(&self, cancel: &AtomicBool, verbose: bool) -> Result<Rendered> {
         let (args, film) = (self.args, &self.desc.film);
         let outputs = args.outputs();
         let [x0, y0, x1, y1] = film.window();
@@ -432,9 +403,8 @@ impl Waves<'_> {
         let progress = |n: u64| bar.inc(n);
         let limit = args.time_limit.map(Duration::from_secs_f64);
         // The limit counts the precomputation (a radiance cache's training) as render time.
-        let start = Instant::now()
-            .checked_sub(stats.precompute)
-            .unwrap_or_else(Instant::now);
+        let start = Instant::now();
+        let mut stats = RenderStats::default();
         let mut sums = SampleSums::empty(
             film.window(),
             film.width,
@@ -446,15 +416,44 @@ impl Waves<'_> {
         let mut status = Status::Complete;
         while reached < target {
             let next = (2 * reached).clamp(1, target);
+            let samples = first + reached..first + next;
+            let t_prepare = Instant::now();
+            let prepared = bar.suspend(|| {
+                let prepare_bar = progress_bar(1000, verbose, "precomputing ");
+                let prepared = self.pool.install(|| {
+                    self.integrator
+                        .for_film(self.scene, film, samples.clone(), cancel, &|done| {
+                            prepare_bar.set_position((done * 1000.0) as u64)
+                        })
+                });
+                prepare_bar.finish_and_clear();
+                prepared
+            });
+            if cancel.load(Ordering::Relaxed) {
+                status = Status::Interrupted;
+                break;
+            }
+            let prepare_time = t_prepare.elapsed();
+            stats.add(&RenderStats {
+                wall: prepare_time,
+                precompute: prepare_time,
+                ..Default::default()
+            });
+            let integrator: &dyn Integrator = match &prepared {
+                Some(p) => {
+                    if stats.precompute_note.as_ref() != Some(&p.note) {
+                        if verbose {
+                            bar.suspend(|| eprintln!("{}", p.note));
+                        }
+                        stats.precompute_note = Some(p.note.clone());
+                    }
+                    p.integrator.as_ref()
+                }
+                None => self.integrator,
+            };
             let wave = self.pool.install(|| {
                 render::render_outputs(
-                    self.scene,
-                    self.integrator,
-                    film,
-                    &outputs,
-                    first + reached..first + next,
-                    cancel,
-                    &progress,
+                    self.scene, integrator, film, &outputs, samples, cancel, &progress,
                 )
             });
             let Some(wave) = wave else {

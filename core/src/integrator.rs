@@ -47,6 +47,14 @@ pub trait Integrator: Send + Sync + std::fmt::Debug {
         let _ = (scene, film, samples, cancel, progress);
         None
     }
+
+    /// The consecutive ranges `samples` splits into for [`Integrator::for_film`]: the render
+    /// loop prepares for and renders one after another, so that what was prepared for one is
+    /// let go before the next is prepared (a radiance cache's sample blocks, each with caches
+    /// of its own). The whole range by default.
+    fn sample_segments(&self, samples: Range<u64>) -> Vec<Range<u64>> {
+        vec![samples]
+    }
 }
 
 /// An integrator prepared for one film by [`Integrator::for_film`].

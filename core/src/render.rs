@@ -657,6 +657,31 @@ pub fn render_outputs(
     cancel: &AtomicBool,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Option<SampleRender> {
+    // Each segment is prepared for (and what was prepared let go) in turn; the segments' sums
+    // append exactly, so the image is the same as one range's.
+    let mut segments = integrator.sample_segments(samples.clone()).into_iter();
+    let first = segments.next().unwrap_or(samples);
+    let mut done = render_segment(scene, integrator, film, outputs, first, cancel, progress)?;
+    for segment in segments {
+        let later = render_segment(scene, integrator, film, outputs, segment, cancel, progress)?;
+        done.sums
+            .append(&later.sums)
+            .expect("an integrator's sample segments follow each other");
+        done.stats.add(&later.stats);
+    }
+    Some(done)
+}
+
+/// [`render_outputs`] of one sample segment, prepared for as a whole.
+fn render_segment(
+    scene: &Scene,
+    integrator: &dyn Integrator,
+    film: &FilmSettings,
+    outputs: &Outputs,
+    samples: Range<u64>,
+    cancel: &AtomicBool,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Option<SampleRender> {
     let start = Instant::now();
     let prepared = integrator.for_film(scene, film, samples.clone(), cancel, &|_| {});
     let integrator = prepared

@@ -256,7 +256,7 @@ impl Integrator for GuidedPathTracer {
         let t = self.trained.get_or_train(
             key,
             |_| true,
-            || Trained::new(&self.settings, scene, key, cancel, progress),
+            |_| Trained::new(&self.settings, scene, key, cancel, progress),
         )?;
         Some(FilmIntegrator {
             note: t.description.clone(),

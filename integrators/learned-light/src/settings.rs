@@ -35,7 +35,8 @@ pub fn check_ranges(integrator: &'static str, checks: &[RangeCheck]) -> Result<(
 }
 
 /// What an integrator learned for the film it rendered last, kept so that the waves and sample
-/// ranges of one image train once.
+/// ranges of one image train once, and handed to the next training for the same film when it
+/// does not serve, so that training can go on from it instead of starting again.
 #[derive(Debug)]
 pub struct LastFilm<T> {
     last: Mutex<Option<(FilmKey, Arc<T>)>>,
@@ -51,12 +52,14 @@ impl<T> Default for LastFilm<T> {
 
 impl<T> LastFilm<T> {
     /// What was learned for `film`, if it `serves` the request, else what `train` learns
-    /// (kept for the next request); `None` when training was stopped.
+    /// (kept for the next request); `None` when training was stopped. `train` is given what was
+    /// learned for the same film before (no longer kept here, so that it is freed as soon as
+    /// its last user lets go of it), to go on from.
     pub fn get_or_train(
         &self,
         film: FilmKey,
         serves: impl Fn(&T) -> bool,
-        train: impl FnOnce() -> Option<T>,
+        train: impl FnOnce(Option<Arc<T>>) -> Option<T>,
     ) -> Option<Arc<T>> {
         let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((key, learned)) = last.as_ref() {
@@ -64,7 +67,8 @@ impl<T> LastFilm<T> {
                 return Some(learned.clone());
             }
         }
-        let learned = Arc::new(train()?);
+        let before = last.take().filter(|(key, _)| *key == film).map(|(_, l)| l);
+        let learned = Arc::new(train(before)?);
         *last = Some((film, learned.clone()));
         Some(learned)
     }
@@ -95,17 +99,21 @@ mod tests {
         };
         let trained = Cell::new(0);
         let learned: LastFilm<u32> = LastFilm::default();
+        // What training was handed, for the checks below.
+        let handed = Cell::new(None);
         let get = |key, wanted: u32| {
             learned.get_or_train(
                 key,
                 |&have| have >= wanted,
-                || {
+                |before: Option<Arc<u32>>| {
+                    handed.set(before.map(|b| *b));
                     trained.set(trained.get() + 1);
                     Some(wanted)
                 },
             )
         };
         assert_eq!(*get(film(1), 2).unwrap(), 2);
+        assert_eq!(handed.get(), None);
         assert_eq!(*get(film(1), 1).unwrap(), 2, "kept: it serves");
         assert_eq!(trained.get(), 1);
         assert_eq!(
@@ -113,9 +121,15 @@ mod tests {
             3,
             "trained again: it does not serve"
         );
+        assert_eq!(handed.get(), Some(2), "handed what the same film learned");
         assert_eq!(*get(film(2), 1).unwrap(), 1, "trained again: another film");
+        assert_eq!(
+            handed.get(),
+            None,
+            "another film's learning is not handed on"
+        );
         assert_eq!(trained.get(), 3);
         // A stopped training keeps nothing and returns nothing.
-        assert!(learned.get_or_train(film(3), |_| true, || None).is_none());
+        assert!(learned.get_or_train(film(3), |_| true, |_| None).is_none());
     }
 }

@@ -29,6 +29,7 @@
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 use tress_core::film::FilmSettings;
 use tress_core::integrator::{
@@ -214,19 +215,52 @@ impl Integrator for RadianceCacheIntegrator {
         let t = self.trained.get_or_train(
             key,
             |t| t.covers(&blocks),
-            || Trained::new(&self.settings, scene, key, blocks.clone(), cancel, progress),
+            |before| {
+                Trained::new(
+                    &self.settings,
+                    scene,
+                    key,
+                    blocks.clone(),
+                    before,
+                    cancel,
+                    progress,
+                )
+            },
         )?;
         Some(FilmIntegrator {
             note: t.description.clone(),
             integrator: t,
         })
     }
+
+    /// One segment a sample block, so that a render holds one block's caches at a time.
+    fn sample_segments(&self, samples: Range<u64>) -> Vec<Range<u64>> {
+        block_segments(self.settings.block_spp, samples)
+    }
+}
+
+/// The first sample of block `block` (see [`block_of`]).
+fn block_start(block_spp: u32, block: u32) -> u64 {
+    let blocks_before = 1u64.checked_shl(block).map_or(u64::MAX, |b| b - 1);
+    (block_spp as u64).saturating_mul(blocks_before)
 }
 
 /// The block of sample `sample`: block `b` holds samples `block_spp · (2^b − 1)` up to
 /// `block_spp · (2^(b+1) − 1)`.
 fn block_of(block_spp: u32, sample: u64) -> u32 {
     (sample / block_spp as u64 + 1).ilog2()
+}
+
+/// `samples` cut at the starts of sample blocks.
+fn block_segments(block_spp: u32, samples: Range<u64>) -> Vec<Range<u64>> {
+    let mut segments = Vec::new();
+    let mut start = samples.start;
+    while start < samples.end {
+        let next = block_start(block_spp, block_of(block_spp, start) + 1).min(samples.end);
+        segments.push(start..next);
+        start = next;
+    }
+    segments
 }
 
 /// The integrator with the caches of one film's sample blocks.
@@ -236,6 +270,15 @@ struct Trained {
     first_block: u32,
     /// The caches of blocks `first_block..`.
     caches: Vec<BlockCaches>,
+    /// The records of the training paths traced, per vertex-number class (empty below the
+    /// first class read), for the training of later blocks to go on from. Taken by that
+    /// training, so that a render whose waves reach new blocks holds the caches of the blocks
+    /// it is rendering and one set of records, never every block's caches at once.
+    records: Mutex<Option<Vec<Records>>>,
+    /// Training paths traced for the film, this training's and those it went on from.
+    traced: u64,
+    /// Wall seconds of training for the film, this training's and those it went on from.
+    seconds: f64,
     /// How the caches were made, for logs.
     description: String,
 }
@@ -303,13 +346,16 @@ const TRAINING_STREAM: u64 = 0x7261_6469_616e_6365;
 
 impl Trained {
     /// The caches of sample blocks `blocks`: block `b`'s from the first `training_spp · 2^b`
-    /// training paths per pixel (each block's paths include the block before's). `None` when
-    /// cancelled.
+    /// training paths per pixel (each block's paths include the block before's). Goes on from
+    /// `before`, the training of earlier blocks of the same film, where it traced no more paths
+    /// than the first of `blocks` needs; the records are the same sums of the same paths in
+    /// the same order either way, so the caches are too. `None` when cancelled.
     fn new(
         settings: &CacheSettings,
         scene: &Scene,
         film: FilmKey,
         blocks: Range<u32>,
+        before: Option<Arc<Trained>>,
         cancel: &AtomicBool,
         progress: &(dyn Fn(f64) + Sync),
     ) -> Option<Self> {
@@ -322,10 +368,22 @@ impl Trained {
         );
         let paths_of = |block: u32| film.pixels() * ((settings.training_spp as u64) << block);
         let total = paths_of(blocks.end - 1);
-        let mut records: Vec<Records> = vec![Records::default(); DEPTH_CLASSES as usize];
+        let went_on = before
+            .filter(|b| b.traced <= paths_of(blocks.start))
+            .and_then(|b| {
+                let records = b.records.lock().unwrap_or_else(|e| e.into_inner()).take()?;
+                Some((records, b.traced, b.seconds))
+            });
+        let (mut records, mut traced, seconds_before) = went_on.unwrap_or_else(|| {
+            let empty = vec![Records::default(); DEPTH_CLASSES as usize];
+            (empty, 0, 0.0)
+        });
+        let first_traced = traced;
         let mut caches = Vec::new();
-        let mut traced = 0;
         for block in 0..blocks.end {
+            if paths_of(block) < traced {
+                continue;
+            }
             let paths = traced..paths_of(block);
             train(
                 settings,
@@ -334,7 +392,10 @@ impl Trained {
                 lattice,
                 paths.clone(),
                 cancel,
-                &|done| progress((paths.start + done) as f64 / total as f64),
+                &|done| {
+                    let done = paths.start + done - first_traced;
+                    progress(done as f64 / (total - first_traced).max(1) as f64)
+                },
                 &mut records,
             )?;
             traced = paths.end;
@@ -350,20 +411,23 @@ impl Trained {
                 });
             }
         }
+        let seconds = seconds_before + start.elapsed().as_secs_f64();
         let last = &caches.last().expect("at least one block").caches[0];
         let description = format!(
-            "{} caches for sample blocks {}..{} (the last {}), from {total} training paths, built \
-             in {:.2} s",
+            "{} caches for sample blocks {}..{} (the last {}), from {total} training paths, \
+             built in {seconds:.2} s",
             caches.len(),
             blocks.start,
             blocks.end,
             last.describe(),
-            start.elapsed().as_secs_f64()
         );
         Some(Trained {
             settings: settings.clone(),
             first_block: blocks.start,
             caches,
+            records: Mutex::new(Some(records)),
+            traced,
+            seconds,
             description,
         })
     }
@@ -399,9 +463,13 @@ fn train(
             let (chunk_records, vertices) = chunk;
             chunk_records.resize_with(DEPTH_CLASSES as usize, Records::default);
             training_path(settings, ray, scene, sampler, vertices);
+            // Classes below the first hand-off's are never read (the hand-off only recedes).
+            let first_read = settings.depth_class(settings.handoff(0));
             for (depth, v) in vertices.iter().enumerate() {
-                let class = settings.depth_class(depth as u32) as usize;
-                chunk_records[class].add(&lattice, v.p, v.wo, v.radiance);
+                let class = settings.depth_class(depth as u32);
+                if class >= first_read {
+                    chunk_records[class as usize].add(&lattice, v.p, v.wo, v.radiance);
+                }
             }
         },
         |(chunk, _)| {
@@ -545,6 +613,19 @@ mod tests {
         }
         assert_eq!(block_of(1, 0), 0);
         assert_eq!(block_of(1, u64::MAX - 1), 63);
+    }
+
+    #[test]
+    fn renders_are_segmented_at_block_starts() {
+        assert_eq!(block_segments(4, 0..30), vec![0..4, 4..12, 12..28, 28..30]);
+        assert_eq!(block_segments(4, 5..11), vec![5..11]);
+        assert_eq!(block_segments(4, 11..13), vec![11..12, 12..13]);
+        assert_eq!(block_segments(4, 7..7), Vec::<Range<u64>>::new());
+        // The last block ends where the sample indices do.
+        assert_eq!(
+            block_segments(1, u64::MAX - 3..u64::MAX - 1),
+            vec![u64::MAX - 3..u64::MAX - 1]
+        );
     }
 
     #[test]
