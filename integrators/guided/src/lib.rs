@@ -375,7 +375,7 @@ impl Trained {
         if settings.adjoint_roulette {
             learned.radiance = Some(RadianceCache::new(
                 radiance_lattice,
-                radiance_records,
+                &radiance_records,
                 RADIANCE_MIN_RECORDS,
             ));
         }

@@ -81,39 +81,35 @@ pub struct RadianceCache {
 
 impl RadianceCache {
     /// Every level's cells from the finest level's `records`; a lookup uses a cell only when
-    /// it averages at least `min_records` records.
-    pub fn new(lattice: Lattice, records: Records, min_records: u32) -> Self {
-        let mut levels: Vec<FxHashMap<u64, Sums>> = vec![records.cells];
+    /// it averages at least `min_records` records. Borrows the records (training goes on from
+    /// them) and holds the sums of two levels at a time while it builds.
+    pub fn new(lattice: Lattice, records: &Records, min_records: u32) -> Self {
+        let mut cells = FxHashMap::default();
+        let mut add_level = |sums: &FxHashMap<u64, Sums>| {
+            cells.extend(sums.iter().filter(|(_, s)| s.count > 0).map(|(&key, s)| {
+                let mean = Vec3::from_array(s.rgb.map(|v| (v / s.count as f64) as f32));
+                let count = s.count;
+                (key, Cell { mean, count })
+            }));
+        };
+        add_level(&records.cells);
+        let mut finer: Option<FxHashMap<u64, Sums>> = None;
         for level in 1..lattice.levels() {
+            let from = finer.as_ref().unwrap_or(&records.cells);
             let mut coarser = FxHashMap::default();
-            let finer = &levels[level as usize - 1];
-            let mut keys: Vec<_> = finer.keys().copied().collect();
+            // Keys in sorted order: a sum's rounding depends on the order of its terms.
+            let mut keys: Vec<_> = from.keys().copied().collect();
             keys.sort_unstable();
             for key in keys {
-                let sums = &finer[&key];
                 let (_, c, bin) = Lattice::split_key(key);
                 coarser
                     .entry(lattice.key(level, c, bin))
                     .or_insert_with(Sums::default)
-                    .add(sums);
+                    .add(&from[&key]);
             }
-            levels.push(coarser);
+            add_level(&coarser);
+            finer = Some(coarser);
         }
-        let cells = levels
-            .into_iter()
-            .flatten()
-            .filter(|(_, s)| s.count > 0)
-            .map(|(key, s)| {
-                let mean = Vec3::from_array(s.rgb.map(|v| (v / s.count as f64) as f32));
-                (
-                    key,
-                    Cell {
-                        mean,
-                        count: s.count,
-                    },
-                )
-            })
-            .collect();
         RadianceCache {
             lattice,
             cells,
@@ -200,7 +196,7 @@ mod tests {
             records.add(&lattice, Vec3::splat(0.2), Vec3::Z, Rgb::splat(3.0));
         }
         records.add(&lattice, Vec3::splat(0.9), Vec3::Z, Rgb::splat(100.0));
-        let at = |min_records| RadianceCache::new(lattice, records.clone(), min_records);
+        let at = |min_records| RadianceCache::new(lattice, &records, min_records);
         // The centre of the finest cell at the origin.
         let origin = Vec3::splat(0.0625);
         assert_eq!(at(3).lookup(origin, Vec3::Z), Some(Rgb::splat(1.0)));
@@ -225,7 +221,7 @@ mod tests {
             records.add(&lattice, Vec3::new(0.1, 0.1, 0.1), Vec3::Z, Rgb::splat(1.0));
             records.add(&lattice, Vec3::new(0.9, 0.1, 0.1), Vec3::Z, Rgb::splat(3.0));
         }
-        let cache = RadianceCache::new(lattice, records, 1);
+        let cache = RadianceCache::new(lattice, &records, 1);
         let at = |x: f32| cache.lookup(Vec3::new(x, 0.25, 0.25), Vec3::Z).unwrap().x;
         assert_eq!(at(0.25), 1.0);
         assert_eq!(at(0.5), 2.0);
@@ -243,7 +239,7 @@ mod tests {
         records.add(&lattice, Vec3::ZERO, Vec3::Z, Rgb::new(-1.0, 0.0, 0.0));
         records.add(&lattice, Vec3::NAN, Vec3::Z, Rgb::ONE);
         assert_eq!(records.count, 0);
-        let cache = RadianceCache::new(lattice, records, 1);
+        let cache = RadianceCache::new(lattice, &records, 1);
         assert_eq!(cache.lookup(Vec3::ZERO, Vec3::Z), None);
     }
 }

@@ -406,7 +406,7 @@ impl Trained {
                     first_class,
                     caches: records[first_class as usize..=last_class as usize]
                         .iter()
-                        .map(|r| RadianceCache::new(lattice, r.clone(), settings.min_records))
+                        .map(|r| RadianceCache::new(lattice, r, settings.min_records))
                         .collect(),
                 });
             }
