@@ -164,6 +164,9 @@ pub struct Fur {
     cdf_range: f64,
     /// The scattering profiles; `None` when the medulla cannot scatter (κ = 0 or σ_s = 0).
     table: Option<Arc<Table>>,
+    /// Each table node's escaping fraction ρ(σ_c) for this cortex's σ_c, per channel: fixed
+    /// per model, so `eval` only interpolates it.
+    escape: Vec<[f64; 3]>,
 }
 
 /// Everything that depends on (wo, h) only.
@@ -208,9 +211,13 @@ impl Fur {
 
         let key = TableKey::new(p);
         let table = (key.kappa > 0.0 && key.sigma_s > 0.0).then(|| Table::get(&key));
+        let sigma_c = [sigma_c.x, sigma_c.y, sigma_c.z].map(f64::from);
+        let escape = table.as_ref().map_or(Vec::new(), |t| {
+            t.nodes.iter().map(|n| sigma_c.map(|s| n.escape_at(s))).collect()
+        });
         Ok(Fur {
             eta: p.eta as f64,
-            sigma_c: [sigma_c.x, sigma_c.y, sigma_c.z].map(f64::from),
+            sigma_c,
             kappa: p.medulla_ratio as f64,
             sigma_s: p.medulla_sigma_s as f64,
             sigma_t: (p.medulla_sigma_s + p.medulla_sigma_a) as f64,
@@ -221,6 +228,7 @@ impl Fur {
             cdf_lo: 1.0 / (1.0 + (PI64 / s).exp()),
             cdf_range: (PI64 / (2.0 * s)).tanh(),
             table,
+            escape,
         })
     }
 
@@ -258,10 +266,14 @@ impl Fur {
             .table
             .as_ref()
             .map_or(Nodes::NONE, |t| t.nodes(sin_o, u));
-        let escape = self
-            .table
-            .as_ref()
-            .map_or([0.0; 3], |t| t.escape(&nodes, self.sigma_c));
+        let mut escape = [0.0; 3];
+        if self.table.is_some() {
+            for (&i, &w) in nodes.index.iter().zip(&nodes.weight) {
+                for (e, n) in escape.iter_mut().zip(self.escape[i]) {
+                    *e += w * n;
+                }
+            }
+        }
         let mut energy = [Rgb::ZERO; 5];
         for c in 0..3 {
             let t_c = (-self.sigma_c[c] * (chord - medulla)).exp();
@@ -696,29 +708,6 @@ impl Table {
         }
     }
 
-    /// The escaping fraction of first scattered light per channel of cortex absorption
-    /// `sigma_c`, interpolated between the nodes.
-    fn escape(&self, n: &Nodes, sigma_c: [f64; 3]) -> [f64; 3] {
-        sigma_c.map(|sigma| {
-            let last = SIGMA_GRID.len() - 1;
-            let k = SIGMA_GRID[1..last].partition_point(|&s| s <= sigma);
-            let t = (sigma - SIGMA_GRID[k]) / (SIGMA_GRID[k + 1] - SIGMA_GRID[k]);
-            let mut sum = 0.0;
-            for (&i, &w) in n.index.iter().zip(&n.weight) {
-                if w > 0.0 {
-                    let e = &self.nodes[i].escape;
-                    let (a, b) = (e[k] as f64, e[k + 1] as f64);
-                    let v = if a > 0.0 && b > 0.0 {
-                        (a.ln() + t * (b.ln() - a.ln())).exp()
-                    } else {
-                        (a + t * (b - a)).max(0.0)
-                    };
-                    sum += w * v;
-                }
-            }
-            sum
-        })
-    }
 
     /// The table's cell of (sin θ_i, φ), in the mirrored frame of the query.
     fn cell(n: &Nodes, sin_i: f64, phi: f64) -> usize {
@@ -825,6 +814,19 @@ impl Table {
 const MAGIC: &[u8; 8] = b"TRESSFUR";
 
 impl Node {
+    /// The escaping fraction through a cortex of absorption `sigma` ([`SIGMA_GRID`]).
+    fn escape_at(&self, sigma: f64) -> f64 {
+        let last = SIGMA_GRID.len() - 1;
+        let k = SIGMA_GRID[1..last].partition_point(|&s| s <= sigma);
+        let t = (sigma - SIGMA_GRID[k]) / (SIGMA_GRID[k + 1] - SIGMA_GRID[k]);
+        let (a, b) = (self.escape[k] as f64, self.escape[k + 1] as f64);
+        if a > 0.0 && b > 0.0 {
+            (a.ln() + t * (b.ln() - a.ln())).exp()
+        } else {
+            (a + t * (b - a)).max(0.0)
+        }
+    }
+
     /// A node from its cell probabilities; `None` unless they are finite, non-negative and
     /// not all zero (a corrupt cache).
     fn new(prob: Vec<f32>, escape: [f32; SIGMA_GRID.len()]) -> Option<Node> {
