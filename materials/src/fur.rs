@@ -213,7 +213,10 @@ impl Fur {
         let table = (key.kappa > 0.0 && key.sigma_s > 0.0).then(|| Table::get(&key));
         let sigma_c = [sigma_c.x, sigma_c.y, sigma_c.z].map(f64::from);
         let escape = table.as_ref().map_or(Vec::new(), |t| {
-            t.nodes.iter().map(|n| sigma_c.map(|s| n.escape_at(s))).collect()
+            t.nodes
+                .iter()
+                .map(|n| sigma_c.map(|s| n.escape_at(s)))
+                .collect()
         });
         Ok(Fur {
             eta: p.eta as f64,
@@ -283,8 +286,7 @@ impl Fur {
             // 1 − fT = 0 only when f = 1 (h = ±1), where a2 = 0 and nothing enters.
             let denom = (1.0 - f * t).max(f64::MIN_POSITIVE);
             let a3 = a2 * f * t / denom;
-            let scattered = (1.0 - f) * t_c.sqrt() * (1.0 - t_m) * albedo / denom
-                * escape[c];
+            let scattered = (1.0 - f) * t_c.sqrt() * (1.0 - t_m) * albedo / denom * escape[c];
             for (e, v) in energy.iter_mut().zip([f, a1, a2, a3, scattered]) {
                 e[c] = v as f32;
             }
@@ -327,14 +329,21 @@ impl Fur {
     /// at the angles of wi.
     fn shapes(&self, g: &Geometry, (sin_i, cos_i, phi): (f64, f64, f64)) -> [f64; 6] {
         let mut out = [0.0; 6];
-        for p in 0..4 {
-            let m = vmf(self.v[p], self.ln_norm[p], sin_i, cos_i, g.sin_o[p], g.cos_o[p]);
+        for (p, value) in out.iter_mut().enumerate().take(4) {
+            let m = vmf(
+                self.v[p],
+                self.ln_norm[p],
+                sin_i,
+                cos_i,
+                g.sin_o[p],
+                g.cos_o[p],
+            );
             let n = if p < RESIDUAL {
                 self.logistic(wrap_pi(phi - g.phi_exit[p]))
             } else {
                 1.0 / (2.0 * PI64)
             };
-            out[p] = m * n;
+            *value = m * n;
         }
         if let Some(t) = &self.table {
             let [tts, trts] = t.density(&g.nodes, sin_i, phi);
@@ -491,7 +500,8 @@ fn i0_scaled(x: f64) -> f64 {
         let t = (x / 3.75) * (x / 3.75);
         let p = 1.0
             + t * (3.5156229
-                + t * (3.0899424 + t * (1.2067492 + t * (0.2659732 + t * (0.0360768 + t * 0.0045813)))));
+                + t * (3.0899424
+                    + t * (1.2067492 + t * (0.2659732 + t * (0.0360768 + t * 0.0045813)))));
         p * (-x).exp()
     } else {
         let t = 3.75 / x;
@@ -635,10 +645,13 @@ impl Nodes {
     };
 }
 
+/// A table of this process with the key bits it was made for.
+type Memo = ([u32; 6], Arc<Table>);
+
 impl Table {
     /// The table for `key`: from this process's memory, the disk cache, or built (and cached).
     fn get(key: &TableKey) -> Arc<Table> {
-        static MEMO: OnceLock<Mutex<Vec<([u32; 6], Arc<Table>)>>> = OnceLock::new();
+        static MEMO: OnceLock<Mutex<Vec<Memo>>> = OnceLock::new();
         let memo = MEMO.get_or_init(Default::default);
         // Held while building, so concurrent builders of one table wait for the first.
         let mut memo = memo.lock().unwrap_or_else(|e| e.into_inner());
@@ -685,10 +698,7 @@ impl Table {
     fn nodes(&self, sin_o: f64, u: f64) -> Nodes {
         let t = (sin_o.abs().asin().to_degrees() / THETA_STEP_DEG).min((N_THETA - 1) as f64);
         let x = u.abs().min(1.0) * (N_U - 1) as f64;
-        let (t0, x0) = (
-            (t as usize).min(N_THETA - 2),
-            (x as usize).min(N_U - 2),
-        );
+        let (t0, x0) = ((t as usize).min(N_THETA - 2), (x as usize).min(N_U - 2));
         let (ft, fx) = (t - t0 as f64, x - x0 as f64);
         Nodes {
             index: [
@@ -707,7 +717,6 @@ impl Table {
             flip_phi: u < 0.0,
         }
     }
-
 
     /// The table's cell of (sin θ_i, φ), in the mirrored frame of the query.
     fn cell(n: &Nodes, sin_i: f64, phi: f64) -> usize {
@@ -839,18 +848,18 @@ impl Node {
                 Some(*s)
             })
             .collect();
-        (ok && cdf[cdf.len() - 1] > 0.0).then_some(Node {
-            prob,
-            cdf,
-            escape,
-        })
+        (ok && cdf[cdf.len() - 1] > 0.0).then_some(Node { prob, cdf, escape })
     }
 }
 
 /// Where tables are cached: `TRESS_CACHE_DIR`, else `$XDG_CACHE_HOME/tress`, else
 /// `~/.cache/tress`; `None` without any of them (the table is then rebuilt per process).
 fn cache_dir() -> Option<PathBuf> {
-    let var = |k| std::env::var_os(k).filter(|v| !v.is_empty()).map(PathBuf::from);
+    let var = |k| {
+        std::env::var_os(k)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
     var("TRESS_CACHE_DIR")
         .or_else(|| var("XDG_CACHE_HOME").map(|d| d.join("tress")))
         .or_else(|| var("HOME").map(|d| d.join(".cache").join("tress")))
@@ -960,7 +969,13 @@ impl Medium {
     /// Follows a photon at `p` inside the fiber going along `d` (in the medulla or the cortex)
     /// until it leaves; `None` if the medulla absorbs it (Russian roulette) or it runs along
     /// the axis (probability ~10⁻¹⁴) or past the cap of events.
-    fn walk(&self, mut p: V3, mut d: V3, mut in_medulla: bool, next: &mut impl FnMut() -> f64) -> Option<Exit> {
+    fn walk(
+        &self,
+        mut p: V3,
+        mut d: V3,
+        mut in_medulla: bool,
+        next: &mut impl FnMut() -> f64,
+    ) -> Option<Exit> {
         let (kappa, eta) = (self.kappa, self.eta);
         let (mut weight, mut cortex, mut reflections) = (1.0f64, 0.0f64, 0u32);
         for _ in 0..100_000 {
@@ -1092,7 +1107,7 @@ fn simulate_node(key: &TableKey, ti: usize, ui: usize) -> Node {
         vec![1.0 / (2 * CELLS) as f32; 2 * CELLS]
     };
     Node::new(prob, escaped.map(|e| (e / PHOTONS as f64).min(1.0) as f32))
-    .expect("a simulated profile is finite and non-negative")
+        .expect("a simulated profile is finite and non-negative")
 }
 
 /// Parameter sets the statistical tests run on this model ([`crate::HairModel::test_instances`]).
@@ -1246,17 +1261,23 @@ mod tests {
             let (mut sum, mut sum2) = (0.0f64, 0.0f64);
             for _ in 0..n {
                 let wi = sample_uniform_sphere(rng.next_2d());
-                let d = ((fur.eval(wo, wi, h) - chiang.eval(wo, wi, h)).abs().x as f64)
-                    * 4.0
-                    * PI64;
+                let d =
+                    ((fur.eval(wo, wi, h) - chiang.eval(wo, wi, h)).abs().x as f64) * 4.0 * PI64;
                 sum += d;
                 sum2 += d * d;
             }
             let mean = sum / n as f64;
             let se = ((sum2 / n as f64 - mean * mean) / n as f64).sqrt();
-            println!("θ_o {theta_deg}° h {h}: L1 {mean:.2e} ± {se:.1e}, bound {:.2e}", 8.0 * eps);
+            println!(
+                "θ_o {theta_deg}° h {h}: L1 {mean:.2e} ± {se:.1e}, bound {:.2e}",
+                8.0 * eps
+            );
             assert!(se < 2.0 * eps, "too noisy to test");
-            assert!(mean < 8.0 * eps, "θ_o {theta_deg}° h {h}: L1 {mean} ≥ {}", 8.0 * eps);
+            assert!(
+                mean < 8.0 * eps,
+                "θ_o {theta_deg}° h {h}: L1 {mean} ≥ {}",
+                8.0 * eps
+            );
         }
     }
 
@@ -1291,9 +1312,13 @@ mod tests {
         a.write(&path, &key).unwrap();
         assert_eq!(bits(&Table::read(&path, &key).unwrap()), bits(&a));
         let other = TableKey { g: 0.0, ..key };
-        assert!(Table::read(&path, &other).unwrap_err().contains("other parameters"));
+        assert!(Table::read(&path, &other)
+            .unwrap_err()
+            .contains("other parameters"));
         std::fs::write(&path, b"TRESSFUR too short").unwrap();
-        assert!(Table::read(&path, &key).unwrap_err().contains("not a table"));
+        assert!(Table::read(&path, &key)
+            .unwrap_err()
+            .contains("not a table"));
         std::fs::remove_dir_all(&dir).unwrap();
     }
     /// Yan et al. 2015 validate their rendering model against full 3D light transport in the
@@ -1321,7 +1346,10 @@ mod tests {
             };
             let fur = Fur::new(&p).unwrap();
             let medium = Medium::new(&TableKey::new(&p));
-            for (i, (theta_deg, h)) in [(0.0f64, 0.1f64), (30.0, -0.4), (60.0, 0.7)].into_iter().enumerate() {
+            for (i, (theta_deg, h)) in [(0.0f64, 0.1f64), (30.0, -0.4), (60.0, 0.7)]
+                .into_iter()
+                .enumerate()
+            {
                 let theta = theta_deg.to_radians();
                 let (p_in, d_t, f) = entry(medium.eta, theta, h);
                 let mut rng = Pcg32::new(99, i as u64);
@@ -1353,7 +1381,11 @@ mod tests {
                          (scattered {scattered:.4}), simulation {mean:.4} ± {se:.4}"
                     );
                     // 10⁻⁵: the model's f32 lobe energies.
-                    let table = if name == "white" { 0.0 } else { 0.02 * scattered };
+                    let table = if name == "white" {
+                        0.0
+                    } else {
+                        0.02 * scattered
+                    };
                     let allowed = 4.0 * se + 1e-5 + table;
                     assert!(
                         (model - mean).abs() < allowed,
