@@ -43,10 +43,11 @@
 //! 32 of φ (equal solid angles) and ρ at 9 cortex absorptions 0, ⅛, …, 16 (ln ρ interpolated
 //! linearly in σ_c between them); `eval` interpolates the nodes bilinearly, and
 //! sampling draws a node by its weight, a cell by its probability and a point uniformly in the
-//! cell, so `pdf` is exactly the sampling density. The tables are built on every core with
-//! fixed seeds (bit-identical for any thread count), shown with a progress bar on a terminal,
-//! and cached on disk (`TRESS_CACHE_DIR`, else `$XDG_CACHE_HOME/tress`, else
-//! `~/.cache/tress`) under the bits of those parameters.
+//! cell, so `pdf` is exactly the sampling density. The tables are built by [`Fur::new`] on
+//! every core with fixed seeds (bit-identical for any thread count), with a progress bar on a
+//! terminal. They are not cached: a library keeps no process-wide state and reads no
+//! environment (`tests/library_sources.rs`), and a cache passed in by the front ends needs
+//! `HairModel::build` to take one.
 //!
 //! # Simplifications (against the papers)
 //! - The cortex pigment changes how much scattered light leaves (ρ), not where it goes: D is
@@ -71,9 +72,8 @@ use crate::pigment::Pigment;
 use crate::{check_range, parallel_map, ModelParams, ParamError, TestInstance};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI as PI64;
-use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::Arc;
 use tress_core::math::{luminance, Rgb, Vec3};
 use tress_core::rng::Pcg32;
 use tress_core::{Bcsdf, BcsdfSample};
@@ -210,7 +210,7 @@ impl Fur {
         let tilt = [-2.0 * a, a, 4.0 * a, 0.0].map(|t: f64| (t.sin(), t.cos()));
 
         let key = TableKey::new(p);
-        let table = (key.kappa > 0.0 && key.sigma_s > 0.0).then(|| Table::get(&key));
+        let table = (key.kappa > 0.0 && key.sigma_s > 0.0).then(|| Arc::new(Table::build(&key)));
         let sigma_c = [sigma_c.x, sigma_c.y, sigma_c.z].map(f64::from);
         let escape = table.as_ref().map_or(Vec::new(), |t| {
             t.nodes
@@ -557,14 +557,13 @@ const N_U: usize = 9;
 const N_SIN: usize = 16;
 const N_PHI: usize = 32;
 const CELLS: usize = N_SIN * N_PHI;
-/// Photons simulated per node: the histograms' cells get ~30 each on average (a smooth
-/// enough profile for a broad lobe, and about a second per parameter set on one core).
+/// Photons simulated per node: the histograms' cells get ~16 each on average (a smooth
+/// enough profile for a broad lobe once interpolated between nodes, for a few seconds of CPU
+/// per model).
 const PHOTONS: u32 = 1 << 14;
-/// Bumped whenever the simulation or the table layout changes, so old caches are not read.
-const TABLE_VERSION: u32 = 2;
 const CELL_AREA: f64 = (2.0 / N_SIN as f64) * (2.0 * PI64 / N_PHI as f64);
 
-/// What the table depends on, as exact bits (module docs).
+/// The parameters the table depends on (module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct TableKey {
     eta: f32,
@@ -583,25 +582,6 @@ impl TableKey {
             sigma_a: p.medulla_sigma_a,
             g: p.medulla_g,
         }
-    }
-
-    fn bits(&self) -> [u32; 6] {
-        [
-            TABLE_VERSION,
-            self.eta.to_bits(),
-            self.kappa.to_bits(),
-            self.sigma_s.to_bits(),
-            self.sigma_a.to_bits(),
-            self.g.to_bits(),
-        ]
-    }
-
-    fn file_name(&self) -> String {
-        let b = self.bits();
-        format!(
-            "fur-medulla-v{}-{:08x}-{:08x}-{:08x}-{:08x}-{:08x}.bin",
-            b[0], b[1], b[2], b[3], b[4], b[5]
-        )
     }
 }
 
@@ -645,42 +625,7 @@ impl Nodes {
     };
 }
 
-/// A table of this process with the key bits it was made for.
-type Memo = ([u32; 6], Arc<Table>);
-
 impl Table {
-    /// The table for `key`: from this process's memory, the disk cache, or built (and cached).
-    fn get(key: &TableKey) -> Arc<Table> {
-        static MEMO: OnceLock<Mutex<Vec<Memo>>> = OnceLock::new();
-        let memo = MEMO.get_or_init(Default::default);
-        // Held while building, so concurrent builders of one table wait for the first.
-        let mut memo = memo.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((_, t)) = memo.iter().find(|(k, _)| *k == key.bits()) {
-            return Arc::clone(t);
-        }
-        let path = cache_dir().map(|d| d.join(key.file_name()));
-        let loaded = path.as_deref().and_then(|p| match Table::read(p, key) {
-            Ok(t) => Some(t),
-            Err(e) => {
-                if p.exists() {
-                    tracing::warn!("{}: unreadable fur table ({e}); rebuilding it", p.display());
-                }
-                None
-            }
-        });
-        let table = Arc::new(loaded.unwrap_or_else(|| {
-            let t = Table::build(key);
-            if let Some(p) = &path {
-                if let Err(e) = t.write(p, key) {
-                    tracing::warn!("cannot cache the fur table: {e}");
-                }
-            }
-            t
-        }));
-        memo.push((key.bits(), Arc::clone(&table)));
-        table
-    }
-
     /// Simulates every node (module docs), on every core, with a progress bar on a terminal.
     fn build(key: &TableKey) -> Table {
         let bar = progress_bar((N_THETA * N_U) as u64);
@@ -774,53 +719,7 @@ impl Table {
         }
         Some((sin_i.clamp(-1.0, 1.0), phi))
     }
-
-    fn write(&self, path: &Path, key: &TableKey) -> Result<(), String> {
-        let mut bytes = Vec::new();
-        bytes.extend_from_slice(MAGIC);
-        for b in key.bits() {
-            bytes.extend_from_slice(&b.to_le_bytes());
-        }
-        for n in &self.nodes {
-            for &v in n.prob.iter().chain(&n.escape) {
-                bytes.extend_from_slice(&v.to_le_bytes());
-            }
-        }
-        if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-        }
-        tress_core::output_file::write_bytes(path, &Default::default(), &bytes)
-            .map_err(|e| e.to_string())
-    }
-
-    fn read(path: &Path, key: &TableKey) -> Result<Table, String> {
-        let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
-        let per_node = 2 * CELLS + SIGMA_GRID.len();
-        let expected = MAGIC.len() + 6 * 4 + N_THETA * N_U * per_node * 4;
-        if bytes.len() != expected || &bytes[..MAGIC.len()] != MAGIC {
-            return Err(format!("{} bytes, not a table of this layout", bytes.len()));
-        }
-        let words: Vec<u32> = bytes[MAGIC.len()..]
-            .chunks_exact(4)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect();
-        if words[..6] != key.bits() {
-            return Err("made for other parameters".into());
-        }
-        let nodes = words[6..]
-            .chunks_exact(per_node)
-            .map(|w| {
-                let v: Vec<f32> = w.iter().map(|&b| f32::from_bits(b)).collect();
-                let escape = std::array::from_fn(|k| v[2 * CELLS + k]);
-                Node::new(v[..2 * CELLS].to_vec(), escape)
-            })
-            .collect::<Option<Vec<_>>>()
-            .ok_or("holds a negative, non-finite or empty profile")?;
-        Ok(Table { nodes })
-    }
 }
-
-const MAGIC: &[u8; 8] = b"TRESSFUR";
 
 impl Node {
     /// The escaping fraction through a cortex of absorption `sigma` ([`SIGMA_GRID`]).
@@ -836,11 +735,8 @@ impl Node {
         }
     }
 
-    /// A node from its cell probabilities; `None` unless they are finite, non-negative and
-    /// not all zero (a corrupt cache).
-    fn new(prob: Vec<f32>, escape: [f32; SIGMA_GRID.len()]) -> Option<Node> {
-        let ok = prob.iter().all(|p| p.is_finite() && *p >= 0.0)
-            && escape.iter().all(|e| (0.0..=1.0).contains(e));
+    /// A node from its cell probabilities (summing to 1) and escaping fractions.
+    fn new(prob: Vec<f32>, escape: [f32; SIGMA_GRID.len()]) -> Node {
         let cdf: Vec<f32> = prob
             .iter()
             .scan(0.0f32, |s, &p| {
@@ -848,21 +744,8 @@ impl Node {
                 Some(*s)
             })
             .collect();
-        (ok && cdf[cdf.len() - 1] > 0.0).then_some(Node { prob, cdf, escape })
+        Node { prob, cdf, escape }
     }
-}
-
-/// Where tables are cached: `TRESS_CACHE_DIR`, else `$XDG_CACHE_HOME/tress`, else
-/// `~/.cache/tress`; `None` without any of them (the table is then rebuilt per process).
-fn cache_dir() -> Option<PathBuf> {
-    let var = |k| {
-        std::env::var_os(k)
-            .filter(|v| !v.is_empty())
-            .map(PathBuf::from)
-    };
-    var("TRESS_CACHE_DIR")
-        .or_else(|| var("XDG_CACHE_HOME").map(|d| d.join("tress")))
-        .or_else(|| var("HOME").map(|d| d.join(".cache").join("tress")))
 }
 
 /// A progress bar on stderr for the table build, hidden unless stderr is a terminal.
@@ -1107,7 +990,6 @@ fn simulate_node(key: &TableKey, ti: usize, ui: usize) -> Node {
         vec![1.0 / (2 * CELLS) as f32; 2 * CELLS]
     };
     Node::new(prob, escaped.map(|e| (e / PHOTONS as f64).min(1.0) as f32))
-        .expect("a simulated profile is finite and non-negative")
 }
 
 /// Parameter sets the statistical tests run on this model ([`crate::HairModel::test_instances`]).
@@ -1282,7 +1164,7 @@ mod tests {
     }
 
     #[test]
-    fn the_table_is_deterministic_and_round_trips_through_its_cache_file() {
+    fn the_table_is_deterministic_and_its_escape_falls_with_absorption() {
         let key = TableKey::new(&Params {
             medulla_ratio: 0.3,
             medulla_sigma_s: 2.0,
@@ -1290,7 +1172,9 @@ mod tests {
             medulla_g: 0.3,
             ..Params::default()
         });
+        let start = std::time::Instant::now();
         let a = Table::build(&key);
+        println!("table built in {:.2} s", start.elapsed().as_secs_f64());
         let b = Table::build(&key);
         let bits = |t: &Table| -> Vec<u32> {
             t.nodes
@@ -1307,19 +1191,6 @@ mod tests {
             );
             assert!(n.escape.windows(2).all(|e| e[1] <= e[0]), "{:?}", n.escape);
         }
-        let dir = std::env::temp_dir().join(format!("tress-fur-test-{}", std::process::id()));
-        let path = dir.join(key.file_name());
-        a.write(&path, &key).unwrap();
-        assert_eq!(bits(&Table::read(&path, &key).unwrap()), bits(&a));
-        let other = TableKey { g: 0.0, ..key };
-        assert!(Table::read(&path, &other)
-            .unwrap_err()
-            .contains("other parameters"));
-        std::fs::write(&path, b"TRESSFUR too short").unwrap();
-        assert!(Table::read(&path, &key)
-            .unwrap_err()
-            .contains("not a table"));
-        std::fs::remove_dir_all(&dir).unwrap();
     }
     /// Yan et al. 2015 validate their rendering model against full 3D light transport in the
     /// double cylinder; so does this test, for the energy the model returns. A brute-force
