@@ -55,7 +55,7 @@
 //!   and the pigment is left out of the first chord's choice in the simulation. The cuticle of the simulation is smooth; its roughness and tilt
 //!   act on the unscattered lobes only (the scattered ones are broad).
 //! - One table per parameter set instead of Yan's tables over σ_s and g: exact for the
-//!   parameters used, at a precomputation per new parameter set (about a second).
+//!   parameters used, at a precomputation per model built (a few seconds of CPU).
 //! - Far field in h like Chiang (N_p per h); no near-field integration over the fiber's width.
 //!
 //! | parameter | default | meaning |
