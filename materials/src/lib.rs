@@ -20,6 +20,7 @@ pub mod deon;
 pub mod dual_scattering;
 pub mod dual_scattering_sampling;
 pub mod fiber_medium;
+pub mod fur;
 pub mod lambertian_fiber;
 pub mod marschner;
 pub mod model_params;
@@ -125,6 +126,7 @@ hair_models! {
     Marschner => marschner::Marschner,
     DEon => deon::DEon,
     Chiang => chiang::Chiang,
+    Fur => fur::Fur,
 }
 
 #[cfg(test)]
