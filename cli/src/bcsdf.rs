@@ -78,12 +78,14 @@ pub fn run(cmd: BcsdfCommand) -> Result<()> {
 }
 
 fn build_model(ron_text: &str) -> Result<Arc<dyn Bcsdf>> {
-    let model: HairModel = tress_scene::ron_options().from_str(ron_text).map_err(|e| {
-        anyhow!(
-            "--model: {e}\n  registered models: {}",
-            HairModel::names().join(", ")
-        )
-    })?;
+    let model: HairModel = tress_loader::ron_options()
+        .from_str(ron_text)
+        .map_err(|e| {
+            anyhow!(
+                "--model: {e}\n  registered models: {}",
+                HairModel::names().join(", ")
+            )
+        })?;
     model.build().map_err(|e| anyhow!("--model: {e}"))
 }
 

@@ -1,10 +1,9 @@
 //! `tress`: the command-line renderer.
 
-// The commands live in the library target (so that fuzz targets and the Python bindings reach
-// exactly what the binary runs); the binary parses the command line and dispatches.
-use tress_cli::{
-    bcsdf_cmd, bench, calibrate, diff, farm, interrupt, logging, merge, render_cmd, study,
-};
+// The commands live in the library target, with their unit tests; the binary parses the command
+// line and dispatches. (Nothing else links the library: Python and the fuzz targets call the
+// loader and the readers directly.)
+use tress_cli::{bcsdf, bench, calibrate, diff, farm, interrupt, logging, merge, render, study};
 
 use anyhow::Result;
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
@@ -26,18 +25,18 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Render a scene to a linear EXR and a tone-mapped PNG preview.
-    Render(render_cmd::RenderArgs),
+    Render(render::RenderArgs),
     /// Print what a scene contains: strands, segments, bounds, memory.
     Info {
         /// Scene file (RON).
         scene: PathBuf,
         /// Values for the scene's `${name}` placeholders: `-D spp=64`.
-        #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = tress_scene::placeholders::parse_define)]
+        #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = tress_loader::placeholders::parse_define)]
         defines: Vec<(String, String)>,
     },
     /// Tools for adding and tuning hair models: furnace, eval.
     #[command(subcommand)]
-    Bcsdf(bcsdf_cmd::BcsdfCommand),
+    Bcsdf(bcsdf::BcsdfCommand),
     /// Comparative convergence study of integrators (error vs spp and time, report, plots).
     Study(study::StudyArgs),
     /// Error metrics of an EXR against a reference EXR, and an error heat map.
@@ -109,10 +108,10 @@ fn run(cli: Cli, log: &mut logging::Log) -> Result<()> {
     match cli.command {
         Command::Render(mut args) => {
             args.run.quiet |= quiet;
-            render_cmd::render(args, log)
+            render::render(args, log)
         }
-        Command::Info { scene, defines } => render_cmd::info(&scene, &defines),
-        Command::Bcsdf(cmd) => bcsdf_cmd::run(cmd),
+        Command::Info { scene, defines } => render::info(&scene, &defines),
+        Command::Bcsdf(cmd) => bcsdf::run(cmd),
         Command::Study(mut args) => {
             args.run.quiet |= quiet;
             study::run(args, log).map(|_| ())

@@ -20,9 +20,9 @@ use tress_core::image_io::Attribute;
 use tress_core::output_file::{self, Inputs};
 use tress_core::render::{self, RenderStats, SampleSums};
 use tress_core::Integrator;
-use tress_scene::integrators::IntegratorDesc;
-use tress_scene::placeholders;
-use tress_scene::scene_desc::{self, SceneDesc};
+use tress_loader::integrators::IntegratorDesc;
+use tress_loader::placeholders;
+use tress_loader::scene_desc::{self, SceneDesc};
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {

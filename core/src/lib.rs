@@ -2,10 +2,9 @@
 //! integrators share — math, sampling, RNG, camera, film, lights, scene and the one render loop.
 //!
 //! This crate depends on neither Embree nor RON: geometry comes in through [`Accel`], scene files
-//! are parsed by `tress-cli`.
+//! are loaded by `tress-loader`, which also holds the integrator registry.
 
 #![warn(missing_docs)]
-
 pub mod accel;
 pub mod bcsdf;
 pub mod camera;
@@ -29,7 +28,7 @@ pub mod stats;
 #[cfg(test)]
 mod test_util;
 
-pub use accel::{Accel, FiberDensity, Hit, HitKind, PrimId};
+pub use accel::{Accel, FiberDensity, HairCurves, Hit, HitKind, PrimId};
 pub use bcsdf::{Bcsdf, BcsdfSample, FiberFrame};
 pub use camera::Camera;
 pub use film::Image;

@@ -1,4 +1,5 @@
-//! Builders and data shared by the unit tests of several modules.
+//! Test grooms for the unit tests of this crate and of the crates that build on grooms (the
+//! `test-util` feature): a few strands, a synthetic `.hair` file, the shared data set's files.
 
 use crate::cyhair::{
     FLAG_COLOR, FLAG_POINTS, FLAG_SEGMENTS, FLAG_THICKNESS, FLAG_TRANSPARENCY, HEADER_BYTES,
@@ -10,7 +11,7 @@ use tress_core::rng::Pcg32;
 use tress_core::sampling::sample_uniform_sphere;
 
 /// Hair made of `strands`, every point of radius `radius`.
-pub(crate) fn hair(strands: &[Vec<Vec3>], radius: f32) -> HairGeometry {
+pub fn hair(strands: &[Vec<Vec3>], radius: f32) -> HairGeometry {
     let mut g = HairGeometry::empty("test hair");
     for s in strands {
         g.push_strand(s, radius);
@@ -19,30 +20,34 @@ pub(crate) fn hair(strands: &[Vec<Vec3>], radius: f32) -> HairGeometry {
 }
 
 /// `points` evenly spaced points from `from` to `to`.
-pub(crate) fn line(from: Vec3, to: Vec3, points: usize) -> Vec<Vec3> {
+pub fn line(from: Vec3, to: Vec3, points: usize) -> Vec<Vec3> {
     (0..points)
         .map(|i| from.lerp(to, i as f32 / (points - 1) as f32))
         .collect()
 }
 
 /// A uniform random direction.
-pub(crate) fn rng_dir(rng: &mut Pcg32) -> Vec3 {
+pub fn rng_dir(rng: &mut Pcg32) -> Vec3 {
     sample_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()))
 }
 
 /// Optional per-strand and per-point arrays of a synthetic `.hair` file.
 #[derive(Default)]
-pub(crate) struct HairArrays {
+pub struct HairArrays {
+    /// Segments per strand.
     pub segments: Option<Vec<u16>>,
+    /// Thickness per point.
     pub thickness: Option<Vec<f32>>,
+    /// Transparency per point.
     pub transparency: Option<Vec<f32>>,
+    /// Colour per point.
     pub colors: Option<Vec<[f32; 3]>>,
 }
 
 /// A `.hair` file of `points` (and the arrays of `a`), its header claiming `header_strands`
 /// strands of `default_segments` segments, default thickness 0.25, transparency 0.5 and colour
 /// (0.1, 0.2, 0.3).
-pub(crate) fn hair_file_bytes(
+pub fn hair_file_bytes(
     header_strands: u32,
     points: &[[f32; 3]],
     a: &HairArrays,
@@ -80,7 +85,7 @@ pub(crate) fn hair_file_bytes(
 /// A hair file of the real data set, `../shared/data/hair` beside the workspace. The tests that
 /// read one are ignored, their names hold `shared_data`, and CI runs them where the data is
 /// (`.ci/run`); run without it, they fail here.
-pub(crate) fn shared_data(name: &str) -> PathBuf {
+pub fn shared_data(name: &str) -> PathBuf {
     let p = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../shared/data/hair")
         .join(name);

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes the USD grooms that accel/src/usd.rs's tests read, with Pixar's own USD library
+"""Writes the USD grooms that groom/src/usd.rs's tests read, with Pixar's own USD library
 (the `usd-core` package on PyPI), each as text (.usda) and binary (.usdc):
 
 - tests/data/usd_linear: an Xform translated by (1, 2, 3) over BasisCurves scaled by 2; Y up,
@@ -11,7 +11,7 @@
 - tests/data/usd_instanced: a class prim holding a linear curve, referenced by two
   instanceable Xforms translated by (5, 0, 0) and (10, 0, 0).
 
-Usage (in a virtualenv): pip install usd-core && python3 accel/tests/usd_grooms.py
+Usage (in a virtualenv): pip install usd-core && python3 groom/tests/usd_grooms.py
 """
 
 import os

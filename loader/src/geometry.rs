@@ -7,10 +7,9 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use tress_accel::{
-    EmbreeAccel, HairAttribute, HairOptions, HairSource, SceneBuilder, Transform, TriangleMesh,
-};
+use tress_accel::{EmbreeAccel, HairOptions, SceneBuilder, TriangleMesh};
 use tress_core::Material;
+use tress_groom::{HairAttribute, HairSource, Transform};
 use tress_materials::pigment::Pigment;
 use tress_materials::strand_variation::{quantise_variants, StrandVariation};
 
@@ -176,7 +175,7 @@ pub fn build_accel(
 /// builder and a line for the summary.
 fn add_varied_hair(
     builder: SceneBuilder,
-    hair: &tress_accel::HairGeometry,
+    hair: &tress_groom::HairGeometry,
     options: &HairOptions,
     variation: &StrandVariation,
     model: &tress_materials::HairModel,

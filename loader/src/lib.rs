@@ -6,19 +6,15 @@
 
 #![warn(missing_docs)]
 
-pub mod cost;
 pub mod geometry;
 pub mod integrators;
 pub mod lights;
 pub mod materials;
-pub mod metrics;
 pub mod paths;
-pub mod picture;
 pub mod placeholders;
 pub mod reference;
 pub mod ron_format;
 pub mod scene_desc;
-pub mod study;
 pub mod threads;
 
 pub use ron_format::options as ron_options;

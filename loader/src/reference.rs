@@ -1,4 +1,4 @@
-//! The scene-file reference (`scenes/README.md`), generated from the serde types themselves:
+//! The scene-file reference (`docs/src/reference/scene-file.md`, a chapter of the book), generated from the serde types themselves:
 //! their JSON schema (schemars) carries every field, its type, its default and the doc comment
 //! that states its unit and range, so the reference cannot drift from what the parser accepts
 //! (a test compares the committed file with a fresh one).
@@ -14,9 +14,9 @@ pub fn scene_reference() -> String {
     let defs = schema["$defs"].as_object().unwrap_or(&empty);
     let mut out = String::from(
         "# Scene file reference\n\n\
-         <!-- Generated from the scene types by `tress_scene::reference`; do not edit. After \
+         <!-- Generated from the scene types by `tress_loader::reference`; do not edit. After \
          changing a scene type, regenerate it with \
-         `TRESS_BLESS=1 cargo test --release -p tress-scene --lib reference`. -->\n\n\
+         `TRESS_BLESS=1 cargo test --release -p tress-loader --lib reference`. -->\n\n\
          Scene files are [RON](https://github.com/ron-rs/ron). A struct is written \
          `(field: value, …)`; an enum is written `Variant(field: value, …)`, or `Variant` when \
          it has no fields; an optional value is `Some(value)` or `None`; a list is \
@@ -277,7 +277,8 @@ mod tests {
     /// The committed reference is what the types generate; `TRESS_BLESS=1` rewrites it.
     #[test]
     fn the_committed_scene_reference_is_current() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/README.md");
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../docs/src/reference/scene-file.md");
         let fresh = scene_reference();
         if std::env::var_os("TRESS_BLESS").is_some() {
             std::fs::write(&path, &fresh).unwrap();
@@ -286,7 +287,7 @@ mod tests {
         assert!(
             committed == fresh,
             "{} is out of date: regenerate it with \
-             `TRESS_BLESS=1 cargo test --release -p tress-scene --lib reference`",
+             `TRESS_BLESS=1 cargo test --release -p tress-loader --lib reference`",
             path.display()
         );
     }

@@ -24,15 +24,20 @@ fn ron_blocks(source: &str) -> Vec<Vec<String>> {
 
 #[test]
 fn the_documented_hair_source_and_option_forms_parse_as_scene_files_write_them() {
-    let blocks = ron_blocks(include_str!("../../accel/src/source.rs"));
-    assert_eq!(blocks.len(), 2, "{blocks:?}");
-    for line in blocks[0].iter().filter(|l| !l.trim().is_empty()) {
-        tress_scene::ron_options()
-            .from_str::<tress_accel::HairSource>(line)
+    let sources = ron_blocks(include_str!("../../groom/src/source.rs"));
+    let options = ron_blocks(include_str!("../../accel/src/options.rs"));
+    assert_eq!(
+        (sources.len(), options.len()),
+        (1, 1),
+        "{sources:?} {options:?}"
+    );
+    for line in sources[0].iter().filter(|l| !l.trim().is_empty()) {
+        tress_loader::ron_options()
+            .from_str::<tress_groom::HairSource>(line)
             .unwrap_or_else(|e| panic!("{line}: {e}"));
     }
-    let options = blocks[1].join("\n");
-    let parsed: tress_accel::HairOptions = tress_scene::ron_options()
+    let options = options[0].join("\n");
+    let parsed: tress_accel::HairOptions = tress_loader::ron_options()
         .from_str(&options)
         .unwrap_or_else(|e| panic!("{options}: {e}"));
     assert_eq!(parsed.curve, tress_accel::CurveShape::Round);
@@ -40,7 +45,7 @@ fn the_documented_hair_source_and_option_forms_parse_as_scene_files_write_them()
 
 /// The variant names of `T`, from the error a variant that does not exist gives.
 fn variants<T: DeserializeOwned + std::fmt::Debug>() -> Vec<String> {
-    let err = tress_scene::ron_options()
+    let err = tress_loader::ron_options()
         .from_str::<T>("NoSuchVariant()")
         .unwrap_err()
         .to_string();
@@ -61,7 +66,7 @@ fn variants<T: DeserializeOwned + std::fmt::Debug>() -> Vec<String> {
 fn refuses_typos<T: DeserializeOwned + std::fmt::Debug>(what: &str) {
     for v in variants::<T>() {
         let text = format!("{v}(zz_typo: 1)");
-        match tress_scene::ron_options().from_str::<T>(&text) {
+        match tress_loader::ron_options().from_str::<T>(&text) {
             Ok(parsed) => panic!("{what}: `{text}` was accepted as {parsed:?}"),
             // Struct variants name the field; tuple variants refuse the syntax. A missing-field
             // error would mean the misspelt field was skipped silently.
@@ -75,12 +80,12 @@ fn refuses_typos<T: DeserializeOwned + std::fmt::Debug>(what: &str) {
 
 #[test]
 fn misspelt_fields_are_refused_in_every_variant() {
-    refuses_typos::<tress_scene::materials::MaterialDesc>("material");
-    refuses_typos::<tress_scene::lights::LightDesc>("light");
-    refuses_typos::<tress_scene::geometry::ObjectDesc>("object");
-    refuses_typos::<tress_scene::integrators::IntegratorDesc>("integrator");
+    refuses_typos::<tress_loader::materials::MaterialDesc>("material");
+    refuses_typos::<tress_loader::lights::LightDesc>("light");
+    refuses_typos::<tress_loader::geometry::ObjectDesc>("object");
+    refuses_typos::<tress_loader::integrators::IntegratorDesc>("integrator");
     refuses_typos::<tress_materials::HairModel>("hair model");
     refuses_typos::<tress_materials::pigment::Pigment>("pigment");
-    refuses_typos::<tress_accel::HairSource>("hair source");
-    refuses_typos::<tress_accel::HairStyle>("hair style");
+    refuses_typos::<tress_groom::HairSource>("hair source");
+    refuses_typos::<tress_groom::HairStyle>("hair style");
 }

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 use tress_core::Material;
-use tress_scene::scene_desc::{build, parse, BuiltScene};
+use tress_loader::scene_desc::{build, parse, BuiltScene};
 
 /// A scene of procedural hair with material `model` and the object's `variation` (RON).
 fn scene(model: &str, variation: &str) -> String {
@@ -40,7 +40,7 @@ fn the_documented_variation_forms_parse() {
         .collect();
     assert_eq!(block.len(), 4);
     for line in block {
-        tress_scene::ron_options()
+        tress_loader::ron_options()
             .from_str::<tress_materials::strand_variation::StrandVariation>(line)
             .unwrap_or_else(|e| panic!("{line}: {e}"));
     }

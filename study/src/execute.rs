@@ -1,14 +1,14 @@
 //! Running the study: every job rendered (or read back), measured against the references.
 
-use super::plan::{
+use crate::metrics::{self, Rect};
+use crate::picture::Picture;
+use crate::plan::{
     reference_seed, str_hash, test_seed, Plan, PlanIntegrator, PlanReference, PlanScene,
     StudySettings,
 };
-use super::progress::Progress;
-use super::render::{Job, SceneRunner};
-use super::results::{sheet_regions, Errors, RefKind, Results, Row, SceneFigures};
-use crate::metrics::{self, Rect};
-use crate::picture::Picture;
+use crate::progress::Progress;
+use crate::render::{Job, SceneRunner};
+use crate::results::{sheet_regions, Errors, RefKind, Results, Row, SceneFigures};
 use anyhow::{bail, Context, Result};
 use std::collections::HashMap;
 use tress_core::image_io;

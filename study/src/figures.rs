@@ -1,7 +1,7 @@
 //! The figures of a study's report, drawn by whoever can draw.
 
-use super::plan::Plan;
-use super::results::Results;
+use crate::plan::Plan;
+use crate::results::Results;
 use anyhow::Result;
 
 /// Draws a study's figures — convergence plots, error heat maps, crop sheets — for its report.

@@ -1,11 +1,11 @@
 //! Study files: what a study compares (see the module documentation of [`crate::study`]).
 
-use crate::integrators::IntegratorDesc;
-use crate::scene_desc::SceneDesc;
 use anyhow::{anyhow, Context, Result};
 use serde::Deserialize;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use tress_loader::integrators::IntegratorDesc;
+use tress_loader::scene_desc::SceneDesc;
 
 /// A study file.
 #[derive(Debug, Deserialize)]
@@ -116,7 +116,7 @@ pub struct Quick {
 pub fn load(path: &Path) -> Result<Study> {
     let text = tress_core::files::read_regular_text(path)
         .with_context(|| format!("cannot read study file {}", path.display()))?;
-    crate::ron_format::options()
+    tress_loader::ron_format::options()
         .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
         .from_str::<Study>(&text)
         .map_err(|e| {

@@ -1,5 +1,7 @@
-//! Comparative convergence studies of integrators (`tress study STUDY.ron`; `tress.study` in
-//! Python), following the protocol of hair-math.md §7.2 — an independent converged reference,
+//! tress-study: comparative convergence studies of integrators (`tress study STUDY.ron`;
+//! `tress.study` in Python), and the image error metrics ([`metrics`]) they and `tress diff`
+//! share. A study follows the measurement protocol of the book
+//! (`docs/src/reference/hair-maths.md#measuring-an-estimator`) — an independent converged reference,
 //! MSE and relative MSE, K repetitions with independent seeds and 95 % confidence intervals,
 //! equal-spp and equal-time comparisons, efficiency and the MSE·spp convergence check. The
 //! figures (plots, heat maps, crop sheets) are drawn by the caller, through [`Figures`].
@@ -32,9 +34,14 @@
 //! the integrator settings, spp and repetition; references hash a different tag, so they are
 //! independent of every test render.
 
+#![warn(missing_docs)]
+
+pub mod cost;
 mod execute;
 mod figures;
 mod file;
+pub mod metrics;
+pub mod picture;
 mod plan;
 mod progress;
 mod render;

@@ -4,7 +4,7 @@
 //! Over the pixels of the compared region, per channel, then over all channels:
 //! - `MSE    = mean (A − B)²`
 //! - `relMSE = mean (A − B)² / (B² + ε)` with ε = [`REL_EPSILON`] = 1e-2, so dark pixels do not
-//!   dominate and bright ones do not drown the rest (hair-math.md §7.2);
+//!   dominate and bright ones do not drown the rest (docs/src/reference/hair-maths.md#measuring-an-estimator);
 //! - `PSNR   = 10 log10(peak² / MSE)` dB, peak = the largest value of B over the region and all
 //!   channels (1 when B is black there), the same peak for every channel;
 //! - `mean difference = mean (A − B)`: the bias when A averages independent renders.

@@ -1,15 +1,15 @@
 //! The plan: the study resolved against its file, `--quick` and the caller's settings; seeds
 //! and hashes.
 
-use super::file::{FilmOverride, Reference, References, RegionDesc, SceneRef, Study};
-use crate::integrators::IntegratorDesc;
+use crate::file::{FilmOverride, Reference, References, RegionDesc, SceneRef, Study};
 use crate::metrics::Rect;
-use crate::paths::resolve;
-use crate::scene_desc::{self, SceneDesc};
 use anyhow::{anyhow, Context, Result};
 use std::path::{Path, PathBuf};
 use tress_core::output_file::Inputs;
 use tress_core::rng::hash_words;
+use tress_loader::integrators::IntegratorDesc;
+use tress_loader::paths::resolve;
+use tress_loader::scene_desc::{self, SceneDesc};
 
 /// How to run a study: what `tress study` takes on its command line.
 #[derive(Clone, Debug)]

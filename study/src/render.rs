@@ -1,9 +1,8 @@
 //! Rendering the jobs, with the cache of EXRs in the output folder.
 
-use super::plan::{pixels_hash, str_hash, PlanIntegrator, PlanScene};
-use super::progress::Progress;
 use crate::cost::timed;
-use crate::scene_desc::{self, BuiltScene};
+use crate::plan::{pixels_hash, str_hash, PlanIntegrator, PlanScene};
+use crate::progress::Progress;
 use anyhow::{Context, Result};
 use std::collections::hash_map::Entry;
 use std::collections::HashMap;
@@ -13,6 +12,7 @@ use tress_core::image_io;
 use tress_core::output_file::{Batch, Inputs};
 use tress_core::rng::hash_words;
 use tress_core::{Image, Integrator};
+use tress_loader::scene_desc::{self, BuiltScene};
 
 /// One image to obtain.
 pub(super) struct Job<'a> {

@@ -1,8 +1,8 @@
 //! What a study measured: errors of every render, and what its figures show.
 
-use super::plan::{Plan, PlanScene};
 use crate::metrics::{self, Rect};
 use crate::picture::Picture;
+use crate::plan::{Plan, PlanScene};
 use std::collections::HashMap;
 
 /// Errors of one render against one reference over one region.

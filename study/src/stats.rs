@@ -1,7 +1,7 @@
 //! Statistics over repetitions: means, confidence intervals, convergence curves and verdicts.
 
-use super::plan::Plan;
-use super::results::{RefKind, Results, Row};
+use crate::plan::Plan;
+use crate::results::{RefKind, Results, Row};
 
 /// Mean and the half-width of its 95 % confidence interval (Student t; none for one value).
 #[derive(Clone, Copy, Debug)]

@@ -1,10 +1,10 @@
 //! Outputs: `results.csv`, `summary.csv` and `report.md`.
 
-use super::figures::FigureFiles;
-use super::plan::{Plan, PlanReference};
-use super::results::{RefKind, Results};
-use super::stats::{curve, extrapolated_reach, loglog_at, reach, verdict, Point, Reach, Stat};
+use crate::figures::FigureFiles;
 use crate::metrics::REL_EPSILON;
+use crate::plan::{Plan, PlanReference};
+use crate::results::{RefKind, Results};
+use crate::stats::{curve, extrapolated_reach, loglog_at, reach, verdict, Point, Reach, Stat};
 use anyhow::Result;
 use std::fmt::Write as _;
 use std::path::PathBuf;

@@ -1,6 +1,6 @@
-//! `tress_scene::study::run` without figures, as the Python bindings run studies.
+//! `tress_study::run` without figures, as the Python bindings run studies.
 
-use tress_scene::study::{self, NotesOnStderr, StudySettings};
+use tress_study::{self as study, NotesOnStderr, StudySettings};
 
 #[test]
 fn run_study_says_where_the_study_wrote_and_what_it_rendered() {

@@ -122,8 +122,8 @@ fn rel_mse(image: &[Rgb], reference: &tress_core::Image, window: [u32; 4]) -> f6
 
 fn main() -> Result<()> {
     let args = parse()?;
-    let desc = tress_scene::scene_desc::load(&args.scene)?;
-    let built = tress_scene::scene_desc::build(&desc, &args.scene, &Default::default())?;
+    let desc = tress_loader::scene_desc::load(&args.scene)?;
+    let built = tress_loader::scene_desc::build(&desc, &args.scene, &Default::default())?;
     let scene = &built.scene;
     let film = &desc.film;
     let (reference, _) = tress_core::image_io::read_exr(&args.reference)

@@ -4,12 +4,10 @@
 
 use crate::curve_data::{CurveData, HairSegment, SegmentMaterials, SegmentRecord, StrandRecord};
 use crate::curves::{CurveBasis, CurveShape, Overlaps};
-use crate::density::{DensityGrid, DensitySettings};
 use crate::error::{Error, Result};
 use crate::fp_mode;
-use crate::geometry::{HairGeometry, Transform};
 use crate::mesh::TriangleMesh;
-use crate::source::HairOptions;
+use crate::options::HairOptions;
 use embree3::sys::RTCFilterFunctionNArguments;
 use embree3::{
     BufferUsage, Device, DeviceProperty, Format, GeometryBuilder, GeometryKind,
@@ -21,9 +19,10 @@ use std::fmt;
 use std::ops::Range;
 use std::sync::atomic::{AtomicIsize, Ordering};
 use std::sync::Arc;
-use tress_core::accel::{Accel, BuildError, FiberDensity, Hit, HitKind, PrimId};
+use tress_core::accel::{Accel, HairCurves, Hit, HitKind, PrimId};
 use tress_core::limits::Limits;
 use tress_core::math::{Aabb, Ray, Vec3};
+use tress_groom::{HairGeometry, Transform};
 
 const NO_ID: u32 = u32::MAX;
 const GIB: f64 = (1u64 << 30) as f64;
@@ -415,7 +414,7 @@ impl SceneBuilder {
         self.plan(
             &hair.name,
             &format!("its {} hair points", hair.point_count()),
-            hair.point_count() as f64 * crate::geometry::BYTES_PER_POINT + OBJECT_BYTES,
+            hair.point_count() as f64 * tress_groom::geometry::BYTES_PER_POINT + OBJECT_BYTES,
         )?;
         let basis = options.basis;
         let order = basis.order();
@@ -904,24 +903,9 @@ impl EmbreeAccel {
     }
 }
 
-// What the density grid (`density.rs`) needs: the world-space fibers Embree intersects, and a
-// brute-force crossing count to calibrate and test it against.
+// A brute-force crossing count for the density grid (in `tress-dual-scattering`, built from
+// `Accel::hair_curves`) to be calibrated and tested against.
 impl EmbreeAccel {
-    /// The density grid of this geometry's hair (meshes and spheres are ignored), refusing a
-    /// lattice that could exceed the memory limit of `limits`. Geometry without hair gives an
-    /// empty grid (every count 0).
-    pub fn density_grid(&self, settings: &DensitySettings, limits: &Limits) -> Result<DensityGrid> {
-        DensityGrid::build(self.hair_curves().collect(), settings, limits)
-    }
-
-    /// The hair geometries with their Embree geometry ids.
-    pub(crate) fn hair_curves(&self) -> impl Iterator<Item = (u32, &Arc<CurveData>)> {
-        self.geoms.iter().enumerate().filter_map(|(id, g)| match g {
-            GeomData::Hair(c) => Some((id as u32, c)),
-            _ => None,
-        })
-    }
-
     /// Brute-force count of the fibers crossed along `ray` over `(0, ray.t_max)`: the distinct
     /// hair segments hit, with the same `ray.exclude` rule as [`Accel::intersect`]; meshes and
     /// spheres neither count nor block. Flat ribbons face the ray, so a fiber crossed is one
@@ -1064,30 +1048,20 @@ impl Accel for EmbreeAccel {
         self.info.bounds
     }
 
-    fn fiber_density(
-        &self,
-        resolution: Option<u32>,
-        limits: &Limits,
-    ) -> std::result::Result<Option<Arc<dyn FiberDensity>>, BuildError> {
-        if self.info.strands == 0 {
-            return Ok(None);
-        }
-        let settings = DensitySettings {
-            resolution,
-            ..Default::default()
-        };
-        Ok(Some(Arc::new(self.density_grid(&settings, limits)?)))
+    fn hair_curves(&self) -> Vec<(u32, Arc<dyn HairCurves>)> {
+        let hair = self.geoms.iter().enumerate().filter_map(|(id, g)| match g {
+            GeomData::Hair(c) => Some((id as u32, Arc::clone(c) as Arc<dyn HairCurves>)),
+            _ => None,
+        });
+        hair.collect()
     }
 }
 
 // A child module: it builds the private intersection context the filter functions read.
-#[path = "raw.rs"]
 pub mod raw;
 
 #[cfg(test)]
-#[path = "scene_tests.rs"]
 mod tests;
 
 #[cfg(test)]
-#[path = "scene_variation_tests.rs"]
 mod variation_tests;

@@ -139,15 +139,16 @@ impl EmbreeAccel {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::{line, rng_dir};
-    use crate::{HairOptions, ProceduralHair, SceneBuilder};
+    use crate::{HairOptions, SceneBuilder};
     use tress_core::math::Vec3;
     use tress_core::rng::Pcg32;
     use tress_core::{Accel, HitKind};
+    use tress_groom::test_util::{line, rng_dir};
+    use tress_groom::ProceduralHair;
 
     fn ball() -> EmbreeAccel {
         let hair = ProceduralHair {
-            style: crate::HairStyle::Ball,
+            style: tress_groom::HairStyle::Ball,
             strands: 300,
             points_per_strand: 9,
             radius: 0.01,
@@ -273,7 +274,7 @@ mod tests {
     fn a_ray_leaves_a_straight_fiber_at_its_far_wall() {
         let (r, len) = (0.05, 1.0);
         let hair =
-            crate::test_util::hair(&[line(Vec3::ZERO, Vec3::new(4.0 * len, 0.0, 0.0), 5)], r);
+            tress_groom::test_util::hair(&[line(Vec3::ZERO, Vec3::new(4.0 * len, 0.0, 0.0), 5)], r);
         let options = HairOptions {
             curve: crate::CurveShape::Round,
             ..Default::default()

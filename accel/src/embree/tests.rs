@@ -1,8 +1,8 @@
 use super::*;
-use crate::geometry::Rotation;
-use crate::test_util::{hair, hair_file_bytes, line, rng_dir, HairArrays};
 use tress_core::math::Frame;
 use tress_core::rng::Pcg32;
+use tress_groom::test_util::{hair, hair_file_bytes, line, rng_dir, HairArrays};
+use tress_groom::Rotation;
 
 fn with_basis(basis: CurveBasis) -> HairOptions {
     HairOptions {
@@ -556,7 +556,7 @@ fn a_hair_file_builds_and_is_hit() {
         hair_file_bytes(400, &points, &HairArrays::default(), 7),
     )
     .unwrap();
-    let g = crate::HairFile::new(&path).read().unwrap();
+    let g = tress_groom::HairFile::new(&path).read().unwrap();
     let accel = SceneBuilder::new()
         .unwrap()
         .add_hair(&g, &HairOptions::default(), 0)
@@ -595,7 +595,7 @@ fn a_hair_file_builds_and_is_hit() {
 
 #[test]
 fn concurrent_queries_match_serial_ones() {
-    let g = crate::ProceduralHair {
+    let g = tress_groom::ProceduralHair {
         strands: 500,
         ..Default::default()
     }

@@ -1,9 +1,9 @@
 //! Per-segment materials ([`SceneBuilder::add_hair_varied`]).
 
 use super::*;
-use crate::geometry::HairAttribute;
-use crate::test_util::{hair, line};
 use tress_core::math::Rgb;
+use tress_groom::test_util::{hair, line};
+use tress_groom::HairAttribute;
 
 /// Two strands along x at y = 0 and y = 1 (z = 0), of 4 segments each, with per-point colours.
 fn two_strands() -> HairGeometry {

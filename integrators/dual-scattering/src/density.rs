@@ -16,9 +16,10 @@
 //!
 //! # Build
 //!
-//! The grid is built from the world-space fibers of an [`EmbreeAccel`] — after transform,
-//! subsampling and radius scale/taper — so it describes exactly what Embree intersects. Every
-//! linear segment (cubic ones are split into [`CUBIC_PIECES`] chords) is split at the voxel
+//! The grid is built from the world-space fibers an accelerator intersects
+//! ([`tress_core::Accel::hair_curves`]) — after transform, subsampling and radius
+//! scale/taper — so it describes exactly what the rays meet. Every
+//! linear piece (the accelerator splits cubic segments into a few chords) is split at the voxel
 //! boundaries by the same 3D-DDA the queries use, and each part adds its exact ribbon area
 //! `∫ 2r ds` (the radius varies linearly) to its voxel. Voxels are cubes; storage is sparse: a
 //! dense index of 8³ bricks points to the occupied bricks' 512 voxel records, so memory grows
@@ -98,26 +99,22 @@
 //!
 //! # Use
 //!
-//! ```no_run
-//! use tress_accel::{DensitySettings, HairFile, HairOptions, SceneBuilder};
-//! use tress_core::{FiberDensity, limits::Limits, math::{Ray, Vec3}};
+//! The dual-scattering integrators reach the scene's grid through
+//! [`tress_core::Scene::fiber_density`], which builds it once per run:
 //!
-//! # fn main() -> Result<(), tress_accel::Error> {
-//! let hair = HairFile::new("straight.hair").read()?;
-//! let accel = SceneBuilder::new()?.add_hair(&hair, &HairOptions::default(), 0)?.build()?;
-//! // Built from the accelerator's own fibers; build it before boxing the accelerator.
-//! let grid = accel.density_grid(&DensitySettings::default(), &Limits::default())?;
+//! ```no_run
+//! use tress_dual_scattering::density::{DensityGrid, DensitySettings};
+//! use tress_core::{Accel, FiberDensity, limits::Limits, math::{Ray, Vec3}};
+//!
+//! # fn grid_of(accel: &dyn Accel) -> Result<(), Box<dyn std::error::Error>> {
+//! let grid = DensityGrid::build(accel.hair_curves(), &DensitySettings::default(), &Limits::default())?;
 //! println!("{}", grid.info());
 //! let n = grid.fibers_crossed(&Ray::new(Vec3::new(0.0, 40.0, 0.0), Vec3::Y));
 //! # Ok(()) }
 //! ```
 //!
-//! [`EmbreeAccel`]: crate::EmbreeAccel
-//! [`EmbreeAccel::count_fibers_crossed`]: crate::EmbreeAccel::count_fibers_crossed
+//! Its brute-force reference is `tress_accel::EmbreeAccel::count_fibers_crossed`.
 
-use crate::curve_data::CurveData;
-use crate::curves::CurveBasis;
-use crate::error::{Error, Result};
 use glam::{UVec3, Vec4};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -127,16 +124,30 @@ use std::fmt;
 use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
-use tress_core::accel::FiberDensity;
+use tress_core::accel::{FiberDensity, HairCurves};
 use tress_core::limits::Limits;
 use tress_core::math::{Aabb, Ray, Vec3};
 
-/// Straight chords per cubic curve segment.
-pub const CUBIC_PIECES: usize = 4;
 /// Target mean fiber length per occupied voxel, in voxel sides, of the automatic resolution.
 pub const AUTO_FIBERS_PER_VOXEL: f64 = 8.0;
 /// Smallest automatic voxel side, in mean fiber diameters.
 pub const AUTO_MIN_DIAMETERS: f64 = 4.0;
+/// Why a density grid could not be built; every message starts "density grid: ".
+#[derive(Debug, thiserror::Error)]
+pub enum DensityError {
+    /// A setting is out of range, or the lattice it asks for could exceed the memory limit.
+    #[error("density grid: invalid `{field}`: {reason}")]
+    Setting {
+        /// The setting at fault, as the integrator settings name it.
+        field: &'static str,
+        /// The allowed range and the value given.
+        reason: String,
+    },
+    /// The hair's extent or fiber widths are beyond what the grid can represent.
+    #[error("density grid: {0}")]
+    Unrepresentable(String),
+}
+
 /// Largest resolution accepted (the dense brick index then has 128³ entries).
 pub const MAX_RESOLUTION: u32 = 1024;
 
@@ -181,10 +192,9 @@ impl Default for DensitySettings {
 }
 
 impl DensitySettings {
-    fn validate(&self) -> Result<()> {
+    fn validate(&self) -> Result<(), DensityError> {
         match self.resolution {
-            Some(r) if !(1..=MAX_RESOLUTION).contains(&r) => Err(Error::InvalidOption {
-                object: "density grid".into(),
+            Some(r) if !(1..=MAX_RESOLUTION).contains(&r) => Err(DensityError::Setting {
                 field: "resolution",
                 reason: format!("must be in 1..={MAX_RESOLUTION}, got {r}"),
             }),
@@ -380,23 +390,6 @@ fn clip_to_box(o: Vec3, inv_d: Vec3, t0: f32, t1: f32, lo: Vec3, hi: Vec3) -> Op
     (t0 < t1).then_some((t0, t1))
 }
 
-/// Calls `f(a, b)` for the straight pieces (xyz = position, w = radius) approximating segment
-/// `prim`: the segment itself when linear, [`CUBIC_PIECES`] chords of a cubic.
-fn for_each_piece(curves: &CurveData, prim: usize, mut f: impl FnMut(Vec4, Vec4)) {
-    let cps = curves.control_points(prim);
-    match curves.basis() {
-        CurveBasis::Linear => f(cps[0], cps[1]),
-        basis => {
-            let mut prev = basis.eval(cps, 0.0).0;
-            for k in 1..=CUBIC_PIECES {
-                let next = basis.eval(cps, k as f32 / CUBIC_PIECES as f32).0;
-                f(prev, next);
-                prev = next;
-            }
-        }
-    }
-}
-
 /// A piece as a unit direction and length; `None` if degenerate.
 fn piece_line(a: Vec4, b: Vec4) -> Option<(Vec3, f32)> {
     let v = (b - a).truncate();
@@ -426,7 +419,7 @@ pub struct DensityGrid {
     /// Per occupied brick, `BRICK_VOXELS` records.
     records: Vec<VoxelRecord>,
     /// Hair data by Embree geometry id, to find the strand a ray leaves.
-    hair: Vec<Option<Arc<CurveData>>>,
+    hair: Vec<Option<Arc<dyn HairCurves>>>,
     info: DensityInfo,
 }
 
@@ -440,25 +433,24 @@ impl fmt::Debug for DensityGrid {
 
 impl DensityGrid {
     /// Builds the grid from `curves`, an accelerator's hair objects with their geometry ids
-    /// ([`EmbreeAccel::density_grid`]), refusing a lattice that could exceed the memory limit
-    /// of `limits`. No curves give an empty grid (every count 0).
-    ///
-    /// [`EmbreeAccel::density_grid`]: crate::EmbreeAccel::density_grid
-    pub(crate) fn build(
-        curves: Vec<(u32, &Arc<CurveData>)>,
+    /// ([`tress_core::Accel::hair_curves`]), refusing a lattice that could exceed the memory
+    /// limit of `limits`. No curves give an empty grid (every count 0).
+    pub fn build(
+        curves: Vec<(u32, Arc<dyn HairCurves>)>,
         settings: &DensitySettings,
         limits: &Limits,
-    ) -> Result<DensityGrid> {
+    ) -> Result<DensityGrid, DensityError> {
         settings.validate()?;
         let mut hair = Vec::new();
-        for &(id, c) in &curves {
-            hair.resize(hair.len().max(id as usize + 1), None);
-            hair[id as usize] = Some(Arc::clone(c));
+        for (id, c) in &curves {
+            let id = *id as usize;
+            hair.resize(hair.len().max(id + 1), None);
+            hair[id] = Some(Arc::clone(c));
         }
         let for_each = |f: &mut dyn FnMut(Vec4, Vec4)| {
             for (_, c) in &curves {
                 for prim in 0..c.segments() {
-                    for_each_piece(c, prim, &mut *f);
+                    c.for_each_piece(prim, &mut *f);
                 }
             }
         };
@@ -507,14 +499,11 @@ impl DensityGrid {
             && mean_width.is_finite()
             && mean_width < 1e30;
         if !representable {
-            return Err(Error::InvalidGeometry {
-                object: "density grid".into(),
-                reason: format!(
-                    "the hair spans {extent:e} units with fibers {mean_width:e} wide on average: \
+            return Err(DensityError::Unrepresentable(format!(
+                "the hair spans {extent:e} units with fibers {mean_width:e} wide on average: \
                      outside what the grid can represent (extent in 1e-20…1e30, finite widths); \
                      scale the hair to ordinary units"
-                ),
-            });
+            )));
         }
         // A margin keeps the end points off the outer faces.
         let pad = Vec3::splat(1e-4 * extent);
@@ -538,8 +527,7 @@ impl DensityGrid {
         let limit_gib = limits.memory_gib;
         if dense_gib > limit_gib {
             let [nx, ny, nz] = lattice.dims;
-            return Err(Error::InvalidOption {
-                object: "density grid".into(),
+            return Err(DensityError::Setting {
                 field: "grid_resolution",
                 reason: format!(
                     "{resolution} gives {nx}×{ny}×{nz} voxels, up to {dense_gib:.1} GiB where the \
@@ -691,7 +679,7 @@ impl DensityGrid {
         // Adds segment `k` in the voxels the ray passes through; false if it has none there.
         let add_segment = |k: usize, own: &mut OwnStrand| {
             let mut touched = false;
-            for_each_piece(curves, k, |a, b| {
+            curves.for_each_piece(k, &mut |a, b| {
                 let Some((t, len)) = piece_line(a, b) else {
                     return;
                 };
@@ -825,7 +813,7 @@ fn auto_resolution(
     bounds: Aabb,
     total_length: f64,
     finest: u32,
-    curves: &[(u32, &Arc<CurveData>)],
+    curves: &[(u32, Arc<dyn HairCurves>)],
 ) -> u32 {
     // Mean fiber length per occupied voxel, in voxel sides.
     let fill = |resolution: u32| -> f64 {
@@ -878,9 +866,9 @@ const OCCUPANCY_CHUNK: usize = 2048;
 /// The number of voxels of `lattice` some fiber piece passes through. Counted in parallel (in
 /// the caller's rayon pool) in a bitmap when the lattice is small enough, else serially in a
 /// hash set; a set's size either way, so it does not depend on the thread count.
-fn occupied_voxels(lattice: &Lattice, curves: &[(u32, &Arc<CurveData>)]) -> usize {
-    let visit = |c: &CurveData, prim: usize, mark: &mut dyn FnMut(u32)| {
-        for_each_piece(c, prim, |a, b| {
+fn occupied_voxels(lattice: &Lattice, curves: &[(u32, Arc<dyn HairCurves>)]) -> usize {
+    let visit = |c: &dyn HairCurves, prim: usize, mark: &mut dyn FnMut(u32)| {
+        c.for_each_piece(prim, &mut |a, b| {
             if let Some((t, len)) = piece_line(a, b) {
                 lattice.traverse(a.truncate(), t, 0.0, len, |v, _, _| mark(lattice.linear(v)));
             }
@@ -891,7 +879,7 @@ fn occupied_voxels(lattice: &Lattice, curves: &[(u32, &Arc<CurveData>)]) -> usiz
         let mut occupied = HashSet::new();
         for (_, c) in curves {
             for prim in 0..c.segments() {
-                visit(c, prim, &mut |v| {
+                visit(c.as_ref(), prim, &mut |v| {
                     occupied.insert(v);
                 });
             }
@@ -901,7 +889,7 @@ fn occupied_voxels(lattice: &Lattice, curves: &[(u32, &Arc<CurveData>)]) -> usiz
     let words: Vec<AtomicU64> = (0..voxels.div_ceil(64))
         .map(|_| AtomicU64::new(0))
         .collect();
-    let tasks: Vec<(&CurveData, usize)> = curves
+    let tasks: Vec<(&dyn HairCurves, usize)> = curves
         .iter()
         .flat_map(|(_, c)| {
             (0..c.segments())
@@ -1082,13 +1070,14 @@ fn sym_eigenvalues(a: [[f64; 3]; 3]) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::{hair, line, rng_dir, shared_data};
-    use crate::{EmbreeAccel, HairGeometry, HairOptions, HairStyle, ProceduralHair, SceneBuilder};
     use glam::Quat;
     use std::f32::consts::PI;
     use std::time::Instant;
+    use tress_accel::{EmbreeAccel, HairOptions, SceneBuilder};
     use tress_core::rng::Pcg32;
     use tress_core::{Accel, HitKind};
+    use tress_groom::test_util::{hair, line, rng_dir, shared_data};
+    use tress_groom::{HairGeometry, HairStyle, ProceduralHair};
 
     fn accel(g: &HairGeometry) -> EmbreeAccel {
         SceneBuilder::new()
@@ -1100,15 +1089,15 @@ mod tests {
     }
 
     fn grid(accel: &EmbreeAccel, resolution: Option<u32>, direction: bool) -> DensityGrid {
-        accel
-            .density_grid(
-                &DensitySettings {
-                    resolution,
-                    direction,
-                },
-                &Limits::default(),
-            )
-            .unwrap()
+        DensityGrid::build(
+            accel.hair_curves(),
+            &DensitySettings {
+                resolution,
+                direction,
+            },
+            &Limits::default(),
+        )
+        .unwrap()
     }
 
     fn mean(v: &[f32]) -> f64 {
@@ -1550,14 +1539,14 @@ mod tests {
             );
         }
 
-        let curves: Vec<(u32, &Arc<CurveData>)> = accel.hair_curves().collect();
+        let curves = accel.hair_curves();
         let bounds = accel.info().bounds;
         for resolution in [8, 40, 100] {
             let lattice = Lattice::new(bounds, resolution);
             let mut serial = HashSet::new();
             for (_, c) in &curves {
                 for prim in 0..c.segments() {
-                    for_each_piece(c, prim, |a, b| {
+                    c.for_each_piece(prim, &mut |a, b| {
                         if let Some((t, len)) = piece_line(a, b) {
                             lattice.traverse(a.truncate(), t, 0.0, len, |v, _, _| {
                                 serial.insert(lattice.linear(v));
@@ -1581,7 +1570,7 @@ mod tests {
     #[test]
     fn the_automatic_resolution_matches_the_upward_ladder_walk() {
         let accel = accel(&ball(6, 400, 10));
-        let curves: Vec<(u32, &Arc<CurveData>)> = accel.hair_curves().collect();
+        let curves = accel.hair_curves();
         let bounds = accel.info().bounds;
         let fill = |resolution: u32, total_length: f64| {
             let lattice = Lattice::new(bounds, resolution);
@@ -1636,9 +1625,12 @@ mod tests {
             .unwrap()
             .build()
             .unwrap();
-        let grid = accel
-            .density_grid(&DensitySettings::default(), &Limits::default())
-            .unwrap();
+        let grid = DensityGrid::build(
+            accel.hair_curves(),
+            &DensitySettings::default(),
+            &Limits::default(),
+        )
+        .unwrap();
         assert_eq!(grid.info().occupied_voxels, 0);
         assert_eq!(grid.fibers_crossed(&Ray::new(Vec3::Z * 5.0, -Vec3::Z)), 0.0);
     }
@@ -1653,16 +1645,16 @@ mod tests {
         assert!(ron::from_str::<DensitySettings>("(resolutoin: Some(64))").is_err());
         let accel = accel(&slab());
         for bad in [0, MAX_RESOLUTION + 1] {
-            let e = accel
-                .density_grid(
-                    &DensitySettings {
-                        resolution: Some(bad),
-                        direction: true,
-                    },
-                    &Limits::default(),
-                )
-                .unwrap_err()
-                .to_string();
+            let e = DensityGrid::build(
+                accel.hair_curves(),
+                &DensitySettings {
+                    resolution: Some(bad),
+                    direction: true,
+                },
+                &Limits::default(),
+            )
+            .unwrap_err()
+            .to_string();
             assert!(
                 e.contains("resolution") && e.contains(&bad.to_string()),
                 "{e}"
@@ -1918,7 +1910,7 @@ mod tests {
     #[test]
     #[ignore = "needs ../shared/data (the real groom): CI runs it with --ignored"]
     fn shared_data_straight_hair_grid_matches_the_brute_force_count() {
-        let g = crate::HairFile::new(shared_data("straight.hair"))
+        let g = tress_groom::HairFile::new(shared_data("straight.hair"))
             .read()
             .unwrap();
         let accel = accel(&g);
