@@ -487,6 +487,8 @@ impl CurveReader {
         Ok(())
     }
 
+    /// Runs one statement: a graphics-state scope, a transform, an object, an include, or a
+    /// shape; everything else says nothing about curve geometry and is skipped.
     fn statement(
         &mut self,
         path: &Path,
@@ -494,27 +496,10 @@ impl CurveReader {
         keyword: Token,
         args: &[Token],
     ) -> Result<()> {
-        let err = |message: String| at(path, keyword.pos, message);
-        let numbers = |count: usize| -> Result<Vec<f64>> {
-            let values: Vec<f64> = args
-                .iter()
-                .filter(|t| !matches!(t.kind, TokenKind::Open | TokenKind::Close))
-                .map(|t| number(path, t))
-                .collect::<Result<_>>()?;
-            if values.len() != count {
-                return Err(err(format!(
-                    "{} takes {count} numbers, found {}",
-                    keyword.text,
-                    values.len()
-                )));
-            }
-            Ok(values)
-        };
-        let name = || -> Result<&str> {
-            match args.first() {
-                Some(t) if t.kind == TokenKind::Str => Ok(t.text),
-                _ => Err(err(format!("{} needs a quoted name", keyword.text))),
-            }
+        let st = Statement {
+            path,
+            keyword,
+            args,
         };
         match keyword.text {
             "AttributeBegin" | "TransformBegin" => {
@@ -526,25 +511,57 @@ impl CurveReader {
                 self.state = self
                     .saved
                     .pop()
-                    .ok_or_else(|| err(format!("{} without a matching begin", keyword.text)))?;
+                    .ok_or_else(|| st.err(format!("{} without a matching begin", keyword.text)))?;
                 self.strand_open = false;
             }
+            "Identity" | "Translate" | "Scale" | "Rotate" | "LookAt" | "ConcatTransform"
+            | "Transform" | "CoordinateSystem" | "CoordSysTransform" | "Camera"
+            | "ActiveTransform" | "WorldBegin" => self.transform_statement(&st)?,
+            "ObjectBegin" | "ObjectEnd" | "ObjectInstance" => self.object_statement(&st)?,
+            "Include" | "Import" => self.include(&st, depth)?,
+            "Attribute" => {
+                let target = st.name()?;
+                if target == "shape" {
+                    let params = params(path, &args[1..])?;
+                    self.state.shape_defaults.extend(params);
+                }
+            }
+            "Shape" => {
+                if st.name()? != "curve" {
+                    self.other_shapes += 1;
+                    self.strand_open = false;
+                } else {
+                    let params = params(path, &args[1..])?;
+                    self.curve(path, keyword.pos, &params)?;
+                }
+            }
+            // Everything else (camera, film, lights, materials, media, …) says nothing about
+            // curve geometry; its arguments were read above.
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// The statements that change the current transform or name one.
+    fn transform_statement(&mut self, st: &Statement) -> Result<()> {
+        let (path, keyword) = (st.path, &st.keyword);
+        match keyword.text {
             "Identity" => self.transform(DMat4::IDENTITY, true),
             "Translate" => {
-                let v = numbers(3)?;
+                let v = st.numbers(3)?;
                 self.transform(DMat4::from_translation(DVec3::new(v[0], v[1], v[2])), false);
             }
             "Scale" => {
-                let v = numbers(3)?;
+                let v = st.numbers(3)?;
                 self.transform(DMat4::from_scale(DVec3::new(v[0], v[1], v[2])), false);
             }
             "Rotate" => {
-                let v = numbers(4)?;
+                let v = st.numbers(4)?;
                 let axis = DVec3::new(v[1], v[2], v[3]);
                 // Scaled first, so that any non-zero length works (1e-200 squares to 0).
                 let largest = axis.abs().max_element();
                 if largest == 0.0 {
-                    return Err(err("Rotate needs a non-zero axis".into()));
+                    return Err(st.err("Rotate needs a non-zero axis".into()));
                 }
                 self.transform(
                     DMat4::from_axis_angle((axis / largest).normalize(), v[0].to_radians()),
@@ -552,7 +569,7 @@ impl CurveReader {
                 );
             }
             "LookAt" => {
-                let v = numbers(9)?;
+                let v = st.numbers(9)?;
                 let [eye, look, up] = [0, 3, 6].map(|i| DVec3::new(v[i], v[i + 1], v[i + 2]));
                 match look_at(eye, look, up) {
                     Some(m) => self.transform(m, false),
@@ -565,17 +582,17 @@ impl CurveReader {
                 }
             }
             "ConcatTransform" | "Transform" => {
-                let v = numbers(16)?;
+                let v = st.numbers(16)?;
                 // pbrt lists the matrix column by column (translation in elements 12–14).
                 let m = DMat4::from_cols_slice(&v);
                 self.transform(m, keyword.text == "Transform");
             }
             "CoordinateSystem" => {
-                let name = name()?.to_owned();
+                let name = st.name()?.to_owned();
                 self.named.insert(name, self.state.ctm);
             }
             "CoordSysTransform" => {
-                let name = name()?;
+                let name = st.name()?;
                 match self.named.get(name) {
                     Some(&m) => self.transform(m, true),
                     None => tracing::warn!(
@@ -590,18 +607,30 @@ impl CurveReader {
                 self.named.insert("camera".into(), self.state.ctm.inverse());
             }
             "ActiveTransform" => {
-                self.state.start_active = match args.first().map(|t| t.text) {
+                self.state.start_active = match st.args.first().map(|t| t.text) {
                     Some("StartTime") | Some("All") => true,
                     Some("EndTime") => false,
-                    _ => return Err(err("ActiveTransform takes StartTime, EndTime or All".into())),
+                    _ => {
+                        return Err(st.err("ActiveTransform takes StartTime, EndTime or All".into()))
+                    }
                 };
             }
             "WorldBegin" => {
                 self.state.ctm = DMat4::IDENTITY;
                 self.named.insert("world".into(), DMat4::IDENTITY);
             }
+            other => unreachable!("{other} is not a transform statement"),
+        }
+        Ok(())
+    }
+
+    /// `ObjectBegin`, `ObjectEnd` and `ObjectInstance`: named objects and their instances.
+    fn object_statement(&mut self, st: &Statement) -> Result<()> {
+        let (path, keyword) = (st.path, &st.keyword);
+        let err = |message: String| st.err(message);
+        match keyword.text {
             "ObjectBegin" => {
-                let name = name()?.to_owned();
+                let name = st.name()?.to_owned();
                 if let Some(d) = &self.defining {
                     return Err(err(format!(
                         "ObjectBegin \"{name}\" inside the definition of \"{}\": objects do \
@@ -642,7 +671,7 @@ impl CurveReader {
                 self.strand_open = false;
             }
             "ObjectInstance" => {
-                let name = name()?.to_owned();
+                let name = st.name()?.to_owned();
                 if let Some(d) = &self.defining {
                     return Err(err(format!(
                         "ObjectInstance \"{name}\" inside the definition of \"{}\": objects \
@@ -657,56 +686,44 @@ impl CurveReader {
                     pos: keyword.pos,
                 });
             }
-            "Include" | "Import" => {
-                let file = name()?;
-                if depth + 1 >= MAX_INCLUDE_DEPTH {
-                    return Err(err(format!(
-                        "{} nested more than {MAX_INCLUDE_DEPTH} deep (does a file include \
-                         itself?)",
-                        keyword.text
-                    )));
-                }
-                self.includes += 1;
-                if self.includes > MAX_INCLUDES {
-                    return Err(err(format!(
-                        "more than {MAX_INCLUDES} `Include`/`Import` statements run in all \
-                         (files including others many times over)"
-                    )));
-                }
-                let file = self.base.join(file);
-                // An imported file's changes to the graphics state stay in it.
-                let import = keyword.text == "Import";
-                if import {
-                    self.saved.push(self.state.clone());
-                }
-                let level = self.saved.len();
-                self.read_file(&file, depth + 1)?;
-                if import {
-                    self.saved.truncate(level);
-                    self.state = self.saved.pop().unwrap_or_default();
-                }
-                self.strand_open = false;
-            }
-            "Attribute" => {
-                let target = name()?;
-                if target == "shape" {
-                    let params = params(path, &args[1..])?;
-                    self.state.shape_defaults.extend(params);
-                }
-            }
-            "Shape" => {
-                if name()? != "curve" {
-                    self.other_shapes += 1;
-                    self.strand_open = false;
-                } else {
-                    let params = params(path, &args[1..])?;
-                    self.curve(path, keyword.pos, &params)?;
-                }
-            }
-            // Everything else (camera, film, lights, materials, media, …) says nothing about
-            // curve geometry; its arguments were read above.
-            _ => {}
+            other => unreachable!("{other} is not an object statement"),
         }
+        Ok(())
+    }
+
+    /// `Include` and `Import`: reads the file named, within the limits of nesting and count;
+    /// an imported file's changes to the graphics state stay in it.
+    fn include(&mut self, st: &Statement, depth: usize) -> Result<()> {
+        let keyword = &st.keyword;
+        let err = |message: String| st.err(message);
+        let file = st.name()?;
+        if depth + 1 >= MAX_INCLUDE_DEPTH {
+            return Err(err(format!(
+                "{} nested more than {MAX_INCLUDE_DEPTH} deep (does a file include \
+                 itself?)",
+                keyword.text
+            )));
+        }
+        self.includes += 1;
+        if self.includes > MAX_INCLUDES {
+            return Err(err(format!(
+                "more than {MAX_INCLUDES} `Include`/`Import` statements run in all \
+                 (files including others many times over)"
+            )));
+        }
+        let file = self.base.join(file);
+        // An imported file's changes to the graphics state stay in it.
+        let import = keyword.text == "Import";
+        if import {
+            self.saved.push(self.state.clone());
+        }
+        let level = self.saved.len();
+        self.read_file(&file, depth + 1)?;
+        if import {
+            self.saved.truncate(level);
+            self.state = self.saved.pop().unwrap_or_default();
+        }
+        self.strand_open = false;
         Ok(())
     }
 
@@ -907,6 +924,46 @@ impl CurveReader {
 
 fn to_f32(p: DVec3) -> Vec3 {
     p.as_vec3()
+}
+
+/// A statement being run: its keyword and argument tokens, in the file `path`.
+struct Statement<'a, 't> {
+    path: &'a Path,
+    keyword: Token<'t>,
+    args: &'a [Token<'t>],
+}
+
+impl Statement<'_, '_> {
+    /// An error at the statement's keyword.
+    fn err(&self, message: String) -> crate::Error {
+        at(self.path, self.keyword.pos, message)
+    }
+
+    /// The statement's `count` numbers (brackets ignored), refusing any other count.
+    fn numbers(&self, count: usize) -> Result<Vec<f64>> {
+        let values: Vec<f64> = self
+            .args
+            .iter()
+            .filter(|t| !matches!(t.kind, TokenKind::Open | TokenKind::Close))
+            .map(|t| number(self.path, t))
+            .collect::<Result<_>>()?;
+        if values.len() != count {
+            return Err(self.err(format!(
+                "{} takes {count} numbers, found {}",
+                self.keyword.text,
+                values.len()
+            )));
+        }
+        Ok(values)
+    }
+
+    /// The quoted name that is the statement's first argument.
+    fn name(&self) -> Result<&str> {
+        match self.args.first() {
+            Some(t) if t.kind == TokenKind::Str => Ok(t.text),
+            _ => Err(self.err(format!("{} needs a quoted name", self.keyword.text))),
+        }
+    }
 }
 
 fn number(path: &Path, t: &Token) -> Result<f64> {

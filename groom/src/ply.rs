@@ -577,12 +577,42 @@ fn parse(bytes: &[u8], path: &Path, options: &PlyFile) -> Result<HairGeometry> {
         .elements
         .get("vertex")
         .is_some_and(|v| vertex_colors(v, path));
-    let encoding = header.encoding;
+    let records = read_records(&mut reader, &header, layout, path)?;
+    let n = records.vertices.len();
+    let polylines = match layout {
+        Layout::StrandElement => strand_element_polylines(&records, n),
+        Layout::StrandIds => strand_id_polylines(&records.vertices),
+        Layout::Edges => chain_edges(&records.edges, n),
+        Layout::FixedLength(per) => fixed_length_polylines(n, per),
+    }
+    .map_err(fail)?;
+    assemble(path, options, &records.vertices, &polylines, has_colors)
+}
 
-    let mut vertices: Vec<VertexRecord> = Vec::new();
-    let mut strands: Vec<StrandRecord> = Vec::new();
-    let mut edges: Vec<EdgeRecord> = Vec::new();
-    let mut strand_element = None;
+/// The records of a PLY file's elements that its layout reads.
+struct Records {
+    vertices: Vec<VertexRecord>,
+    strands: Vec<StrandRecord>,
+    edges: Vec<EdgeRecord>,
+    /// The name of the element `strands` came from.
+    strand_element: Option<&'static str>,
+}
+
+/// Reads the elements after the header: those `layout` uses into records, the others skipped.
+fn read_records(
+    reader: &mut Reader<&[u8]>,
+    header: &Header,
+    layout: Layout,
+    path: &Path,
+) -> Result<Records> {
+    let fail = |reason: String| format_error(path, reason);
+    let encoding = header.encoding;
+    let mut records = Records {
+        vertices: Vec::new(),
+        strands: Vec::new(),
+        edges: Vec::new(),
+        strand_element: None,
+    };
     // Elements are stored in header order, so each is read (or skipped) in turn.
     for element in header.elements.values() {
         let read_error = |e: ply_rs_bw::parser::ParseError| {
@@ -600,110 +630,131 @@ fn parse(bytes: &[u8], path: &Path, options: &PlyFile) -> Result<HairGeometry> {
         }
         let name = element.name.as_str();
         if name == "vertex" {
-            vertices = Parser::<VertexRecord>::new()
-                .read_payload_for_element(&mut reader, element, &header)
+            records.vertices = Parser::<VertexRecord>::new()
+                .read_payload_for_element(reader, element, header)
                 .map_err(read_error)?;
         } else if layout == Layout::StrandElement
-            && strand_element.is_none()
+            && records.strand_element.is_none()
             && STRAND_ELEMENT_NAMES.contains(&name)
         {
-            strands = Parser::<StrandRecord>::new()
-                .read_payload_for_element(&mut reader, element, &header)
+            records.strands = Parser::<StrandRecord>::new()
+                .read_payload_for_element(reader, element, header)
                 .map_err(read_error)?;
-            strand_element = Some(name);
+            records.strand_element = STRAND_ELEMENT_NAMES.iter().copied().find(|&n| n == name);
         } else if layout == Layout::Edges && name == "edge" {
-            edges = Parser::<EdgeRecord>::new()
-                .read_payload_for_element(&mut reader, element, &header)
+            records.edges = Parser::<EdgeRecord>::new()
+                .read_payload_for_element(reader, element, header)
                 .map_err(read_error)?;
         } else {
             Parser::<Skipped>::new()
-                .read_payload_for_element(&mut reader, element, &header)
+                .read_payload_for_element(reader, element, header)
                 .map_err(read_error)?;
         }
     }
+    Ok(records)
+}
 
-    let mut polylines: Vec<Polyline> = Vec::new();
-    let n = vertices.len();
-    match layout {
-        Layout::StrandElement => {
-            let element = strand_element.unwrap_or("strand");
-            let mut next = 0usize;
-            for (s, record) in strands.iter().enumerate() {
-                let radius = record.radius.get();
-                let indices = if let Some(list) = &record.indices {
-                    list.iter()
-                        .map(|&i| {
-                            u32::try_from(i)
-                                .ok()
-                                .filter(|&i| (i as usize) < n)
-                                .ok_or_else(|| {
-                                    fail(format!(
-                                    "{element} {s} refers to vertex {i}, but there are {n} vertices"
-                                ))
-                                })
+/// The polylines of a strand element: each record lists its vertices, or counts them from
+/// where the previous one ended.
+fn strand_element_polylines(
+    records: &Records,
+    n: usize,
+) -> std::result::Result<Vec<Polyline>, String> {
+    let mut polylines = Vec::new();
+    let element = records.strand_element.unwrap_or("strand");
+    let mut next = 0usize;
+    for (s, record) in records.strands.iter().enumerate() {
+        let radius = record.radius.get();
+        let indices = if let Some(list) = &record.indices {
+            list.iter()
+                .map(|&i| {
+                    u32::try_from(i)
+                        .ok()
+                        .filter(|&i| (i as usize) < n)
+                        .ok_or_else(|| {
+                            format!(
+                                "{element} {s} refers to vertex {i}, but there are {n} vertices"
+                            )
                         })
-                        .collect::<Result<Vec<u32>>>()?
-                } else {
-                    let count = record.points.get().unwrap_or(f64::NAN);
-                    if !(count.fract() == 0.0 && count >= 1.0) {
-                        return Err(fail(format!(
-                            "{element} {s} has {} points; a strand needs a whole number, at least 1",
-                            count
-                        )));
-                    }
-                    let end = next as f64 + count;
-                    if end > n as f64 {
-                        return Err(fail(format!(
-                            "{element} {s} needs vertices {next}..{end}, but there are {n} vertices"
-                        )));
-                    }
-                    let range = next as u32..end as u32;
-                    next = end as usize;
-                    range.collect()
-                };
-                polylines.push((indices, radius));
+                })
+                .collect::<std::result::Result<Vec<u32>, String>>()?
+        } else {
+            let count = record.points.get().unwrap_or(f64::NAN);
+            if !(count.fract() == 0.0 && count >= 1.0) {
+                return Err(format!(
+                    "{element} {s} has {} points; a strand needs a whole number, at least 1",
+                    count
+                ));
             }
-            let by_count = strands.iter().any(|r| r.indices.is_none());
-            if by_count && next != n {
-                return Err(fail(format!(
-                    "the {} {element} records take {next} vertices, but the file has {n}",
-                    strands.len()
-                )));
+            let end = next as f64 + count;
+            if end > n as f64 {
+                return Err(format!(
+                    "{element} {s} needs vertices {next}..{end}, but there are {n} vertices"
+                ));
             }
-        }
-        Layout::StrandIds => {
-            let mut finished: HashSet<u64> = HashSet::new();
-            let mut start = 0usize;
-            for i in 1..=n {
-                let id = |i: usize| vertices[i].strand.get().unwrap_or(f64::NAN);
-                if i < n && id(i).to_bits() == id(start).to_bits() {
-                    continue;
-                }
-                if !finished.insert(id(start).to_bits()) {
-                    return Err(fail(format!(
-                        "vertex {start} has strand id {}, which an earlier run of vertices \
-                         already had: the vertices of a strand must be consecutive",
-                        id(start)
-                    )));
-                }
-                polylines.push(((start as u32..i as u32).collect(), None));
-                start = i;
-            }
-        }
-        Layout::Edges => polylines = chain_edges(&edges, n).map_err(fail)?,
-        Layout::FixedLength(per) => {
-            if !n.is_multiple_of(per as usize) {
-                return Err(fail(format!(
-                    "{n} vertices are not a whole number of strands of {per} points \
-                     (points_per_strand)"
-                )));
-            }
-            polylines = (0..(n / per as usize) as u32)
-                .map(|s| ((s * per..(s + 1) * per).collect(), None))
-                .collect();
-        }
+            let range = next as u32..end as u32;
+            next = end as usize;
+            range.collect()
+        };
+        polylines.push((indices, radius));
     }
+    let by_count = records.strands.iter().any(|r| r.indices.is_none());
+    if by_count && next != n {
+        return Err(format!(
+            "the {} {element} records take {next} vertices, but the file has {n}",
+            records.strands.len()
+        ));
+    }
+    Ok(polylines)
+}
 
+/// The polylines of per-vertex strand ids: runs of consecutive vertices with one id.
+fn strand_id_polylines(vertices: &[VertexRecord]) -> std::result::Result<Vec<Polyline>, String> {
+    let n = vertices.len();
+    let mut polylines = Vec::new();
+    let mut finished: HashSet<u64> = HashSet::new();
+    let mut start = 0usize;
+    for i in 1..=n {
+        let id = |i: usize| vertices[i].strand.get().unwrap_or(f64::NAN);
+        if i < n && id(i).to_bits() == id(start).to_bits() {
+            continue;
+        }
+        if !finished.insert(id(start).to_bits()) {
+            return Err(format!(
+                "vertex {start} has strand id {}, which an earlier run of vertices \
+                 already had: the vertices of a strand must be consecutive",
+                id(start)
+            ));
+        }
+        polylines.push(((start as u32..i as u32).collect(), None));
+        start = i;
+    }
+    Ok(polylines)
+}
+
+/// The polylines of a file of vertices only, `per` points a strand.
+fn fixed_length_polylines(n: usize, per: u32) -> std::result::Result<Vec<Polyline>, String> {
+    if !n.is_multiple_of(per as usize) {
+        return Err(format!(
+            "{n} vertices are not a whole number of strands of {per} points \
+             (points_per_strand)"
+        ));
+    }
+    Ok((0..(n / per as usize) as u32)
+        .map(|s| ((s * per..(s + 1) * per).collect(), None))
+        .collect())
+}
+
+/// The hair of `polylines` over `vertices`, with the radius the options, the vertices or the
+/// strands give (in that order of precedence) and the vertices' colours.
+fn assemble(
+    path: &Path,
+    options: &PlyFile,
+    vertices: &[VertexRecord],
+    polylines: &[Polyline],
+    has_colors: bool,
+) -> Result<HairGeometry> {
+    let n = vertices.len();
     let mut hair = HairGeometry::empty(path.display().to_string());
     let mut colors: Vec<Rgb> = Vec::new();
     let vertex_radius = vertices.iter().any(|v| v.radius.get().is_some());
@@ -715,7 +766,7 @@ fn parse(bytes: &[u8], path: &Path, options: &PlyFile) -> Result<HairGeometry> {
             path.display()
         );
     }
-    for (indices, strand_r) in &polylines {
+    for (indices, strand_r) in polylines {
         // One point: no segment, as in the other readers.
         if indices.len() < 2 {
             continue;
@@ -738,10 +789,10 @@ fn parse(bytes: &[u8], path: &Path, options: &PlyFile) -> Result<HairGeometry> {
         hair.strand_offsets.push(hair.points.len() as u32);
     }
     if hair.strand_count() == 0 {
-        return Err(fail(format!(
-            "no strand has two points or more ({} vertices)",
-            n
-        )));
+        return Err(format_error(
+            path,
+            format!("no strand has two points or more ({} vertices)", n),
+        ));
     }
     if has_colors {
         hair.colors = Some(HairAttribute::PerPoint(colors));

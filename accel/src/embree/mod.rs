@@ -392,182 +392,39 @@ impl SceneBuilder {
         self.add_curves(hair, options, Materials::PerSegment(Box::new(materials)))
     }
 
+    /// Adds a hair object: its strands grown and subsampled ([`strands_to_draw`]), cut into
+    /// curve segments ([`Curves::new`]), given their materials ([`Curves::set_materials`]) and
+    /// handed to Embree ([`Curves::geometry`]).
     fn add_curves(
         mut self,
         hair: &HairGeometry,
         options: &HairOptions,
         materials: Materials,
     ) -> Result<Self> {
-        hair.validate()?;
-        options.validate(&hair.name)?;
-        let grown = options.with_children(hair, &self.limits())?;
-        let hair: &HairGeometry = &grown;
-        let (hair, ids): (Cow<HairGeometry>, Vec<u32>) = if options.strand_fraction < 1.0 {
-            let (sub, ids) = hair.subsample(options.strand_fraction, options.strand_seed);
-            (Cow::Owned(sub), ids)
-        } else {
-            (
-                Cow::Borrowed(hair),
-                (0..hair.strand_count() as u32).collect(),
-            )
-        };
+        let grown = strands_to_draw(hair, options, &self.limits())?;
+        let (hair, ids) = (&grown.0, &grown.1);
         self.plan(
             &hair.name,
             &format!("its {} hair points", hair.point_count()),
             hair.point_count() as f64 * tress_groom::geometry::BYTES_PER_POINT + OBJECT_BYTES,
         )?;
-        let basis = options.basis;
-        let order = basis.order();
-        let matrix = options.transform.matrix();
-        let radius_scale = options.radius_scale * options.transform.scale;
-        let mut data = CurveData {
-            basis,
-            shape: options.curve,
-            overlaps: options.overlaps,
-            materials: SegmentMaterials::Uniform(0),
-            seg_cps: Vec::new(),
-            segs: Vec::new(),
-            capsules: Vec::new(),
-            strands: Vec::new(),
-        };
-        // Embree's vertex and index buffers.
-        let mut cps: Vec<Vec4> = Vec::new();
-        let mut seg_first_cp: Vec<u32> = Vec::new();
-        let mut points = 0;
-        let mut bounds = Aabb::EMPTY;
-        // What the caller choosing per-segment materials sees, one per primitive.
-        let mut segments: Vec<HairSegment> = Vec::new();
         let per_segment = matches!(materials, Materials::PerSegment(_));
-        for (slot, &id) in ids.iter().enumerate() {
-            let range = hair.strand(slot);
-            let first_point = range.start;
-            let n = range.len();
-            if n < 2 {
-                continue;
-            }
-            let pts: Vec<Vec4> = range
-                .enumerate()
-                .map(|(i, at)| {
-                    let v = i as f32 / (n - 1) as f32;
-                    let taper = 1.0 + (options.tip_scale - 1.0) * v;
-                    matrix
-                        .transform_point3(hair.points[at])
-                        .extend(hair.radii[at] * radius_scale * taper)
-                })
-                .collect();
-            let strand = data.strands.len() as u32;
-            let base = cps.len();
-            cps.extend(basis.control_points(&pts));
-            let before = seg_first_cp.len();
-            for j in 0..n - 1 {
-                // A zero-length segment has no area and no tangent.
-                if pts[j].truncate() == pts[j + 1].truncate() {
-                    continue;
-                }
-                let seg = &cps[base + j..base + j + order];
-                let cap = basis.capsule(seg);
-                bounds.grow(cap.a - Vec3::splat(cap.r));
-                bounds.grow(cap.a + Vec3::splat(cap.r));
-                bounds.grow(cap.b - Vec3::splat(cap.r));
-                bounds.grow(cap.b + Vec3::splat(cap.r));
-                data.seg_cps.extend_from_slice(seg);
-                seg_first_cp.push((base + j) as u32);
-                data.segs.push(SegmentRecord {
-                    strand,
-                    index: j as u32,
-                });
-                data.capsules.push(cap);
-                if per_segment {
-                    let color = hair.colors.as_ref().map(|c| {
-                        let at = first_point + j;
-                        0.5 * (c.at(slot, at) + c.at(slot, at + 1))
-                    });
-                    segments.push(HairSegment {
-                        strand: id,
-                        v: (j as f32 + 0.5) / (n - 1) as f32,
-                        color,
-                    });
-                }
-            }
-            if seg_first_cp.len() == before {
-                cps.truncate(base);
-                continue;
-            }
-            data.strands.push(StrandRecord {
-                first_prim: before as u32,
-                end_prim: seg_first_cp.len() as u32,
-                segments: (n - 1) as u32,
-                id,
-            });
-            points += n;
-        }
-        if seg_first_cp.is_empty() {
-            return Err(Error::InvalidGeometry {
-                object: hair.name.clone(),
-                reason: "no strand has a segment of non-zero length".into(),
-            });
-        }
-        let material_span = match materials {
-            Materials::One(m) => {
-                data.materials = SegmentMaterials::Uniform(m);
-                m..m + 1
-            }
-            Materials::PerSegment(choose) => {
-                let fail = |reason: String| Error::InvalidGeometry {
-                    object: hair.name.clone(),
-                    reason,
-                };
-                let chosen = choose(&segments).map_err(fail)?;
-                if chosen.len() != segments.len() {
-                    return Err(fail(format!(
-                        "{} materials chosen for {} curve segments",
-                        chosen.len(),
-                        segments.len()
-                    )));
-                }
-                let lo = chosen.iter().copied().min().unwrap_or(0);
-                let hi = chosen.iter().copied().max().unwrap_or(0);
-                data.materials = SegmentMaterials::PerSegment(chosen);
-                lo..hi.saturating_add(1)
-            }
-        };
-        drop(segments);
-        if cps.len() > u32::MAX as usize {
-            return Err(Error::InvalidGeometry {
-                object: hair.name.clone(),
-                reason: "too many control points for one Embree geometry".into(),
-            });
-        }
-        check_extent(&hair.name, &bounds)?;
-
-        let name = &hair.name;
-        let mut geometry = self
-            .device
-            .create_geometry(basis.geometry_kind(options.curve))
-            .map_err(|e| embree_error(name, "cannot create curves", e))?;
-        geometry
-            .set_new_buffer::<[f32; 4]>(BufferUsage::VERTEX, 0, Format::FLOAT4, 16, cps.len())
-            .map_err(|e| embree_error(name, "cannot allocate control points", e))?
-            .iter_mut()
-            .zip(&cps)
-            .for_each(|(dst, src)| *dst = src.to_array());
-        geometry
-            .set_new_buffer::<u32>(BufferUsage::INDEX, 0, Format::UINT, 4, seg_first_cp.len())
-            .map_err(|e| embree_error(name, "cannot allocate curve indices", e))?
-            .copy_from_slice(&seg_first_cp);
-        drop((cps, seg_first_cp));
-        let data = Arc::new(data);
+        let mut curves = Curves::new(hair, ids, options, per_segment)?;
+        let material_span = curves.set_materials(materials, &hair.name)?;
+        check_extent(&hair.name, &curves.bounds)?;
+        let geometry = curves.geometry(&self.device, &hair.name, options.curve)?;
+        let data = Arc::new(curves.data);
         let info = ObjectInfo {
-            name: name.clone(),
+            name: hair.name.clone(),
             kind: ObjectKind::Hair {
                 strands: data.strands.len(),
                 segments: data.segs.len(),
-                points,
-                basis,
+                points: curves.points,
+                basis: options.basis,
                 curve: options.curve,
             },
             materials: material_span,
-            bounds,
+            bounds: curves.bounds,
         };
         self.attach(geometry, GeomData::Hair(data));
         self.check_device(&info.name)?;
@@ -784,40 +641,249 @@ fn max_fiber_radius(geoms: &[GeomData]) -> f32 {
 /// Embree calls it with the arguments of a query whose context is an
 /// `IntersectContextExt<Exclude>` built by [`EmbreeAccel::context`] for a live scene.
 unsafe extern "C" fn context_filter(args: *const RTCFilterFunctionNArguments) {
-    let args = &*args;
-    let ex = &(*(args.context as *const IntersectContextExt<Exclude>)).ext;
-    let geoms = &*ex.geoms;
+    // SAFETY: Embree passes a valid pointer to the call's arguments, alive for the call.
+    let args = unsafe { &*args };
+    // SAFETY: the context is the one the query was given, an `IntersectContextExt<Exclude>`
+    // from `EmbreeAccel::context` (`repr(C)`, Embree's context first), alive for the query.
+    let ex = unsafe { &(*(args.context as *const IntersectContextExt<Exclude>)).ext };
+    // SAFETY: `geoms` is the slice of the `EmbreeAccel` being queried, which outlives the query
+    // and is not changed after it is built.
+    let geoms = unsafe { &*ex.geoms };
     let n = args.N as usize;
     // Embree's SoA layouts of `RTCRayN` and `RTCHitN` (rtcore_ray.h): field k of lane i is
     // element k·N + i.
     let ray = args.ray as *const f32;
     let hit = args.hit as *const u32;
     for i in 0..n {
-        let valid = args.valid.add(i);
+        // SAFETY: `valid` holds one flag per lane, N of them, which the filter may clear.
+        let valid = unsafe { &mut *args.valid.add(i) };
         if *valid == 0 {
             continue;
         }
-        let ray_field = |k: usize| *ray.add(k * n + i);
+        // SAFETY: a ray has 12 fields of N lanes (origin, t_near, direction, time, t_far, …):
+        // the fields read, k ≤ 8, lie within it.
+        let ray_field = |k: usize| unsafe { *ray.add(k * n + i) };
         let dir = Vec3::new(ray_field(4), ray_field(5), ray_field(6));
         // The ray's own origin, in front of the one Embree was given (`EmbreeAccel::embree_ray`).
         let org = Vec3::new(ray_field(0), ray_field(1), ray_field(2)) + ex.origin_shift * dir;
-        let (prim, geom) = (*hit.add(5 * n + i), *hit.add(6 * n + i));
+        // SAFETY: a hit has 8 fields of N lanes (normal, u, v, primID, geomID, instID): the
+        // fields read, 3, 5 and 6, lie within it.
+        let hit_field = |k: usize| unsafe { *hit.add(k * n + i) };
+        let (prim, geom) = (hit_field(5), hit_field(6));
         // Field 3 of the hit is its curve parameter u; field 8 of the ray the candidate's
         // distance, measured from the shifted origin.
         let candidate = Candidate {
             geom,
             prim,
-            u: f32::from_bits(*hit.add(3 * n + i)),
+            u: f32::from_bits(hit_field(3)),
             t: ray_field(8) - ex.origin_shift,
         };
         if !geoms[geom as usize].keep(ex, candidate, org, dir) {
             *valid = 0;
         } else if !ex.hits.is_null() {
-            // Set only by `count_fibers_crossed`, whose vector outlives the (synchronous) query
-            // and is not otherwise touched during it.
-            (*ex.hits).push((PrimId { geom, prim }, candidate.t));
+            // SAFETY: set only by `count_fibers_crossed`, whose vector outlives the
+            // (synchronous) query and is not otherwise touched during it.
+            unsafe { (*ex.hits).push((PrimId { geom, prim }, candidate.t)) };
             *valid = 0;
         }
+    }
+}
+
+/// The strands of `hair` a hair object draws, validated: with its child strands, then the
+/// subset of [`HairOptions::strand_fraction`], and each one's index in the object.
+fn strands_to_draw<'a>(
+    hair: &'a HairGeometry,
+    options: &HairOptions,
+    limits: &Limits,
+) -> Result<(Cow<'a, HairGeometry>, Vec<u32>)> {
+    hair.validate()?;
+    options.validate(&hair.name)?;
+    let grown = options.with_children(hair, limits)?;
+    Ok(if options.strand_fraction < 1.0 {
+        let (sub, ids) = grown.subsample(options.strand_fraction, options.strand_seed);
+        (Cow::Owned(sub), ids)
+    } else {
+        let ids = (0..grown.strand_count() as u32).collect();
+        (grown, ids)
+    })
+}
+
+/// A hair object cut into curve segments: what the accelerator keeps of it, and Embree's
+/// buffers.
+struct Curves {
+    data: CurveData,
+    /// Embree's vertex buffer: every drawn strand's control points.
+    cps: Vec<Vec4>,
+    /// Embree's index buffer: each segment's first control point.
+    seg_first_cp: Vec<u32>,
+    /// Points of the strands drawn.
+    points: usize,
+    bounds: Aabb,
+    /// What a caller choosing per-segment materials sees, one per primitive (else empty).
+    segments: Vec<HairSegment>,
+}
+
+impl Curves {
+    /// Transforms, scales and tapers the strands `ids` of `hair` (in slot order) and cuts them
+    /// into segments, skipping zero-length ones; `per_segment` also records what a per-segment
+    /// material choice sees.
+    fn new(
+        hair: &HairGeometry,
+        ids: &[u32],
+        options: &HairOptions,
+        per_segment: bool,
+    ) -> Result<Curves> {
+        let basis = options.basis;
+        let order = basis.order();
+        let matrix = options.transform.matrix();
+        let radius_scale = options.radius_scale * options.transform.scale;
+        let mut c = Curves {
+            data: CurveData {
+                basis,
+                shape: options.curve,
+                overlaps: options.overlaps,
+                materials: SegmentMaterials::Uniform(0),
+                seg_cps: Vec::new(),
+                segs: Vec::new(),
+                capsules: Vec::new(),
+                strands: Vec::new(),
+            },
+            cps: Vec::new(),
+            seg_first_cp: Vec::new(),
+            points: 0,
+            bounds: Aabb::EMPTY,
+            segments: Vec::new(),
+        };
+        for (slot, &id) in ids.iter().enumerate() {
+            let range = hair.strand(slot);
+            let first_point = range.start;
+            let n = range.len();
+            if n < 2 {
+                continue;
+            }
+            let pts: Vec<Vec4> = range
+                .enumerate()
+                .map(|(i, at)| {
+                    let v = i as f32 / (n - 1) as f32;
+                    let taper = 1.0 + (options.tip_scale - 1.0) * v;
+                    matrix
+                        .transform_point3(hair.points[at])
+                        .extend(hair.radii[at] * radius_scale * taper)
+                })
+                .collect();
+            let strand = c.data.strands.len() as u32;
+            let base = c.cps.len();
+            c.cps.extend(basis.control_points(&pts));
+            let before = c.seg_first_cp.len();
+            for j in 0..n - 1 {
+                // A zero-length segment has no area and no tangent.
+                if pts[j].truncate() == pts[j + 1].truncate() {
+                    continue;
+                }
+                let seg = &c.cps[base + j..base + j + order];
+                let cap = basis.capsule(seg);
+                c.bounds.grow(cap.a - Vec3::splat(cap.r));
+                c.bounds.grow(cap.a + Vec3::splat(cap.r));
+                c.bounds.grow(cap.b - Vec3::splat(cap.r));
+                c.bounds.grow(cap.b + Vec3::splat(cap.r));
+                c.data.seg_cps.extend_from_slice(seg);
+                c.seg_first_cp.push((base + j) as u32);
+                c.data.segs.push(SegmentRecord {
+                    strand,
+                    index: j as u32,
+                });
+                c.data.capsules.push(cap);
+                if per_segment {
+                    let color = hair.colors.as_ref().map(|colors| {
+                        let at = first_point + j;
+                        0.5 * (colors.at(slot, at) + colors.at(slot, at + 1))
+                    });
+                    c.segments.push(HairSegment {
+                        strand: id,
+                        v: (j as f32 + 0.5) / (n - 1) as f32,
+                        color,
+                    });
+                }
+            }
+            if c.seg_first_cp.len() == before {
+                c.cps.truncate(base);
+                continue;
+            }
+            c.data.strands.push(StrandRecord {
+                first_prim: before as u32,
+                end_prim: c.seg_first_cp.len() as u32,
+                segments: (n - 1) as u32,
+                id,
+            });
+            c.points += n;
+        }
+        if c.seg_first_cp.is_empty() {
+            return Err(Error::InvalidGeometry {
+                object: hair.name.clone(),
+                reason: "no strand has a segment of non-zero length".into(),
+            });
+        }
+        if c.cps.len() > u32::MAX as usize {
+            return Err(Error::InvalidGeometry {
+                object: hair.name.clone(),
+                reason: "too many control points for one Embree geometry".into(),
+            });
+        }
+        Ok(c)
+    }
+
+    /// Gives the segments their materials; the span of material indices used.
+    fn set_materials(&mut self, materials: Materials, object: &str) -> Result<Range<u32>> {
+        let segments = std::mem::take(&mut self.segments);
+        Ok(match materials {
+            Materials::One(m) => {
+                self.data.materials = SegmentMaterials::Uniform(m);
+                m..m + 1
+            }
+            Materials::PerSegment(choose) => {
+                let fail = |reason: String| Error::InvalidGeometry {
+                    object: object.to_owned(),
+                    reason,
+                };
+                let chosen = choose(&segments).map_err(fail)?;
+                if chosen.len() != segments.len() {
+                    return Err(fail(format!(
+                        "{} materials chosen for {} curve segments",
+                        chosen.len(),
+                        segments.len()
+                    )));
+                }
+                let lo = chosen.iter().copied().min().unwrap_or(0);
+                let hi = chosen.iter().copied().max().unwrap_or(0);
+                self.data.materials = SegmentMaterials::PerSegment(chosen);
+                lo..hi.saturating_add(1)
+            }
+        })
+    }
+
+    /// The Embree curves, their buffers moved out of `self`.
+    fn geometry(
+        &mut self,
+        device: &Device,
+        name: &str,
+        curve: CurveShape,
+    ) -> Result<GeometryBuilder<'static>> {
+        let cps = std::mem::take(&mut self.cps);
+        let seg_first_cp = std::mem::take(&mut self.seg_first_cp);
+        let mut geometry = device
+            .create_geometry(self.data.basis.geometry_kind(curve))
+            .map_err(|e| embree_error(name, "cannot create curves", e))?;
+        geometry
+            .set_new_buffer::<[f32; 4]>(BufferUsage::VERTEX, 0, Format::FLOAT4, 16, cps.len())
+            .map_err(|e| embree_error(name, "cannot allocate control points", e))?
+            .iter_mut()
+            .zip(&cps)
+            .for_each(|(dst, src)| *dst = src.to_array());
+        geometry
+            .set_new_buffer::<u32>(BufferUsage::INDEX, 0, Format::UINT, 4, seg_first_cp.len())
+            .map_err(|e| embree_error(name, "cannot allocate curve indices", e))?
+            .copy_from_slice(&seg_first_cp);
+        Ok(geometry)
     }
 }
 
