@@ -12,6 +12,9 @@
 //! direction toward the camera as a RON tuple (default `(0.35, 0.15, 1)`).
 //! Procedural scalp hair is shown on its scalp sphere.
 
+// A program of its own, not library code: it reads its command line (clippy.toml).
+#![allow(clippy::disallowed_methods)]
+
 use tress_accel::{HairOptions, SceneBuilder};
 use tress_core::limits::Limits;
 use tress_core::math::{Vec2, Vec3};

@@ -87,7 +87,13 @@
 //! scene's largest fiber radius) with its interval moved by as much: the culling never
 //! applies, and the rule above alone decides.
 
+// Test code is not library code: it writes its fixtures and reads what it is asked to bless
+// (clippy.toml's rules are for the library).
+#![cfg_attr(test, allow(clippy::disallowed_methods))]
 #![warn(missing_docs)]
+// Every unsafe operation in its own block, with the reason it is sound.
+#![warn(unsafe_op_in_unsafe_fn, clippy::undocumented_unsafe_blocks)]
+
 mod curve_data;
 mod curves;
 mod embree;

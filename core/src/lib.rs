@@ -4,7 +4,13 @@
 //! This crate depends on neither Embree nor RON: geometry comes in through [`Accel`], scene files
 //! are loaded by `tress-loader`, which also holds the integrator registry.
 
+// Test code is not library code: it writes its fixtures and reads what it is asked to bless
+// (clippy.toml's rules are for the library).
+#![cfg_attr(test, allow(clippy::disallowed_methods))]
 #![warn(missing_docs)]
+// Every unsafe operation in its own block, with the reason it is sound.
+#![warn(unsafe_op_in_unsafe_fn, clippy::undocumented_unsafe_blocks)]
+
 pub mod accel;
 pub mod bcsdf;
 pub mod camera;

@@ -1,5 +1,9 @@
 //! `tress_study::run` without figures, as the Python bindings run studies.
 
+// Test code is not library code: it writes its fixtures and reads its settings (clippy.toml's
+// rules are for the library).
+#![allow(clippy::disallowed_methods)]
+
 use tress_study::{self as study, NotesOnStderr, StudySettings};
 
 #[test]

@@ -12,6 +12,9 @@
 //!
 //! Errors are relMSE over the window (ε = 1e-2, as `tress diff`).
 
+// A program of its own, not library code: it reads its command line (clippy.toml).
+#![allow(clippy::disallowed_methods)]
+
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use std::path::PathBuf;
