@@ -12,11 +12,15 @@
 //! direction toward the camera as a RON tuple (default `(0.35, 0.15, 1)`).
 //! Procedural scalp hair is shown on its scalp sphere.
 
-use tress_accel::{HairOptions, HairSource, HairStyle, SceneBuilder};
+// A program of its own, not library code: it reads its command line (clippy.toml).
+#![allow(clippy::disallowed_methods)]
+
+use tress_accel::{HairOptions, SceneBuilder};
 use tress_core::limits::Limits;
 use tress_core::math::{Vec2, Vec3};
 use tress_core::rng::Pcg32;
 use tress_core::{Accel, Camera, HitKind, Image, Ray};
+use tress_groom::{HairSource, HairStyle};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();

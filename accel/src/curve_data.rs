@@ -4,7 +4,7 @@
 
 use crate::curves::{Capsule, CurveBasis, CurveShape, Overlaps};
 use glam::Vec4;
-use tress_core::accel::HitKind;
+use tress_core::accel::{HairCurves, HitKind};
 use tress_core::bcsdf::FiberFrame;
 use tress_core::math::{Ray, Rgb, Vec3};
 
@@ -286,24 +286,38 @@ impl CurveData {
 }
 
 impl CurveData {
-    pub(crate) fn basis(&self) -> CurveBasis {
-        self.basis
-    }
-
-    /// Curve segments (Embree primitives).
-    pub(crate) fn segments(&self) -> usize {
-        self.segs.len()
-    }
-
-    /// The control points (position, radius) of segment `prim`, `basis().order()` of them.
+    /// The control points (position, radius) of segment `prim`, `basis.order()` of them.
     #[inline]
     pub(crate) fn control_points(&self, prim: usize) -> &[Vec4] {
         let order = self.basis.order();
         &self.seg_cps[prim * order..(prim + 1) * order]
     }
+}
 
-    /// Whether two segments belong to the same strand.
-    pub(crate) fn same_strand(&self, a: usize, b: usize) -> bool {
+/// Straight chords per cubic curve segment in [`HairCurves::for_each_piece`].
+const CUBIC_PIECES: usize = 4;
+
+impl HairCurves for CurveData {
+    fn segments(&self) -> usize {
+        self.segs.len()
+    }
+
+    fn for_each_piece(&self, prim: usize, f: &mut dyn FnMut(Vec4, Vec4)) {
+        let cps = self.control_points(prim);
+        match self.basis {
+            CurveBasis::Linear => f(cps[0], cps[1]),
+            basis => {
+                let mut prev = basis.eval(cps, 0.0).0;
+                for k in 1..=CUBIC_PIECES {
+                    let next = basis.eval(cps, k as f32 / CUBIC_PIECES as f32).0;
+                    f(prev, next);
+                    prev = next;
+                }
+            }
+        }
+    }
+
+    fn same_strand(&self, a: usize, b: usize) -> bool {
         self.segs[a].strand == self.segs[b].strand
     }
 }

@@ -2,9 +2,13 @@
 
 use std::path::PathBuf;
 
-/// Errors from reading hair and mesh files, validating geometry and building the Embree scene.
+/// Errors from reading mesh files, validating geometry and options and building the Embree
+/// scene.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
+    /// The hair handed to the builder (or its child strands) is invalid.
+    #[error(transparent)]
+    Groom(#[from] tress_groom::Error),
     /// The file could not be opened or read.
     #[error("{}: {source}", .path.display())]
     Io {
@@ -58,11 +62,3 @@ pub enum Error {
 
 /// `Result` with [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
-
-/// Shorthand for a [`Error::Format`] about `path`.
-pub(crate) fn format_error(path: &std::path::Path, reason: impl Into<String>) -> Error {
-    Error::Format {
-        path: path.to_owned(),
-        reason: reason.into(),
-    }
-}

@@ -43,8 +43,8 @@ mod imp {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::{hair, line};
     use tress_core::math::Vec3;
+    use tress_groom::test_util::{hair, line};
 
     #[test]
     fn building_a_scene_leaves_the_floating_point_mode_as_it_was() {

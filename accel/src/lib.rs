@@ -1,14 +1,15 @@
-//! tress-accel: Embree geometry for tress — hair as flat curves, triangle meshes and spheres
-//! behind [`tress_core::Accel`], the hair file readers (Cem Yuksel `.hair`, AMD TressFX
-//! `.tfx`) and procedural hair.
+//! tress-accel: Embree geometry for tress — hair as flat or round curves, triangle meshes and
+//! spheres behind [`tress_core::Accel`]. The strands come from `tress-groom`'s readers and
+//! generators.
 //!
 //! # Building an accelerator from a HAIR file
 //!
 //! ```no_run
-//! use tress_accel::{HairFile, HairOptions, SceneBuilder};
+//! use tress_accel::{HairOptions, SceneBuilder};
 //! use tress_core::{Accel, math::{Ray, Vec3}};
+//! use tress_groom::HairFile;
 //!
-//! # fn main() -> Result<(), tress_accel::Error> {
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let hair = HairFile::new("straight.hair").read()?; // Z-up file → Y-up world
 //! let accel = SceneBuilder::new()?
 //!     .add_hair(&hair, &HairOptions::default(), 0)? // material 0
@@ -21,9 +22,9 @@
 //!
 //! `examples/preview.rs` renders a quick shaded preview of any hair source.
 //!
-//! For dual scattering, [`EmbreeAccel::density_grid`] turns the hair of a built accelerator into a
-//! sparse voxel grid answering [`tress_core::FiberDensity`] (the expected number of fibers a
-//! ray crosses); [`EmbreeAccel::count_fibers_crossed`] is its brute-force reference.
+//! For dual scattering, [`tress_core::Accel::hair_curves`] hands the fibers of a built
+//! accelerator to the density grid (in `tress-dual-scattering`);
+//! [`EmbreeAccel::count_fibers_crossed`] is its brute-force reference.
 //!
 //! # Fibers: flat or round curves, the local frame and `h`
 //!
@@ -86,43 +87,25 @@
 //! scene's largest fiber radius) with its interval moved by as much: the culling never
 //! applies, and the rule above alone decides.
 
+// Test code is not library code: it writes its fixtures and reads what it is asked to bless
+// (clippy.toml's rules are for the library).
+#![cfg_attr(test, allow(clippy::disallowed_methods))]
 #![warn(missing_docs)]
+// Every unsafe operation in its own block, with the reason it is sound.
+#![warn(unsafe_op_in_unsafe_fn, clippy::undocumented_unsafe_blocks)]
 
-mod children;
 mod curve_data;
 mod curves;
-pub mod cyhair;
-pub mod density;
+mod embree;
 mod error;
 mod fp_mode;
-pub mod geometry;
-mod le_bytes;
 pub mod mesh;
-pub mod pbrt;
-pub mod ply;
-pub mod procedural;
-mod scene;
-pub mod source;
-#[cfg(test)]
-mod test_util;
-pub mod tfx;
-pub mod usc;
-pub mod usd;
+mod options;
 
-pub use children::ChildStrands;
 pub use curve_data::HairSegment;
 pub use curves::{CurveBasis, CurveShape, Overlaps};
-pub use cyhair::HairFile;
-pub use density::{DensityGrid, DensityInfo, DensitySettings};
+pub use embree::raw;
+pub use embree::{AccelInfo, EmbreeAccel, ObjectInfo, ObjectKind, SceneBuilder};
 pub use error::{Error, Result};
-pub use geometry::{HairAttribute, HairGeometry, Rotation, Transform};
 pub use mesh::TriangleMesh;
-pub use pbrt::PbrtFile;
-pub use ply::PlyFile;
-pub use procedural::{HairStyle, ProceduralHair};
-pub use scene::raw;
-pub use scene::{AccelInfo, EmbreeAccel, ObjectInfo, ObjectKind, SceneBuilder};
-pub use source::{HairOptions, HairSource};
-pub use tfx::TfxFile;
-pub use usc::UscFile;
-pub use usd::UsdFile;
+pub use options::HairOptions;

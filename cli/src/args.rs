@@ -25,7 +25,7 @@ impl RunArgs {
     }
 }
 
-/// [`tress_scene::check_threads`] as a command-line value parser.
+/// [`tress_loader::check_threads`] as a command-line value parser.
 pub fn parse_threads(s: &str) -> Result<usize, String> {
-    tress_scene::check_threads(s.parse().map_err(|e| format!("{e}"))?)
+    tress_loader::check_threads(s.parse().map_err(|e| format!("{e}"))?)
 }

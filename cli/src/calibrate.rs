@@ -24,10 +24,10 @@ use tress_core::output_file::{self, Inputs};
 use tress_core::render::render_samples;
 use tress_core::{Hit, HitKind, Image, Integrator, Ray, Rgb, Sampler, Scene};
 use tress_dual_uniform::DualSettings;
+use tress_loader::integrators::IntegratorDesc;
+use tress_loader::scene_desc::{self, SceneDesc};
 use tress_materials::dual_scattering::{DensityFactors, MultipleScattering};
-use tress_scene::integrators::IntegratorDesc;
-use tress_scene::metrics::REL_EPSILON;
-use tress_scene::scene_desc::{self, SceneDesc};
+use tress_study::metrics::REL_EPSILON;
 
 #[derive(Args, Debug)]
 pub struct CalibrateArgs {
@@ -489,7 +489,7 @@ fn conclude(
             "// tress calibrate {}: hair mean ÷ path {} (R/G/B)\n{}\n",
             args.scene.display(),
             ratios(fitted_mean, reference_mean),
-            tress_scene::ron_options()
+            tress_loader::ron_options()
                 .to_string_pretty(&fitted, ron::ser::PrettyConfig::default())?
         );
         output_file::write_bytes(out, inputs, text.as_bytes())?;

@@ -1,6 +1,6 @@
 //! `tress diff A.exr B.exr`: error metrics of an image A against a reference B, and colour-mapped
 //! per-pixel error maps. MSE, relMSE, PSNR and the mean difference are
-//! [`tress_scene::metrics`], which studies compute too.
+//! [`tress_study::metrics`], which studies compute too.
 //!
 //! Two perceptual metrics compare the images as they are seen: tone-mapped like the PNG
 //! previews (scaled by 2^`--exposure`, mapped by `--tonemap`, sRGB-encoded to [0, 1]).
@@ -26,11 +26,11 @@ use std::path::{Path, PathBuf};
 use tress_core::image_io::{self, ToneMap};
 use tress_core::output_file::Inputs;
 use tress_core::Image;
-use tress_scene::metrics::{
+use tress_study::metrics::{
     avg3, check_compatible, check_finite, error_map, metrics, resolve_region, MapKind, Metrics,
     Rect, REL_EPSILON,
 };
-use tress_scene::picture::srgb;
+use tress_study::picture::srgb;
 
 /// What an error map shows per pixel (`--map-kind`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

@@ -9,9 +9,9 @@ use clap::Args;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use tress_core::film::Aov;
-use tress_scene::integrators::IntegratorDesc;
-use tress_scene::placeholders::{self, Defines};
-use tress_scene::scene_desc;
+use tress_loader::integrators::IntegratorDesc;
+use tress_loader::placeholders::{self, Defines};
+use tress_loader::scene_desc;
 
 fn parse_aov(s: &str) -> Result<Aov, String> {
     s.parse()

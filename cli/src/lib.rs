@@ -1,5 +1,5 @@
-//! The `tress` binary's commands, over the scene layer of `tress-scene` (scene files, the
-//! integrator registry, studies). The binary uses them as they are, so tests reach exactly the
+//! The `tress` binary's commands, over `tress-loader` (scene files, the integrator registry)
+//! and `tress-study` (studies, image metrics). The binary uses them as they are, so tests reach exactly the
 //! commands the binary runs.
 
 #![warn(missing_docs)]
@@ -9,7 +9,7 @@
 #[doc(hidden)]
 pub mod args;
 #[doc(hidden)]
-pub mod bcsdf_cmd;
+pub mod bcsdf;
 #[doc(hidden)]
 pub mod bench;
 #[doc(hidden)]
@@ -27,7 +27,7 @@ pub mod merge;
 mod plot;
 mod progress;
 #[doc(hidden)]
-pub mod render_cmd;
+pub mod render;
 mod render_file;
 #[doc(hidden)]
 pub mod study;

@@ -1,10 +1,12 @@
 //! `tress`: the command-line renderer.
 
-// The commands live in the library target (so that fuzz targets and the Python bindings reach
-// exactly what the binary runs); the binary parses the command line and dispatches.
-use tress_cli::{
-    bcsdf_cmd, bench, calibrate, diff, farm, interrupt, logging, merge, render_cmd, study,
-};
+// Every unsafe operation in its own block, with the reason it is sound.
+#![warn(unsafe_op_in_unsafe_fn, clippy::undocumented_unsafe_blocks)]
+
+// The commands live in the library target, with their unit tests; the binary parses the command
+// line and dispatches. (Nothing else links the library: Python and the fuzz targets call the
+// loader and the readers directly.)
+use tress_cli::{bcsdf, bench, calibrate, diff, farm, interrupt, logging, merge, render, study};
 
 use anyhow::Result;
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
@@ -26,18 +28,18 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Render a scene to a linear EXR and a tone-mapped PNG preview.
-    Render(render_cmd::RenderArgs),
+    Render(render::RenderArgs),
     /// Print what a scene contains: strands, segments, bounds, memory.
     Info {
         /// Scene file (RON).
         scene: PathBuf,
         /// Values for the scene's `${name}` placeholders: `-D spp=64`.
-        #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = tress_scene::placeholders::parse_define)]
+        #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = tress_loader::placeholders::parse_define)]
         defines: Vec<(String, String)>,
     },
-    /// Tools for adding and tuning hair models: furnace, eval.
+    /// Tools for adding and tuning hair models: furnace, eval, plot.
     #[command(subcommand)]
-    Bcsdf(bcsdf_cmd::BcsdfCommand),
+    Bcsdf(bcsdf::BcsdfCommand),
     /// Comparative convergence study of integrators (error vs spp and time, report, plots).
     Study(study::StudyArgs),
     /// Error metrics of an EXR against a reference EXR, and an error heat map.
@@ -109,10 +111,10 @@ fn run(cli: Cli, log: &mut logging::Log) -> Result<()> {
     match cli.command {
         Command::Render(mut args) => {
             args.run.quiet |= quiet;
-            render_cmd::render(args, log)
+            render::render(args, log)
         }
-        Command::Info { scene, defines } => render_cmd::info(&scene, &defines),
-        Command::Bcsdf(cmd) => bcsdf_cmd::run(cmd),
+        Command::Info { scene, defines } => render::info(&scene, &defines),
+        Command::Bcsdf(cmd) => bcsdf::run(cmd),
         Command::Study(mut args) => {
             args.run.quiet |= quiet;
             study::run(args, log).map(|_| ())
@@ -152,4 +154,115 @@ fn init(path: &std::path::Path) -> Result<()> {
         path.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Cli;
+    use clap::CommandFactory;
+    use std::fmt::Write as _;
+
+    /// The line of `docs/src/reference/commands.md` after which every command's `--help` is
+    /// generated.
+    const MARKER: &str =
+        "<!-- Generated from the command line's own --help (cli/src/main.rs); do not edit \
+        below. After changing a command, regenerate it with `TRESS_BLESS=1 cargo test --release \
+        -p tress-cli --bin tress commands_reference`. -->";
+
+    fn reference_path() -> std::path::PathBuf {
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/src/reference/commands.md")
+    }
+
+    /// `tress --help` and every command's, at a fixed width so the page does not depend on the
+    /// terminal that generated it.
+    fn help_pages() -> String {
+        fn push(cmd: &mut clap::Command, name: &str, out: &mut String) {
+            let help = cmd.render_long_help().to_string();
+            let _ = write!(out, "### `{name}`\n\n```text\n{}\n```\n\n", help.trim_end());
+            for sub in cmd.get_subcommands_mut().filter(|c| c.get_name() != "help") {
+                let name = format!("{name} {}", sub.get_name());
+                push(sub, &name, out);
+            }
+        }
+        let mut root = Cli::command().term_width(100).max_term_width(100);
+        root.build();
+        let mut out = String::new();
+        push(&mut root, "tress", &mut out);
+        out
+    }
+
+    /// The committed page ends with what the commands print for `--help`; `TRESS_BLESS=1`
+    /// rewrites that part.
+    #[test]
+    fn commands_reference_ends_with_the_help_of_every_command() {
+        let path = reference_path();
+        let page = std::fs::read_to_string(&path).unwrap();
+        let head = page.split(MARKER).next().unwrap();
+        let expected = format!("{head}{MARKER}\n\n{}", help_pages().trim_end());
+        if std::env::var_os("TRESS_BLESS").is_some() {
+            std::fs::write(&path, format!("{expected}\n")).unwrap();
+        } else {
+            assert!(
+                page.trim_end() == expected,
+                "{} is not what the commands print for --help: regenerate it with \
+                 `TRESS_BLESS=1 cargo test --release -p tress-cli --bin tress commands_reference`",
+                path.display()
+            );
+        }
+    }
+
+    /// Every command and option of the page's summary exists: `tress NAME` is a command (or
+    /// `tress bcsdf NAME` one of its own) and each `--option` and `-D` written after it is one
+    /// of that command's arguments.
+    #[test]
+    fn commands_reference_summary_names_real_commands_and_options() {
+        let page = std::fs::read_to_string(reference_path()).unwrap();
+        let summary = page
+            .split("```sh\n")
+            .nth(1)
+            .unwrap()
+            .split("```")
+            .next()
+            .unwrap();
+        let mut root = Cli::command();
+        root.build();
+        let mut current: Option<clap::Command> = None;
+        let mut checked = 0;
+        for line in summary.lines() {
+            let words: Vec<&str> = line.split("#").next().unwrap().split_whitespace().collect();
+            if words.first() == Some(&"tress") {
+                current = match words.get(1) {
+                    Some(&"COMMAND") => None,
+                    Some(name) => {
+                        let cmd = root.find_subcommand(name).unwrap_or_else(|| {
+                            panic!("commands.md names `tress {name}`, which is no command")
+                        });
+                        let sub = words.get(2).and_then(|w| cmd.find_subcommand(w));
+                        Some(sub.unwrap_or(cmd).clone())
+                    }
+                    None => None,
+                };
+            }
+            let Some(cmd) = &current else { continue };
+            for word in &words {
+                let option = word.trim_start_matches('[');
+                let option = option.split(['=', ']', ' ']).next().unwrap();
+                let known = if let Some(long) = option.strip_prefix("--") {
+                    cmd.get_arguments().any(|a| a.get_long() == Some(long))
+                } else if let Some(short) = option.strip_prefix('-').filter(|s| s.len() == 1) {
+                    let c = short.chars().next().unwrap();
+                    cmd.get_arguments().any(|a| a.get_short() == Some(c))
+                } else {
+                    continue;
+                };
+                assert!(
+                    known,
+                    "commands.md: `tress {}` has no option `{option}`",
+                    cmd.get_name()
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked > 20, "only {checked} options found in the summary");
+    }
 }

@@ -310,10 +310,10 @@ fn calibrate_fits_the_density_factors_and_writes_them() {
         let o = tress(&args, dir.path());
         assert!(o.status.success(), "{}", stderr(&o));
         let text = std::fs::read_to_string(dir.path().join(out)).unwrap();
-        let fitted: tress_scene::integrators::IntegratorDesc = tress_scene::ron_options()
+        let fitted: tress_loader::integrators::IntegratorDesc = tress_loader::ron_options()
             .from_str(&text)
             .unwrap_or_else(|e| panic!("{e}: {text}"));
-        let tress_scene::integrators::IntegratorDesc::DualMis(s) = fitted else {
+        let tress_loader::integrators::IntegratorDesc::DualMis(s) = fitted else {
             panic!("{text}");
         };
         (String::from_utf8_lossy(&o.stdout).into_owned(), text, s)

@@ -692,9 +692,9 @@ fn waves_and_partial_images_do_not_change_the_image() {
     );
     // The binary renders in waves (1, 2, 4, 8, 13 samples); the library call renders all 13 in
     // one pass. Same bits.
-    let mut desc = tress_scene::scene_desc::load(&scene).unwrap();
+    let mut desc = tress_loader::scene_desc::load(&scene).unwrap();
     desc.film.spp = 13;
-    let built = tress_scene::scene_desc::build(&desc, &scene, &Default::default()).unwrap();
+    let built = tress_loader::scene_desc::build(&desc, &scene, &Default::default()).unwrap();
     let integrator = desc
         .integrator
         .build(&built.scene, &Default::default())

@@ -1,8 +1,8 @@
 //! The ray-intersection interface implemented by `tress-accel` (Embree).
 
-use crate::limits::Limits;
 pub use crate::math::PrimId;
 use crate::math::{Aabb, Ray, Vec3};
+use glam::Vec4;
 use std::sync::Arc;
 
 /// What was hit.
@@ -60,26 +60,31 @@ pub trait Accel: Send + Sync {
     }
     /// Bounds of all geometry.
     fn bounds(&self) -> Aabb;
-    /// Builds the density grid of the hair fibers in this geometry with `resolution` voxels
-    /// along the longest side of their bounds (`None`: chosen from the fibers), refusing one
-    /// that could exceed the memory limit of `limits`; `Ok(None)` when there is no hair.
-    /// Integrators reach it through [`crate::Scene::fiber_density`], which builds it once per
-    /// run and resolution.
-    fn fiber_density(
-        &self,
-        resolution: Option<u32>,
-        limits: &Limits,
-    ) -> Result<Option<Arc<dyn FiberDensity>>, BuildError> {
-        let _ = (resolution, limits);
-        Ok(None)
+    /// The hair objects of this geometry with their geometry ids ([`PrimId::geom`]), as
+    /// intersected: for data derived from the fibers themselves (the dual-scattering density
+    /// grid, built through [`crate::Scene::fiber_density`]). None by default.
+    fn hair_curves(&self) -> Vec<(u32, Arc<dyn HairCurves>)> {
+        Vec::new()
     }
+}
+
+/// The fibers of one hair object as an accelerator intersects them — after transform,
+/// subsampling and radius scale and taper — segment by segment ([`PrimId::prim`]).
+pub trait HairCurves: Send + Sync {
+    /// Curve segments (primitives).
+    fn segments(&self) -> usize;
+    /// Calls `f(a, b)` for the straight pieces (xyz = position, w = radius) approximating
+    /// segment `prim`, root to tip: the segment itself when linear, a few chords of a cubic.
+    fn for_each_piece(&self, prim: usize, f: &mut dyn FnMut(Vec4, Vec4));
+    /// Whether segments `a` and `b` belong to the same strand.
+    fn same_strand(&self, a: usize, b: usize) -> bool;
 }
 
 /// Why derived geometry (a density grid) could not be built.
 pub type BuildError = Box<dyn std::error::Error + Send + Sync>;
 
 /// Hair density along rays, for dual scattering: the expected number of fibers a ray crosses.
-/// Implemented by the voxel density grid in `tress-accel`; kept apart from [`Accel`] because it
+/// Implemented by the voxel density grid in `tress-dual-scattering`; kept apart from [`Accel`] because it
 /// answers a statistical question, not an intersection one.
 pub trait FiberDensity: Send + Sync {
     /// Expected number of fibers crossed along `ray` over `(0, ray.t_max)`.

@@ -66,7 +66,7 @@ pub struct FilmIntegrator {
     pub note: String,
 }
 
-/// An integrator as the registry lists it (the `integrators!` table of the `tress` CLI): how
+/// An integrator as the registry lists it (the `integrators!` table of `tress-loader`): how
 /// its settings are written, what it needs of the scene, how it is built and how the
 /// cross-crate tests hold it. Each integrator crate implements this once, on a type of its own,
 /// so that adding an integrator is its crate plus one registry line.

@@ -2,9 +2,14 @@
 //! integrators share — math, sampling, RNG, camera, film, lights, scene and the one render loop.
 //!
 //! This crate depends on neither Embree nor RON: geometry comes in through [`Accel`], scene files
-//! are parsed by `tress-cli`.
+//! are loaded by `tress-loader`, which also holds the integrator registry.
 
+// Test code is not library code: it writes its fixtures and reads what it is asked to bless
+// (clippy.toml's rules are for the library).
+#![cfg_attr(test, allow(clippy::disallowed_methods))]
 #![warn(missing_docs)]
+// Every unsafe operation in its own block, with the reason it is sound.
+#![warn(unsafe_op_in_unsafe_fn, clippy::undocumented_unsafe_blocks)]
 
 pub mod accel;
 pub mod bcsdf;
@@ -29,7 +34,7 @@ pub mod stats;
 #[cfg(test)]
 mod test_util;
 
-pub use accel::{Accel, FiberDensity, Hit, HitKind, PrimId};
+pub use accel::{Accel, FiberDensity, HairCurves, Hit, HitKind, PrimId};
 pub use bcsdf::{Bcsdf, BcsdfSample, FiberFrame};
 pub use camera::Camera;
 pub use film::Image;

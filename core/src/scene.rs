@@ -1,9 +1,10 @@
 //! The renderable scene: camera, geometry, materials, lights.
 
-use crate::accel::{Accel, BuildError, FiberDensity, Hit};
+use crate::accel::{Accel, BuildError, FiberDensity, HairCurves, Hit};
 use crate::bcsdf::Bcsdf;
 use crate::camera::Camera;
 use crate::light::Light;
+use crate::limits::Limits;
 use crate::math::{Aabb, Ray, Rgb};
 use crate::prepare::Preparation;
 use std::cell::Cell;
@@ -218,29 +219,36 @@ impl Scene {
         self.accel.as_ref()
     }
 
-    /// The density grid of the scene's hair at `resolution` voxels along the longest side
-    /// (`None`: chosen from the fibers), built within `prep`'s limits on the run's first request
-    /// and shared after; `Ok(None)` when the scene has no hair. The build is noted in `prep`.
+    /// The scene's fiber density at `resolution` (voxels along the longest side; `None`: chosen
+    /// from the fibers), made by `build` from the accelerator's hair curves within `prep`'s
+    /// limits on the run's first request and shared after; `Ok(None)` when the scene has no
+    /// hair. The build is noted in `prep`.
     pub fn fiber_density(
         &self,
         prep: &Preparation,
         resolution: Option<u32>,
+        build: impl FnOnce(
+            Vec<(u32, Arc<dyn HairCurves>)>,
+            &Limits,
+        ) -> Result<Arc<dyn FiberDensity>, BuildError>,
     ) -> Result<Option<Arc<dyn FiberDensity>>, BuildError> {
         let key = DensityKey {
             geometry: Arc::downgrade(&self.accel),
             resolution,
         };
         let grid = prep.get_or_build(key, || {
-            let start = Instant::now();
-            let grid = self.accel.fiber_density(resolution, prep.limits())?;
-            if let Some(grid) = &grid {
-                prep.note(format!(
-                    "{} built in {:.2} s",
-                    grid.describe(),
-                    start.elapsed().as_secs_f64()
-                ));
+            let curves = self.accel.hair_curves();
+            if curves.is_empty() {
+                return Ok(None);
             }
-            Ok::<_, BuildError>(grid)
+            let start = Instant::now();
+            let grid = build(curves, prep.limits())?;
+            prep.note(format!(
+                "{} built in {:.2} s",
+                grid.describe(),
+                start.elapsed().as_secs_f64()
+            ));
+            Ok::<_, BuildError>(Some(grid))
         })?;
         Ok(grid.as_ref().clone())
     }

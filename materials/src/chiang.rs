@@ -29,15 +29,12 @@
 //! shading-normal cosine in `f` and its integrator multiplies it back; here neither happens).
 //!
 //! # I₀ and reference values
-//! `M_p` here uses ln I₀ from Abramowitz & Stegun 9.8.1/9.8.2 (|ε| < 2e-7) in its log form, so
-//! it follows the exact Bessel function everywhere. pbrt-v3 (and renderers that took its code)
-//! approximate instead: a 10-term power series for I₀ below 12 and an asymptotic ln I₀ with
-//! ln 2 rounded to 0.6931; measured against mpmath, its R lobe at the peak (θ_i = −θ_o = 0) is
-//! 0.1–0.4 % low for β_m 0.1–0.25 and 1.8 % low at β_m = 0.3, where the argument sits just
-//! below the series' cut-over. `tests/chiang_reference.rs` checks this implementation against
-//! an independent 40-digit evaluation with the exact I₀ (`tests/chiang_reference.py`) on 1200
-//! points — three fibers (absorbing and not), five h, four θ_o, four θ_i, five Δφ — to 1e-4
-//! relative (worst measured 9e-6).
+//! `M_p` here uses ln I₀ from Abramowitz & Stegun 9.8.1/9.8.2 in its log form (the bounds are at
+//! `i0_scaled_split`), so it follows the exact Bessel function everywhere; pbrt-v3's series
+//! and asymptotic form do not (measured in docs/src/research/performance.md, "Chiang's I₀").
+//! `tests/chiang_reference.rs` checks this implementation against an independent 40-digit
+//! evaluation with the exact I₀ (`tests/chiang_reference.py`) on 1200 points — three fibers
+//! (absorbing and not), five h, four θ_o, four θ_i, five Δφ — to 1e-4 relative.
 //!
 //! # Sampling
 //! pbrt's procedure with four independent numbers instead of two demultiplexed ones: `u[0]` picks
@@ -51,15 +48,13 @@
 //! take one vector `exp` each, and the RGB transmittance, the pair (γ_t, γ_o), sampling's four
 //! inverse-CDF logarithms and its two sines and cosines take one vector `exp`, `asin`, `ln` and
 //! `sin_cos`. `exp`, `ln` and `sin_cos` are [`crate::simd_math`]'s, specialised to the arguments
-//! passed here (exp of arguments ≤ 16, ln of positive numbers, bounded angles) and within 1.4 ulp
-//! of libm; `wide`'s general versions cost a quarter of `sample` and a tenth of `eval_pdf`.
-//! `asin` and `atan2` are `wide`'s (lean versions did not measurably pay). The reference test's
-//! worst error stays at 9e-6.
+//! passed here (exp of arguments ≤ 16, ln of positive numbers, bounded angles), because
+//! `wide`'s general versions showed in Chiang's profile (docs/src/research/performance.md);
+//! `asin` and `atan2` are `wide`'s.
 //!
 //! # Differences from pbrt-v4 (all keep its formulas; they make `pdf` the exact sampling density)
-//! - I₀ uses the Abramowitz & Stegun 9.8.1/9.8.2 approximations (relative error < 5·10⁻⁷) instead
-//!   of pbrt's 10-term series, which is 1.7 % low at the argument 11.8 — the R-lobe peak at the
-//!   default β_m = 0.3, θ_o = 0 — and jumps by 2.6 % where pbrt switches to its asymptotic form.
+//! - I₀ uses the Abramowitz & Stegun approximations above instead of pbrt's 10-term series and
+//!   asymptotic form.
 //! - M_p is evaluated as `exp(−|m − u|²/(2v) + ln(I₀(a) e^{−a}) − ln v − ln(1 − e^{−2/v}))` with
 //!   `u = (sin θ_i, cos θ_i)` and `m = (−sin θ_o, cos θ_o)`, which equals pbrt's two branches
 //!   (direct for v > 0.1, logarithmic below) without the cancellation of `a − b − 1/v` in f32.

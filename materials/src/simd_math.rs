@@ -3,11 +3,10 @@
 //!
 //! `wide`'s own `exp`, `ln` and `sin_cos` handle every input (NaN, ±∞, overflow, subnormal
 //! results) with a dozen selects and an early-out branch each, and round with a slow SSE2
-//! emulation of `roundps`; on baseline x86-64 (SSE2, no FMA) they took a quarter of Chiang's
-//! `sample` and a tenth of its `eval`. Here each function accepts a stated domain only, reduces
+//! emulation of `roundps`, which showed in Chiang's profile (the measurements are in
+//! docs/src/research/performance.md). Here each function accepts a stated domain only, reduces
 //! its argument with integer bit arithmetic and the 1.5·2²³ rounding trick, and evaluates one
-//! short polynomial. (Lean `asin` and `atan2` were written and measured too; Chiang's cost did not
-//! change measurably, so it keeps `wide`'s.) The polynomial coefficients were fitted for this module (weighted minimax fits by
+//! short polynomial. The polynomial coefficients were fitted for this module (weighted minimax fits by
 //! Lawson's iteratively reweighted least squares on dense grids in f64, weight = the relative
 //! error, or absolute where stated, of the final result), then rounded to f32; the errors quoted
 //! are measured on the f32 results against f64 `std` by the tests below, which fail if a bound is

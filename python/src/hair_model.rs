@@ -235,7 +235,7 @@ impl HairModel {
     #[new]
     fn new(model: &str) -> PyResult<Self> {
         let parsed: tress_materials::HairModel =
-            tress_scene::ron_options().from_str(model).map_err(|e| {
+            tress_loader::ron_options().from_str(model).map_err(|e| {
                 PyValueError::new_err(format!(
                     "hair model '{model}': {e} (models: {})",
                     tress_materials::HairModel::names().join(", ")
@@ -251,7 +251,7 @@ impl HairModel {
     }
 
     fn __repr__(&self) -> String {
-        let text = tress_scene::ron_options()
+        let text = tress_loader::ron_options()
             .to_string(&self.model)
             .unwrap_or_else(|_| format!("{:?}", self.model));
         format!("tress.HairModel({text:?})")

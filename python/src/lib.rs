@@ -1,9 +1,9 @@
 //! `tress._tress`: the Python extension module behind the `tress` package (`python/tress/`).
 //!
 //! It reaches the same code paths as the `tress` binary — scene files through
-//! `tress_scene::scene_desc`, integrators through the registry in `tress_scene::integrators`, the
+//! `tress_loader::scene_desc`, integrators through the registry in `tress_loader::integrators`, the
 //! render loop of `tress_core::render`, hair models through `tress_materials::HairModel` and
-//! studies through [`tress_scene::study`] — so a scene renders to the same pixels from Python
+//! studies through [`tress_study`] — so a scene renders to the same pixels from Python
 //! as from the command line.
 
 mod convert;
@@ -51,7 +51,7 @@ fn _tress(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add(
         "INTEGRATORS",
-        tress_scene::integrators::IntegratorDesc::NAMES.to_vec(),
+        tress_loader::integrators::IntegratorDesc::NAMES.to_vec(),
     )?;
     m.add("HAIR_MODELS", tress_materials::HairModel::names().to_vec())?;
     m.add_class::<scene::Scene>()?;

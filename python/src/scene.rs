@@ -14,8 +14,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 use tress_core::prepare::Preparation;
 use tress_core::render::{render_samples, SampleRender};
-use tress_scene::integrators::IntegratorDesc;
-use tress_scene::scene_desc::{self, BuiltScene, SceneDesc};
+use tress_loader::integrators::IntegratorDesc;
+use tress_loader::scene_desc::{self, BuiltScene, SceneDesc};
 
 /// A scene, built and ready to render: its geometry, materials and lights, and the film and
 /// integrator it was written with (which `render` can override).
@@ -115,7 +115,7 @@ impl Scene {
 
     /// The scene description as RON, as a scene file would hold it.
     fn to_ron(&self) -> PyResult<String> {
-        tress_scene::ron_options()
+        tress_loader::ron_options()
             .to_string_pretty(&self.desc, ron::ser::PrettyConfig::default())
             .map_err(|e| PyValueError::new_err(e.to_string()))
     }
@@ -147,7 +147,7 @@ impl Scene {
     /// The scene's integrator, as RON (`Path(max_depth: 100, ...)`).
     #[getter]
     fn integrator(&self) -> PyResult<String> {
-        tress_scene::ron_options()
+        tress_loader::ron_options()
             .to_string(&self.desc.integrator)
             .map_err(|e| PyValueError::new_err(e.to_string()))
     }
@@ -210,7 +210,7 @@ impl Scene {
         };
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(
-                tress_scene::check_threads(threads.unwrap_or(0)).map_err(PyValueError::new_err)?,
+                tress_loader::check_threads(threads.unwrap_or(0)).map_err(PyValueError::new_err)?,
             )
             .build()
             .map_err(|e| PyRuntimeError::new_err(format!("creating the thread pool: {e}")))?;

@@ -5,7 +5,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
-use tress_scene::study::{self, NotesOnStderr, StudySettings};
+use tress_study::{self as study, NotesOnStderr, StudySettings};
 
 /// Runs the study file `path` as `tress study` does, without drawing figures (the module links
 /// no plotting), and returns a dict: `folder`, `report`, `results_csv`, `summary_csv` (paths)
@@ -25,7 +25,7 @@ pub fn run_study<'py>(
         quick,
         out,
         threads: threads
-            .map(tress_scene::check_threads)
+            .map(tress_loader::check_threads)
             .transpose()
             .map_err(PyValueError::new_err)?,
         verbose,

@@ -12,6 +12,9 @@
 //!
 //! Errors are relMSE over the window (ε = 1e-2, as `tress diff`).
 
+// A program of its own, not library code: it reads its command line (clippy.toml).
+#![allow(clippy::disallowed_methods)]
+
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use std::path::PathBuf;
@@ -122,8 +125,8 @@ fn rel_mse(image: &[Rgb], reference: &tress_core::Image, window: [u32; 4]) -> f6
 
 fn main() -> Result<()> {
     let args = parse()?;
-    let desc = tress_scene::scene_desc::load(&args.scene)?;
-    let built = tress_scene::scene_desc::build(&desc, &args.scene, &Default::default())?;
+    let desc = tress_loader::scene_desc::load(&args.scene)?;
+    let built = tress_loader::scene_desc::build(&desc, &args.scene, &Default::default())?;
     let scene = &built.scene;
     let film = &desc.film;
     let (reference, _) = tress_core::image_io::read_exr(&args.reference)

@@ -2,11 +2,12 @@
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use tress_accel::{HairOptions, HairStyle, ProceduralHair, SceneBuilder};
+use tress_accel::{HairOptions, SceneBuilder};
 use tress_core::film::FilmSettings;
 use tress_core::light::Light;
 use tress_core::math::{Rgb, Vec3};
 use tress_core::{Bcsdf, Camera, Material, Scene};
+use tress_groom::{HairStyle, ProceduralHair};
 
 /// A ball of `strands` fibers of radius 0.01 around the origin (radius 1), seen from +z, with
 /// `bcsdf` and the given lights.
@@ -17,7 +18,7 @@ pub fn hair_ball_scene(bcsdf: Arc<dyn Bcsdf>, strands: u32, lights: Vec<Light>) 
 /// `hair` drawn as `options` say, with `bcsdf` and the given lights, seen from (0, 0, 4)
 /// looking at the origin with a 35° field of view.
 pub fn hair_scene(
-    hair: &tress_accel::HairGeometry,
+    hair: &tress_groom::HairGeometry,
     options: &HairOptions,
     bcsdf: Arc<dyn Bcsdf>,
     lights: Vec<Light>,
@@ -81,7 +82,7 @@ pub fn shared_data(rel: &str) -> PathBuf {
 }
 
 /// The hair ball of [`hair_ball_scene`], as geometry.
-pub fn hair_ball(strands: u32) -> tress_accel::HairGeometry {
+pub fn hair_ball(strands: u32) -> tress_groom::HairGeometry {
     ProceduralHair {
         style: HairStyle::Ball,
         seed: 3,

@@ -5,9 +5,9 @@ use std::sync::Arc;
 use tress_core::light::{EnvironmentMap, Light};
 use tress_core::render::render;
 use tress_core::Scene;
+use tress_loader::integrators::IntegratorDesc;
 use tress_materials::pigment::Pigment;
 use tress_materials::HairModel;
-use tress_scene::integrators::IntegratorDesc;
 use tress_tests::{assert_bit_identical, film, hair_ball_scene, on_threads};
 
 /// Dark hair under a sky so dim (scale 1e-36) that most radiance values are denormal floats, so

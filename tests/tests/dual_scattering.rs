@@ -159,7 +159,7 @@ fn with_no_fibers_to_cross_and_no_back_scattering_dual_scattering_is_single_scat
     // One thick fiber under a constant environment: every light direction is either free or
     // blocked by the fiber itself, so DS with d_b = 0 is f_s with a shadow ray, which is the
     // path tracer's single scattering (max_depth 1).
-    let hair = tress_accel::HairGeometry {
+    let hair = tress_groom::HairGeometry {
         name: "one fiber".into(),
         points: vec![
             glam::Vec3::new(-3.0, 0.0, 0.0),

@@ -59,7 +59,7 @@ fn absorbing_fibers_are_darker_than_the_furnace() {
 /// with the coarse test tables; the radiance cache from one training path per pixel 1.00).
 #[test]
 fn every_registered_integrator_in_a_white_furnace() {
-    use tress_scene::integrators::IntegratorDesc;
+    use tress_loader::integrators::IntegratorDesc;
     let model = HairModel::Chiang(tress_materials::chiang::Params {
         pigment: tress_materials::pigment::Pigment::SigmaA((0.0, 0.0, 0.0)),
         ..Default::default()

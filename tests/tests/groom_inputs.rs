@@ -3,10 +3,9 @@
 
 use glam::Vec2;
 use std::path::{Path, PathBuf};
-use tress_accel::{
-    ChildStrands, HairGeometry, HairOptions, HairSource, PbrtFile, PlyFile, SceneBuilder,
-};
+use tress_accel::{HairOptions, SceneBuilder};
 use tress_core::math::Vec3;
+use tress_groom::{ChildStrands, HairGeometry, HairSource, PbrtFile, PlyFile};
 
 /// A fresh scratch folder for one test.
 fn scratch(name: &str) -> PathBuf {
@@ -370,7 +369,7 @@ fn child_strands_are_added_deterministically_around_kept_guides() {
     let options = |children: Option<ChildStrands>, fraction: f32| HairOptions {
         children,
         strand_fraction: fraction,
-        transform: tress_accel::Transform {
+        transform: tress_groom::Transform {
             scale: 2.0,
             ..Default::default()
         },
@@ -456,8 +455,8 @@ fn tfx_guides_with_children_cover_far_more_of_the_image() {
     let measure = |children: &str| {
         let path = dir.join("scene.ron");
         std::fs::write(&path, scene(children)).unwrap();
-        let desc = tress_scene::scene_desc::load(&path).unwrap();
-        let built = tress_scene::scene_desc::build(&desc, &path, &Default::default()).unwrap();
+        let desc = tress_loader::scene_desc::load(&path).unwrap();
+        let built = tress_loader::scene_desc::build(&desc, &path, &Default::default()).unwrap();
         (coverage(&built.scene, 48), built.summary)
     };
     let (guides_only, summary) = measure("");

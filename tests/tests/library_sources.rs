@@ -1,5 +1,7 @@
-//! Rules the library crates' sources keep, checked by reading them as text (no compiler
-//! involved), so that a change breaking one fails here, naming file and line:
+//! The rules of the library crates' sources that clippy cannot say, checked by reading them as
+//! text, so that a change breaking one fails here, naming file and line. (The others are in
+//! clippy.toml: no environment or command line read outside the front ends, no file written
+//! outside `tress_core::output_file`, no `thread_local!`.)
 //!
 //! 1. **No import cycles between files.** Within a crate, file A depends on file B when A's code
 //!    names something of B's module: a `use` of it, a path through it (`crate::b::f`,
@@ -9,22 +11,15 @@
 //!    `crate::Image` counts as a use of `film.rs` when the crate root says `pub use
 //!    film::Image`. `mod` declarations are structure, not use. Files that name each other,
 //!    directly or round a longer loop, fail with the loop and the line of each step.
-//! 2. **No hidden inputs.** Library code reads no environment variable and no command-line
-//!    argument (`std::env::var`, `var_os`, `vars`, `args`, …, however imported) and sets none:
-//!    settings are passed in, and only the front ends (`cli`, `python`) read the environment.
-//! 3. **No process-wide mutable state.** No `static mut`, no `static` of an interior-mutable
+//! 2. **No process-wide mutable state.** No `static mut`, no `static` of an interior-mutable
 //!    type (atomics, `Cell`s, locks, `OnceLock`, `LazyLock`, …) and no `thread_local!`: state
 //!    lives in values their owners pass in, never beside them. Constant statics are fine.
-//! 4. **One writer.** Library code creates or replaces no file (`fs::write`, `fs::rename`,
-//!    `fs::copy`, `File::create`, `File::create_new`, the `tempfile` crate, `.persist(…)`) outside
-//!    [`WRITER`], `tress_core::output_file`, which every output goes through: there a file is
-//!    synced and renamed into place, and devices, links and the command's inputs are respected.
 //!
 //! The library crates are the workspace members named in the root `Cargo.toml` except the
 //! front ends `cli` and `python`; their modules are found by following `mod` declarations
 //! (and `#[path]`) from `src/lib.rs`, and a file under `src/` that is no module fails the
 //! check (the rules would not see it). Test code — `#[cfg(test)]` items and modules, and the
-//! files of `#[cfg(test)] mod x;` — is not library code and is skipped by all four rules.
+//! files of `#[cfg(test)] mod x;` — is not library code and is skipped by both rules.
 
 use crate::workspace;
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
@@ -33,9 +28,6 @@ use std::path::{Path, PathBuf};
 /// The workspace members that are front ends (may read the environment); every other member
 /// is a library crate.
 const FRONT_ENDS: [&str; 2] = ["cli", "python"];
-
-/// The one file of library code that writes files: (member, file).
-const WRITER: (&str, &str) = ("core", "src/output_file.rs");
 
 // ---------------------------------------------------------------------------------------------
 // Lexing: identifiers, `::` and punctuation with their lines; comments, literals and
@@ -283,8 +275,6 @@ struct FileScan {
     mods: Vec<ModDecl>,
     /// Mutable process-wide state: (line, what).
     state: Vec<(u32, String)>,
-    /// Method calls: (line, name).
-    methods: Vec<(u32, String)>,
 }
 
 /// Interior-mutable types: a `static` of one is process-wide mutable state.
@@ -537,11 +527,6 @@ fn scan(src: &str) -> FileScan {
                         None => break,
                     }
                     j += 2;
-                }
-                if prev.is_some_and(|p| p.is_punct('.'))
-                    && t.get(i + 1).is_some_and(|x| x.is_punct('('))
-                {
-                    s.methods.push((t[i].line, first.clone()));
                 }
                 if segments.len() > 1 && !tail && (!after_dollar || first == "crate") {
                     s.paths.push(PathRef {
@@ -878,40 +863,6 @@ impl Crate {
         false
     }
 
-    /// Reads of the environment or of the command line.
-    fn environment_reads(&self) -> Vec<String> {
-        const READS: [&str; 8] = [
-            "var",
-            "var_os",
-            "vars",
-            "vars_os",
-            "set_var",
-            "remove_var",
-            "args",
-            "args_os",
-        ];
-        let mut out = Vec::new();
-        for file in self.files.iter().filter(|f| !f.test) {
-            for path in &file.scan.paths {
-                let reads = path
-                    .segments
-                    .windows(2)
-                    .any(|w| w[0] == "env" && READS.contains(&w[1].as_str()));
-                if reads {
-                    out.push(format!(
-                        "{}/{}:{}: `{}` reads the environment in library code: take the \
-                         setting as an argument and let the front end (cli, python) read it",
-                        self.member,
-                        file.rel,
-                        path.line,
-                        path.segments.join("::")
-                    ));
-                }
-            }
-        }
-        out
-    }
-
     /// Process-wide mutable state.
     fn mutable_statics(&self) -> Vec<String> {
         let mut out = Vec::new();
@@ -921,50 +872,6 @@ impl Crate {
                     "{}/{}:{line}: {what} is process-wide mutable state in library code: \
                      keep it in a value the caller owns and passes in",
                     self.member, file.rel
-                ));
-            }
-        }
-        out
-    }
-}
-
-impl Crate {
-    /// Files created or replaced outside [`WRITER`].
-    fn file_writes(&self) -> Vec<String> {
-        const WRITES: [[&str; 2]; 5] = [
-            ["fs", "write"],
-            ["fs", "rename"],
-            ["fs", "copy"],
-            ["File", "create"],
-            ["File", "create_new"],
-        ];
-        const PERSIST: [&str; 2] = ["persist", "persist_noclobber"];
-        let mut out = Vec::new();
-        for file in self.files.iter().filter(|f| !f.test) {
-            if (self.member.as_str(), file.rel.as_str()) == WRITER {
-                continue;
-            }
-            let paths = file.scan.paths.iter().filter(|p| {
-                p.segments.first().is_some_and(|s| s == "tempfile")
-                    || p.segments
-                        .windows(2)
-                        .any(|w| WRITES.iter().any(|[a, b]| w[0] == *a && w[1] == *b))
-            });
-            let found = paths
-                .map(|p| (p.line, format!("`{}`", p.segments.join("::"))))
-                .chain(
-                    file.scan
-                        .methods
-                        .iter()
-                        .filter(|(_, m)| PERSIST.contains(&m.as_str()))
-                        .map(|(line, m)| (*line, format!("`.{m}(…)`"))),
-                );
-            for (line, what) in found {
-                out.push(format!(
-                    "{}/{}:{line}: {what} writes a file in library code: write it through \
-                     tress_core::output_file ({}/{}), which syncs and renames it and respects \
-                     devices, links and the command's inputs",
-                    self.member, file.rel, WRITER.0, WRITER.1
                 ));
             }
         }
@@ -998,21 +905,8 @@ fn library_files_import_each_other_without_cycles() {
 }
 
 #[test]
-fn library_crates_read_no_environment() {
-    assert_none(check_workspace(
-        &workspace::root(),
-        Crate::environment_reads,
-    ));
-}
-
-#[test]
 fn library_crates_keep_no_process_wide_mutable_state() {
     assert_none(check_workspace(&workspace::root(), Crate::mutable_statics));
-}
-
-#[test]
-fn library_crates_write_files_only_through_the_writer() {
-    assert_none(check_workspace(&workspace::root(), Crate::file_writes));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1174,41 +1068,6 @@ fn files_the_module_tree_does_not_reach_are_refused() {
 }
 
 #[test]
-fn environment_reads_are_found_however_written_and_front_ends_may_read() {
-    let ws = workspace(
-        &["core", "integrators/x", "cli", "python"],
-        &[
-            (
-                "core/src/lib.rs",
-                "use std::env;\npub fn a() -> bool { env::var(\"A\").is_ok() }\n\
-                 pub fn b() -> bool { std::env::var_os(\"B\").is_some() }\n",
-            ),
-            (
-                "integrators/x/src/lib.rs",
-                "use std::env::{args, var as read};\n#[cfg(test)]\nfn t() { std::env::var(\"T\"); }\n",
-            ),
-            ("cli/src/lib.rs", "pub fn c() { std::env::var(\"C\"); }\n"),
-            ("python/src/lib.rs", "pub fn d() { std::env::var(\"D\"); }\n"),
-        ],
-    );
-    let found = check_workspace(ws.path(), Crate::environment_reads);
-    let places: Vec<&str> = found
-        .iter()
-        .map(|f| f.split(": `").next().unwrap())
-        .collect();
-    assert_eq!(
-        places,
-        [
-            "core/src/lib.rs:2",
-            "core/src/lib.rs:3",
-            "integrators/x/src/lib.rs:1",
-            "integrators/x/src/lib.rs:1"
-        ],
-        "{found:#?}"
-    );
-}
-
-#[test]
 fn mutable_statics_are_found_and_constant_ones_pass() {
     let ws = workspace(
         &["core"],
@@ -1237,56 +1096,6 @@ fn mutable_statics_are_found_and_constant_ones_pass() {
             "core/src/lib.rs:8: `static CACHE` of type OnceLock",
             "core/src/lib.rs:9: `thread_local!`",
             "core/src/lib.rs:9: `static RAYS` of type Cell",
-        ],
-        "{found:#?}"
-    );
-}
-
-#[test]
-fn file_writes_are_found_however_written_and_the_writer_may_write() {
-    let ws = workspace(
-        &["core", "scene"],
-        &[
-            (
-                "core/src/lib.rs",
-                "pub mod output_file;
-use std::fs;
-pub fn a() { fs::write(\"a\", \"\"); }
-",
-            ),
-            (
-                "core/src/output_file.rs",
-                "pub fn w(t: tempfile::NamedTempFile) { t.persist(\"o\"); std::fs::write(\"o\", \"\"); }
-",
-            ),
-            (
-                "scene/src/lib.rs",
-                "use std::fs::{File, rename as mv};
-use tempfile::Builder;
-                 pub fn b(t: T) {
-    File::create(\"b\");
-    t.persist(\"b\");
-                     std::fs::read(\"b\");
-}
-                 #[cfg(test)]
-fn t() { std::fs::write(\"t\", \"\"); }
-",
-            ),
-        ],
-    );
-    let found = check_workspace(ws.path(), Crate::file_writes);
-    let what: Vec<&str> = found
-        .iter()
-        .map(|f| f.split(" writes a file").next().unwrap())
-        .collect();
-    assert_eq!(
-        what,
-        [
-            "core/src/lib.rs:3: `fs::write`",
-            "scene/src/lib.rs:1: `std::fs::rename`",
-            "scene/src/lib.rs:2: `tempfile::Builder`",
-            "scene/src/lib.rs:4: `File::create`",
-            "scene/src/lib.rs:5: `.persist(…)`",
         ],
         "{found:#?}"
     );

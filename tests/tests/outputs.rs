@@ -9,8 +9,8 @@ use tress_core::film::{Aov, FilmSettings, Outputs};
 use tress_core::light::{EnvironmentMap, Light};
 use tress_core::render::{camera_sample, render, render_outputs, SampleSums};
 use tress_core::Scene;
+use tress_loader::integrators::IntegratorDesc;
 use tress_materials::HairModel;
-use tress_scene::integrators::IntegratorDesc;
 use tress_tests::{film, hair_ball_scene, on_threads, shared_data};
 
 fn scene() -> Scene {
@@ -161,8 +161,8 @@ fn measure_the_cost_of_the_alpha_query() {
     shared_data("hair/straight.hair");
     let scene_file =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/straight_venice.ron");
-    let desc = tress_scene::scene_desc::load(&scene_file).unwrap();
-    let built = tress_scene::scene_desc::build(&desc, &scene_file, &Default::default()).unwrap();
+    let desc = tress_loader::scene_desc::load(&scene_file).unwrap();
+    let built = tress_loader::scene_desc::build(&desc, &scene_file, &Default::default()).unwrap();
     let scene = &built.scene;
     let (width, height) = (desc.film.width, desc.film.height);
     for name in ["path", "dual-mis"] {

@@ -5,10 +5,11 @@
 
 use glam::Vec2;
 use std::sync::Arc;
-use tress_accel::{CurveShape, HairGeometry, HairOptions};
+use tress_accel::{CurveShape, HairOptions};
 use tress_core::math::Vec3;
 use tress_core::render::render;
 use tress_core::{Bcsdf, Scene};
+use tress_groom::HairGeometry;
 use tress_materials::HairModel;
 use tress_path::{PathSettings, PathTracer};
 use tress_tests::{film, hair_ball, hair_scene, white_environment};

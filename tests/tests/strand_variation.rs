@@ -7,11 +7,11 @@ use tress_core::math::{Ray, Vec3};
 use tress_core::prepare::Preparation;
 use tress_core::render::render;
 use tress_core::{HitKind, Image, Material};
+use tress_loader::integrators::IntegratorDesc;
+use tress_loader::scene_desc::{build, parse, BuiltScene};
 use tress_materials::dual_scattering::{fingerprint, DualScatteringSettings, DualScatteringTables};
 use tress_materials::pigment::Pigment;
 use tress_materials::HairModel;
-use tress_scene::integrators::IntegratorDesc;
-use tress_scene::scene_desc::{build, parse, BuiltScene};
 use tress_tests::{film, on_threads};
 
 /// Procedural hair (a ball of 400 strands) with a Chiang material and the object's
@@ -228,7 +228,7 @@ fn random_roughness_and_darker_roots_reach_each_segments_material() {
         tint: tress_materials::pigment::NO_TINT,
     };
     let base = brown.sigma_a(0.35).unwrap();
-    let desc: tress_materials::strand_variation::StrandVariation = tress_scene::ron_options()
+    let desc: tress_materials::strand_variation::StrandVariation = tress_loader::ron_options()
         .from_str("(random_roughness: 0.5, seed: 4)")
         .unwrap();
     let varied = desc.for_model(&HairModel::Chiang(chiang(brown))).unwrap();
@@ -399,7 +399,7 @@ fn the_example_scenes_build_with_their_variants() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../scenes")
             .join(scene);
-        let desc = tress_scene::scene_desc::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
+        let desc = tress_loader::scene_desc::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
         let built = build(&desc, &path, &Default::default()).unwrap_or_else(|e| panic!("{e:#}"));
         assert_eq!(built.scene.materials.len(), 18, "{scene}");
         assert!(

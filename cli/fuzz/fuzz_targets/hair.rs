@@ -3,7 +3,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use tress_accel::HairFile;
+use tress_groom::HairFile;
 
 fuzz_target!(|data: &[u8]| {
     let path = tress_fuzz::scratch_file("hair", data);

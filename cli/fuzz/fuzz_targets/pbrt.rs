@@ -4,7 +4,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use tress_accel::PbrtFile;
+use tress_groom::PbrtFile;
 
 fuzz_target!(|data: &[u8]| {
     let path = tress_fuzz::scratch_file("pbrt", data);

@@ -4,8 +4,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use tress_scene::materials::MaterialDesc;
-use tress_scene::scene_desc;
+use tress_loader::materials::MaterialDesc;
+use tress_loader::scene_desc;
 
 fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {

@@ -3,7 +3,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use tress_accel::TfxFile;
+use tress_groom::TfxFile;
 
 fuzz_target!(|data: &[u8]| {
     let path = tress_fuzz::scratch_file("tfx", data);

@@ -37,10 +37,7 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use tress_accel::{
-    CurveShape, DensityGrid, DensitySettings, EmbreeAccel, HairFile, HairGeometry, HairOptions,
-    HairStyle, ProceduralHair, SceneBuilder,
-};
+use tress_accel::{CurveShape, EmbreeAccel, HairOptions, SceneBuilder};
 use tress_core::film::FilmSettings;
 use tress_core::light::{EnvironmentMap, Light};
 use tress_core::math::{Aabb, Vec2, Vec3};
@@ -49,10 +46,12 @@ use tress_core::prepare::Preparation;
 use tress_core::rng::Pcg32;
 use tress_core::sampling::sample_uniform_sphere;
 use tress_core::{Bcsdf, Camera, Integrator, Material, Scene};
+use tress_dual_scattering::density::{DensityGrid, DensitySettings};
+use tress_groom::{HairFile, HairGeometry, HairStyle, ProceduralHair};
+use tress_loader::integrators::IntegratorDesc;
+use tress_loader::scene_desc;
 use tress_materials::dual_scattering::{fingerprint, DualScatteringTables};
 use tress_materials::HairModel;
-use tress_scene::integrators::IntegratorDesc;
-use tress_scene::scene_desc;
 
 mod plan;
 mod raw;
@@ -415,8 +414,13 @@ fn build_model(spec: &ModelSpec, pool: &ThreadPool) -> Result<BuiltModel> {
     drop(hair);
     // Its cost is part of the build; the scene hands the grid to the integrators.
     let t2 = Instant::now();
-    let grid = pool
-        .install(|| accel.density_grid(&DensitySettings::default(), &crate::limits_from_env()))?;
+    let grid = pool.install(|| {
+        DensityGrid::build(
+            tress_core::Accel::hair_curves(&accel),
+            &DensitySettings::default(),
+            &crate::limits_from_env(),
+        )
+    })?;
     let grid_time = t2.elapsed();
     let peak = peak_rss();
     // The baseline's build quality and basis are tress's; built after the peak above so that
@@ -565,11 +569,15 @@ fn bench_model(
         Box::new(CountingAccel {
             inner: Arc::clone(&accel),
             record: Arc::clone(&recording),
-            grid: Some(Arc::new(grid)),
         }),
         vec![Material::Hair(Arc::clone(bcsdf))],
         vec![Light::Environment(EnvironmentMap::builtin_sky(0.0, 1.0)?)].into(),
     );
+    // The grid at the default resolution was built (and timed) with the BVH: the run's
+    // preparation hands it to the dual-scattering integrators instead of building another.
+    scene
+        .fiber_density(prep, None, |_, _| Ok(Arc::new(grid)))
+        .map_err(|e| anyhow!("{name}: {e}"))?;
     let renders = ModelRenders {
         name,
         full: spec.full,

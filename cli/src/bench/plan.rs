@@ -2,8 +2,8 @@
 
 use std::path::PathBuf;
 use tress_accel::CurveShape;
+use tress_loader::integrators::IntegratorDesc;
 use tress_materials::dual_scattering::DualScatteringSettings;
-use tress_scene::integrators::IntegratorDesc;
 
 /// Sizes of one run.
 pub(super) struct Plan {

@@ -14,7 +14,7 @@ use tress_core::math::{Ray, Vec2};
 use tress_core::rng::Pcg32;
 use tress_core::sampling::sample_uniform_sphere;
 use tress_core::{Accel, Camera, Hit};
-use tress_scene::cost::timed;
+use tress_study::cost::timed;
 
 /// The three kinds of ray, as in a render: camera rays through the film, and rays leaving hair
 /// hit points (found by random walks from the camera) in uniformly random directions — as

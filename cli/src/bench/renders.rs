@@ -3,7 +3,6 @@
 use super::plan::{strand_label, thin_label, Plan, CHUNK};
 use super::raw::{Accels, Kind, Mode, RawRates};
 use super::table::{cost_note, target, Table};
-use anyhow::Result;
 use rayon::prelude::*;
 use rayon::ThreadPool;
 use std::cell::{Cell, RefCell};
@@ -12,14 +11,13 @@ use std::hint::black_box;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use tress_accel::raw::{Exclusion, RawRay};
-use tress_accel::{DensityGrid, EmbreeAccel};
-use tress_core::accel::BuildError;
+use tress_accel::EmbreeAccel;
+use tress_core::accel::HairCurves;
 use tress_core::film::FilmSettings;
-use tress_core::limits::Limits;
 use tress_core::math::{Aabb, Ray};
-use tress_core::{Accel, FiberDensity, Hit, Integrator, Scene};
-use tress_scene::cost::{timed, Cost};
-use tress_scene::integrators::IntegratorDesc;
+use tress_core::{Accel, Hit, Integrator, Scene};
+use tress_loader::integrators::IntegratorDesc;
+use tress_study::cost::{timed, Cost};
 
 /// Query kinds counted and recorded by [`CountingAccel`].
 pub(super) const CAMERA: usize = 0;
@@ -39,9 +37,6 @@ thread_local! {
 pub(super) struct CountingAccel {
     pub(super) inner: Arc<EmbreeAccel>,
     pub(super) record: Arc<AtomicBool>,
-    /// The density grid at the default resolution, built (and timed) with the BVH; `None`:
-    /// built by the accelerator on request.
-    pub(super) grid: Option<Arc<DensityGrid>>,
 }
 
 impl CountingAccel {
@@ -88,15 +83,8 @@ impl Accel for CountingAccel {
         self.inner.bounds()
     }
 
-    fn fiber_density(
-        &self,
-        resolution: Option<u32>,
-        limits: &Limits,
-    ) -> Result<Option<Arc<dyn FiberDensity>>, BuildError> {
-        match (resolution, &self.grid) {
-            (None, Some(grid)) => Ok(Some(Arc::clone(grid) as Arc<dyn FiberDensity>)),
-            _ => self.inner.fiber_density(resolution, limits),
-        }
+    fn hair_curves(&self) -> Vec<(u32, Arc<dyn HairCurves>)> {
+        self.inner.hair_curves()
     }
 }
 

@@ -13,7 +13,7 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use tress_core::prepare::Preparation;
-use tress_scene::scene_desc;
+use tress_loader::scene_desc;
 
 /// Benchmarks the scene at `path` (its integrator, film and lights; `spp` overrides its
 /// film's) on every pool, into `table`.
@@ -45,7 +45,6 @@ pub(super) fn bench_scene(
             Box::new(CountingAccel {
                 inner: accel,
                 record: Arc::clone(&recording),
-                grid: None,
             })
         })
     })?;

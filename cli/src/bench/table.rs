@@ -1,7 +1,7 @@
 //! The bench table: rows, text and CSV.
 
 use std::fmt::Write as _;
-use tress_scene::cost::Cost;
+use tress_study::cost::Cost;
 
 /// The table's columns, in order.
 pub const COLUMNS: [&str; 7] = [

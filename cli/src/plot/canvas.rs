@@ -7,7 +7,7 @@ use plotters::prelude::*;
 use std::path::Path;
 use tress_core::image_io;
 use tress_core::output_file::{self, Inputs, Sink};
-use tress_scene::picture::Picture;
+use tress_study::picture::Picture;
 
 /// The drawing area of a PNG being drawn.
 pub(super) type Bitmap<'a> = DrawingArea<Typeset<BitMapBackend<'a>>, Shift>;

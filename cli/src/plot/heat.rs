@@ -8,7 +8,7 @@ use plotters::prelude::*;
 use plotters::style::text_anchor;
 use std::path::Path;
 use tress_core::output_file::Inputs;
-use tress_scene::picture::Picture;
+use tress_study::picture::Picture;
 
 /// A logarithmic colour scale `[lo, hi]` (values outside are clamped to its ends).
 #[derive(Clone, Copy, Debug, PartialEq)]

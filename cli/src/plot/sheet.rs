@@ -5,7 +5,7 @@ use super::canvas::{MARGIN, TITLE_H};
 use anyhow::Result;
 use std::path::Path;
 use tress_core::output_file::Inputs;
-use tress_scene::picture::Picture;
+use tress_study::picture::Picture;
 
 /// A grid of pictures with a title, row labels on the left and column labels on top (an empty
 /// cell is left white); PNG, which may replace none of `inputs`. All pictures are shown at the size of the largest one, enlarged by

@@ -1,4 +1,4 @@
-//! `tress study STUDY.ron`: a comparative study of integrators (`tress_scene::study`, which
+//! `tress study STUDY.ron`: a comparative study of integrators (`tress_study`, which
 //! describes the study file), with a progress bar and the figures drawn by plotters.
 
 mod plots;
@@ -10,7 +10,7 @@ use anyhow::Result;
 use clap::Args;
 use indicatif::ProgressBar;
 use std::path::PathBuf;
-use tress_scene::study::{self, Progress, StudyOutputs, StudySettings};
+use tress_study::{self as study, Progress, StudyOutputs, StudySettings};
 
 #[derive(Args, Debug)]
 pub struct StudyArgs {

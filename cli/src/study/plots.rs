@@ -2,9 +2,9 @@
 
 use crate::plot::{self, Chart, HeatPanel, Series};
 use anyhow::Result;
-use tress_scene::metrics::MapKind;
-use tress_scene::picture::Picture;
-use tress_scene::study::{
+use tress_study::metrics::MapKind;
+use tress_study::picture::Picture;
+use tress_study::{
     curve, sheet_regions, FigureFiles, Figures, Plan, Point, RefKind, Results, Stat,
 };
 

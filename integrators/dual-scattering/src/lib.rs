@@ -6,7 +6,8 @@
 //! At a hair hit x seen from ω_o the outgoing radiance is
 //! `L_o = ∫ L(ω_d) F(ω_o, ω_d; n(ω_d), V(ω_d)) dω_d` (+ the delta lights' terms), where
 //! - n(ω_d) is the expected number of fibers crossed from x toward ω_d, from the voxel
-//!   density grid of the scene's hair (`Scene::fiber_density`, built once per run);
+//!   density grid of the scene's hair ([`density`], built once per run through
+//!   `Scene::fiber_density`);
 //! - V(ω_d) is a shadow ray: unoccluded ⇒ the light arrives directly (direct fraction 1, n = 0);
 //!   blocked by hair only ⇒ it arrives forward-scattered through n fibers (direct fraction 0);
 //!   blocked by a surface (a head, an occluder) ⇒ nothing arrives;
@@ -28,6 +29,9 @@
 
 #![warn(missing_docs)]
 
+pub mod density;
+
+use density::{DensityGrid, DensitySettings};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use tress_core::integrator::{direct_light, escaped_light, scatter};
@@ -228,7 +232,13 @@ impl<D: DirectionSampling> DualScattering<D> {
             .any(|m| matches!(m, Material::Hair(_)));
         let density = if has_hair {
             let grid = scene
-                .fiber_density(prep, settings.grid_resolution)
+                .fiber_density(prep, settings.grid_resolution, |curves, limits| {
+                    let settings = DensitySettings {
+                        resolution: settings.grid_resolution,
+                        ..Default::default()
+                    };
+                    Ok(Arc::new(DensityGrid::build(curves, &settings, limits)?))
+                })
                 .map_err(DualError::DensityGrid)?;
             Some(grid.ok_or(DualError::NoHairGeometry)?)
         } else {

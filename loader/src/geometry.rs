@@ -1,0 +1,238 @@
+//! Scene objects (hair, meshes, spheres) and building the Embree accelerator from them.
+
+use crate::materials::MaterialDesc;
+use crate::paths::resolve;
+use anyhow::{anyhow, Result};
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use tress_accel::{EmbreeAccel, HairOptions, SceneBuilder, TriangleMesh};
+use tress_core::Material;
+use tress_groom::{HairAttribute, HairSource, Transform};
+use tress_materials::pigment::Pigment;
+use tress_materials::strand_variation::{quantise_variants, StrandVariation};
+
+/// An object of the scene, referring to a material by name.
+#[derive(Clone, Debug, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub enum ObjectDesc {
+    /// Hair: `Hair(source: File("straight.hair"), material: "brown", options: (...),
+    /// variation: Some(random: 0.3))`.
+    Hair {
+        /// Where the strands come from: a file or a generator.
+        source: HairSource,
+        /// Name of a `Hair(...)` material in the scene's `materials`.
+        material: String,
+        /// How the strands become curves, and their transform (defaults if omitted).
+        #[serde(default)]
+        options: HairOptions,
+        /// Per-strand variation of the material's pigment: random melanin, a root-to-tip
+        /// gradient, the file's colours (default none: every strand has the material's
+        /// pigment). The object then uses up to `variants` copies of its material.
+        #[serde(default)]
+        variation: Option<StrandVariation>,
+    },
+    /// A triangle mesh from an OBJ file.
+    Mesh {
+        /// The OBJ file, relative to the scene file's folder.
+        file: PathBuf,
+        /// Name of a `Diffuse(...)` material in the scene's `materials`.
+        material: String,
+        /// Scale, rotation and translation applied to the vertices (none if omitted).
+        #[serde(default)]
+        transform: Transform,
+    },
+    /// A sphere.
+    Sphere {
+        /// Centre, in world space.
+        #[schemars(with = "[f32; 3]")]
+        center: Vec3,
+        /// Radius, in scene units; finite and positive.
+        radius: f32,
+        /// Name of a `Diffuse(...)` material in the scene's `materials`.
+        material: String,
+    },
+}
+
+impl ObjectDesc {
+    fn material(&self) -> &str {
+        match self {
+            ObjectDesc::Hair { material, .. }
+            | ObjectDesc::Mesh { material, .. }
+            | ObjectDesc::Sphere { material, .. } => material,
+        }
+    }
+}
+
+/// Builds the accelerator for the scene's objects with `builder`, whose limits the hair is
+/// loaded and built within; returns it with a summary (`tress info`).
+/// `materials` holds the built materials of `descriptions` (in `material_index` order); hair
+/// objects with a `variation` append their variants to it.
+pub fn build_accel(
+    objects: &[ObjectDesc],
+    scene_path: &Path,
+    descriptions: &BTreeMap<String, MaterialDesc>,
+    material_index: &BTreeMap<String, u32>,
+    materials: &mut Vec<Material>,
+    mut builder: SceneBuilder,
+) -> Result<(EmbreeAccel, String)> {
+    let here = |i: usize, what: String| anyhow!("{}: objects[{i}]: {what}", scene_path.display());
+    let mut notes = Vec::new();
+    for (i, object) in objects.iter().enumerate() {
+        let name = object.material();
+        let &material = material_index.get(name).ok_or_else(|| {
+            let known: Vec<&str> = material_index.keys().map(String::as_str).collect();
+            here(
+                i,
+                format!("unknown material '{name}' (defined: {})", known.join(", ")),
+            )
+        })?;
+        let is_hair_material = matches!(materials[material as usize], Material::Hair(_));
+        builder = match object {
+            ObjectDesc::Hair {
+                source,
+                options,
+                variation,
+                ..
+            } => {
+                let model = match descriptions.get(name) {
+                    Some(MaterialDesc::Hair(model)) if is_hair_material => model,
+                    _ => {
+                        return Err(here(
+                            i,
+                            format!("hair needs a Hair(...) material, but '{name}' is not one"),
+                        ))
+                    }
+                };
+                let mut source = source.clone();
+                if let Some(p) = source.path_mut() {
+                    *p = resolve(scene_path, p);
+                }
+                // Loaded within what the objects before it leave of the memory limit.
+                let hair = source
+                    .load(&builder.limits())
+                    .map_err(|e| here(i, e.to_string()))?;
+                match variation {
+                    None => builder
+                        .add_hair(&hair, options, material)
+                        .map_err(|e| here(i, e.to_string()))?,
+                    Some(variation) => {
+                        let (builder, note) =
+                            add_varied_hair(builder, &hair, options, variation, model, materials)
+                                .map_err(|e| here(i, format!("material '{name}': {e}")))?;
+                        notes.push(format!("objects[{i}]: {note}"));
+                        builder
+                    }
+                }
+            }
+            ObjectDesc::Mesh {
+                file, transform, ..
+            } => {
+                if is_hair_material {
+                    return Err(here(
+                        i,
+                        format!(
+                            "meshes need a Diffuse(...) material, but '{name}' is a hair model"
+                        ),
+                    ));
+                }
+                let mesh = TriangleMesh::load_obj(&resolve(scene_path, file))
+                    .map_err(|e| here(i, e.to_string()))?;
+                builder
+                    .add_mesh(&mesh, transform, material)
+                    .map_err(|e| here(i, e.to_string()))?
+            }
+            ObjectDesc::Sphere { center, radius, .. } => {
+                if is_hair_material {
+                    return Err(here(
+                        i,
+                        format!(
+                            "spheres need a Diffuse(...) material, but '{name}' is a hair model"
+                        ),
+                    ));
+                }
+                builder
+                    .add_sphere(*center, *radius, material)
+                    .map_err(|e| here(i, e.to_string()))?
+            }
+        };
+    }
+    let accel = builder
+        .build()
+        .map_err(|e| anyhow!("{}: {e}", scene_path.display()))?;
+    let mut summary = accel.info().to_string();
+    for note in notes {
+        summary.push('\n');
+        summary.push_str(&note);
+    }
+    Ok((accel, summary))
+}
+
+/// Adds a hair object whose material varies (`variation`): every segment's absorption and
+/// roughness scale from the variation, quantised to at most `variation.variants` values, each a
+/// copy of `model` with that absorption and roughness appended to `materials`. Returns the
+/// builder and a line for the summary.
+fn add_varied_hair(
+    builder: SceneBuilder,
+    hair: &tress_groom::HairGeometry,
+    options: &HairOptions,
+    variation: &StrandVariation,
+    model: &tress_materials::HairModel,
+    materials: &mut Vec<Material>,
+) -> Result<(SceneBuilder, String)> {
+    let varied = variation.for_model(model)?;
+    if varied.uses_file_colors() {
+        match &hair.colors {
+            Some(HairAttribute::PerStrand(_) | HairAttribute::PerPoint(_)) => {}
+            Some(HairAttribute::Uniform(c)) => anyhow::bail!(
+                "variation.file_colors: {} stores no colour per strand or per point, only the \
+                 default colour {c} for all",
+                hair.name
+            ),
+            None => anyhow::bail!("variation.file_colors: {} stores no colours", hair.name),
+        }
+    }
+    let first = materials.len() as u32;
+    let mut palette = Vec::new();
+    let builder = builder.add_hair_varied(hair, options, |segments| {
+        let values = segments
+            .iter()
+            .map(|s| {
+                varied
+                    .variant(s.strand, s.v, s.color)
+                    .map_err(|e| match s.color {
+                        Some(c) if varied.uses_file_colors() => {
+                            format!("variation: strand {}, file colour {c}: {e}", s.strand)
+                        }
+                        _ => format!("variation: strand {}: {e}", s.strand),
+                    })
+            })
+            .collect::<std::result::Result<Vec<_>, _>>()?;
+        let (representatives, index) = quantise_variants(&values, varied.variants() as usize);
+        palette = representatives;
+        Ok(index.into_iter().map(|k| first + k).collect())
+    })?;
+    for v in &palette {
+        let sigma = v.sigma_a;
+        let variant = model
+            .with_pigment(Pigment::SigmaA((sigma.x, sigma.y, sigma.z)))
+            .ok_or_else(|| anyhow!("variation: the model has no pigment"))?
+            .with_roughness_scale(v.roughness);
+        let bcsdf = variant.build().map_err(|e| {
+            anyhow!(
+                "variation: variant σ_a = {sigma}, roughness × {}: {e}",
+                v.roughness
+            )
+        })?;
+        materials.push(Material::Hair(bcsdf));
+    }
+    let note = match palette.len() {
+        1 => format!("1 pigment variant (material {first})"),
+        n => format!(
+            "{n} pigment variants (materials {first}–{})",
+            materials.len() - 1
+        ),
+    };
+    Ok((builder, note))
+}

@@ -1,0 +1,9 @@
+//! The integration tests of tress-loader, one module per file, built as a single test binary
+//! (a binary per file linked the whole dependency tree once per file; see `Cargo.toml`).
+
+// Test code is not library code: it writes its fixtures and reads its settings (clippy.toml's
+// rules are for the library).
+#![allow(clippy::disallowed_methods)]
+
+mod scene_types;
+mod strand_variation;
