@@ -2,7 +2,7 @@
 //! ray queries with [`tress_core::Hit`]s. See the crate docs for the fiber frame, the sign of
 //! `h` and the self-intersection rule.
 
-use crate::curve_data::{CurveData, HairSegment, SegmentMaterials, SegmentRecord, StrandRecord};
+use crate::curve_data::{CurveData, HairSegment, SegmentMaterials, StrandRecord};
 use crate::curves::{CurveBasis, CurveShape, Overlaps};
 use crate::density::{DensityGrid, DensitySettings};
 use crate::error::{Error, Result};
@@ -426,14 +426,21 @@ impl SceneBuilder {
             shape: options.curve,
             overlaps: options.overlaps,
             materials: SegmentMaterials::Uniform(0),
-            seg_cps: Vec::new(),
-            segs: Vec::new(),
+            cps: Vec::new(),
+            first_cp: Vec::new(),
+            strand_of: Vec::new(),
             capsules: Vec::new(),
             strands: Vec::new(),
         };
-        // Embree's vertex and index buffers.
-        let mut cps: Vec<Vec4> = Vec::new();
-        let mut seg_first_cp: Vec<u32> = Vec::new();
+        // Embree's vertex and index buffers, which it shares with the hits and the filter.
+        let CurveData {
+            cps,
+            first_cp: seg_first_cp,
+            ..
+        } = &mut data;
+        let mut strand_of: Vec<u32> = Vec::new();
+        let mut capsules = Vec::new();
+        let mut strands = Vec::new();
         let mut points = 0;
         let mut bounds = Aabb::EMPTY;
         // What the caller choosing per-segment materials sees, one per primitive.
@@ -456,7 +463,7 @@ impl SceneBuilder {
                         .extend(hair.radii[at] * radius_scale * taper)
                 })
                 .collect();
-            let strand = data.strands.len() as u32;
+            let strand = strands.len() as u32;
             let base = cps.len();
             cps.extend(basis.control_points(&pts));
             let before = seg_first_cp.len();
@@ -471,13 +478,11 @@ impl SceneBuilder {
                 bounds.grow(cap.a + Vec3::splat(cap.r));
                 bounds.grow(cap.b - Vec3::splat(cap.r));
                 bounds.grow(cap.b + Vec3::splat(cap.r));
-                data.seg_cps.extend_from_slice(seg);
                 seg_first_cp.push((base + j) as u32);
-                data.segs.push(SegmentRecord {
-                    strand,
-                    index: j as u32,
-                });
-                data.capsules.push(cap);
+                strand_of.push(strand);
+                if basis != CurveBasis::Linear {
+                    capsules.push(cap);
+                }
                 if per_segment {
                     let color = hair.colors.as_ref().map(|c| {
                         let at = first_point + j;
@@ -494,15 +499,16 @@ impl SceneBuilder {
                 cps.truncate(base);
                 continue;
             }
-            data.strands.push(StrandRecord {
+            strands.push(StrandRecord {
                 first_prim: before as u32,
                 end_prim: seg_first_cp.len() as u32,
                 segments: (n - 1) as u32,
+                first_cp: base as u32,
                 id,
             });
             points += n;
         }
-        if seg_first_cp.is_empty() {
+        if data.first_cp.is_empty() {
             return Err(Error::InvalidGeometry {
                 object: hair.name.clone(),
                 reason: "no strand has a segment of non-zero length".into(),
@@ -533,7 +539,10 @@ impl SceneBuilder {
             }
         };
         drop(segments);
-        if cps.len() > u32::MAX as usize {
+        data.strand_of = strand_of;
+        data.capsules = capsules;
+        data.strands = strands;
+        if data.cps.len() > u32::MAX as usize {
             return Err(Error::InvalidGeometry {
                 object: hair.name.clone(),
                 reason: "too many control points for one Embree geometry".into(),
@@ -542,27 +551,43 @@ impl SceneBuilder {
         check_extent(&hair.name, &bounds)?;
 
         let name = &hair.name;
-        let mut geometry = self
+        let geometry = self
             .device
             .create_geometry(basis.geometry_kind(options.curve))
             .map_err(|e| embree_error(name, "cannot create curves", e))?;
-        geometry
-            .set_new_buffer::<[f32; 4]>(BufferUsage::VERTEX, 0, Format::FLOAT4, 16, cps.len())
-            .map_err(|e| embree_error(name, "cannot allocate control points", e))?
-            .iter_mut()
-            .zip(&cps)
-            .for_each(|(dst, src)| *dst = src.to_array());
-        geometry
-            .set_new_buffer::<u32>(BufferUsage::INDEX, 0, Format::UINT, 4, seg_first_cp.len())
-            .map_err(|e| embree_error(name, "cannot allocate curve indices", e))?
-            .copy_from_slice(&seg_first_cp);
-        drop((cps, seg_first_cp));
+        data.cps.shrink_to_fit();
+        data.first_cp.shrink_to_fit();
         let data = Arc::new(data);
+        // SAFETY: Embree reads the two buffers until the scene is released. They live in the
+        // `Arc<CurveData>` that `geoms` keeps, are never written again, and `EmbreeAccel` and
+        // `SceneBuilder` declare `scene` before `geoms`, so the scene is dropped first.
+        unsafe {
+            embree3::sys::rtcSetSharedGeometryBuffer(
+                geometry.handle(),
+                BufferUsage::VERTEX,
+                0,
+                Format::FLOAT4,
+                data.cps.as_ptr().cast(),
+                0,
+                std::mem::size_of::<Vec4>(),
+                data.cps.len(),
+            );
+            embree3::sys::rtcSetSharedGeometryBuffer(
+                geometry.handle(),
+                BufferUsage::INDEX,
+                0,
+                Format::UINT,
+                data.first_cp.as_ptr().cast(),
+                0,
+                4,
+                data.first_cp.len(),
+            );
+        }
         let info = ObjectInfo {
             name: name.clone(),
             kind: ObjectKind::Hair {
                 strands: data.strands.len(),
-                segments: data.segs.len(),
+                segments: data.segments(),
                 points,
                 basis,
                 curve: options.curve,
@@ -770,7 +795,7 @@ fn max_fiber_radius(geoms: &[GeomData]) -> f32 {
     geoms
         .iter()
         .filter_map(|g| match g {
-            GeomData::Hair(c) => Some(c.seg_cps.iter().fold(0.0f32, |m, p| m.max(p.w))),
+            GeomData::Hair(c) => Some(c.cps.iter().fold(0.0f32, |m, p| m.max(p.w))),
             _ => None,
         })
         .fold(0.0, f32::max)
@@ -950,7 +975,7 @@ impl EmbreeAccel {
                 p.geom == h.geom
                     && a + 1 == b
                     && c.same_strand(a, b)
-                    && (t - tp).abs() <= c.capsules[a].r + c.capsules[b].r
+                    && (t - tp).abs() <= c.capsule(a).r + c.capsule(b).r
             };
             count += u32::from(!through_joint);
         }
