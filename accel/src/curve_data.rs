@@ -200,7 +200,15 @@ impl CurveData {
         let h = ((p - axis.truncate()).dot(frame.width_axis()) / radius).clamp(-1.0, 1.0);
         let t = match self.shape {
             CurveShape::Flat => {
-                t + tube_chord(p, ray.dir, axis.truncate(), tangent, radius, &self.capsule(prim)).map_or(
+                t + tube_chord(
+                    p,
+                    ray.dir,
+                    axis.truncate(),
+                    tangent,
+                    radius,
+                    &self.capsule(prim),
+                )
+                .map_or(
                     0.0,
                     |(t_in, t_out)| if t + t_in >= 0.0 { t_in } else { t_out },
                 )
@@ -258,8 +266,15 @@ impl CurveData {
             CurveShape::Round => (p - axis.truncate()).dot(dir) > 0.0,
             CurveShape::Flat => {
                 let radius = axis.w.max(f32::MIN_POSITIVE);
-                tube_chord(p, dir, axis.truncate(), tangent, radius, &self.capsule(prim))
-                    .is_some_and(|(t_in, _)| t + t_in < 0.0)
+                tube_chord(
+                    p,
+                    dir,
+                    axis.truncate(),
+                    tangent,
+                    radius,
+                    &self.capsule(prim),
+                )
+                .is_some_and(|(t_in, _)| t + t_in < 0.0)
             }
         }
     }

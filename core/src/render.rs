@@ -788,7 +788,10 @@ impl TileJob<'_> {
             records.clear();
             for k in next..end {
                 let (pixel, s) = (k / samples_per_pixel, k % samples_per_pixel);
-                let (x, y) = (tx0 + (pixel % (tx1 - tx0) as usize) as u32, ty0 + (pixel / (tx1 - tx0) as usize) as u32);
+                let (x, y) = (
+                    tx0 + (pixel % (tx1 - tx0) as usize) as u32,
+                    ty0 + (pixel / (tx1 - tx0) as usize) as u32,
+                );
                 let s = self.samples.start + s as u64;
                 let (ray, sampler) = camera_sample(&scene.camera, film, x, y, s);
                 let mut record = SampleRecord::default();

@@ -57,6 +57,7 @@ fn wavefront_renders_the_path_tracers_image_bit_for_bit() {
         let wavefront = WavefrontPathTracer::new(WavefrontSettings {
             max_depth: settings.max_depth,
             rr_depth: settings.rr_depth,
+            paths: 100,
         });
         for curve in [CurveShape::Flat, CurveShape::Round] {
             for (light_name, light) in lights() {

@@ -14,13 +14,13 @@
 
 #![warn(missing_docs)]
 
+use serde::{Deserialize, Serialize};
 use tress_core::integrator::{
-    direct_light_unoccluded, escaped_light, roulette, scatter, trace_path, BuildError,
-    WaveSample,
+    direct_light_unoccluded, escaped_light, roulette, scatter, trace_path, BuildError, WaveSample,
 };
+use tress_core::math::Vec2;
 use tress_core::prepare::Preparation;
 use tress_core::shading::ShadingPoint;
-use serde::{Deserialize, Serialize};
 use tress_core::{Hit, Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene};
 
 /// Wavefront path tracer settings: those of `Path`.
@@ -31,6 +31,11 @@ pub struct WavefrontSettings {
     pub max_depth: u32,
     /// Bounces before Russian roulette starts.
     pub rr_depth: u32,
+    /// Paths advanced together (at least 1): the render loop's waves are cut into groups of
+    /// this many. More paths hide more of the light tables' memory latency; fewer keep the
+    /// fibers each path shades and leaves in the cache until its rays are traced. The image
+    /// does not depend on it.
+    pub paths: u32,
 }
 
 impl Default for WavefrontSettings {
@@ -38,6 +43,7 @@ impl Default for WavefrontSettings {
         WavefrontSettings {
             max_depth: 100,
             rr_depth: 5,
+            paths: 1024,
         }
     }
 }
@@ -72,6 +78,8 @@ impl IntegratorKind for WavefrontPathTracer {
     fn test_settings() -> WavefrontSettings {
         WavefrontSettings {
             max_depth: 10_000,
+            // Groups smaller than the render loop's waves, so that the tests cut them.
+            paths: 100,
             ..Default::default()
         }
     }
@@ -109,6 +117,11 @@ struct Buffers {
     next_rays: Vec<Ray>,
     next: Vec<Continuation>,
     hits: Vec<Option<Hit>>,
+    /// Per vertex: its first two draws (the light's choice and its sample), `None` past the
+    /// depth limit.
+    draws: Vec<Option<(f32, Vec2)>>,
+    /// The rays of `arrive` that escaped, with their states.
+    escaped: Vec<(Ray, Continuation)>,
 }
 
 impl WavefrontPathTracer {
@@ -121,11 +134,13 @@ impl WavefrontPathTracer {
         states: &[Continuation],
         hits: &mut Vec<Option<Hit>>,
         vertices: &mut Vec<Vertex>,
+        escaped: &mut Vec<(Ray, Continuation)>,
     ) {
         hits.clear();
         hits.resize(rays.len(), None);
         scene.intersect_many(rays, hits);
         vertices.clear();
+        escaped.clear();
         for ((ray, c), hit) in rays.iter().zip(states).zip(hits.iter()) {
             match hit {
                 Some(hit) => vertices.push(Vertex {
@@ -136,13 +151,19 @@ impl WavefrontPathTracer {
                     depth: c.depth,
                 }),
                 None => {
-                    let radiance = &mut wave[c.path as usize].radiance;
-                    for light in scene.lights.infinite() {
-                        let select_pdf = scene.lights.select_pdf_of(light);
-                        *radiance +=
-                            escaped_light(light, ray.dir, c.scatter_pdf, select_pdf, c.throughput);
+                    // The map's texels toward all the escapes are fetched before any is read.
+                    if c.scatter_pdf.is_some() {
+                        scene.lights.infinite().for_each(|l| l.prefetch_le(ray.dir));
                     }
+                    escaped.push((*ray, *c));
                 }
+            }
+        }
+        for (ray, c) in escaped.iter() {
+            let radiance = &mut wave[c.path as usize].radiance;
+            for light in scene.lights.infinite() {
+                let select_pdf = scene.lights.select_pdf_of(light);
+                *radiance += escaped_light(light, ray.dir, c.scatter_pdf, select_pdf, c.throughput);
             }
         }
     }
@@ -153,29 +174,52 @@ impl Integrator for WavefrontPathTracer {
         let WavefrontSettings {
             max_depth,
             rr_depth,
+            ..
         } = self.settings;
         trace_path(scene, camera_ray, max_depth, rr_depth, sampler, |_| None)
     }
 
     fn li_wave(&self, scene: &Scene, wave: &mut [WaveSample]) {
+        let mut b = Buffers::default();
+        for group in wave.chunks_mut(self.settings.paths.max(1) as usize) {
+            self.advance(scene, group, &mut b);
+        }
+    }
+}
+
+impl WavefrontPathTracer {
+    /// Advances the paths of `wave` together to their ends, with `b` as scratch space.
+    fn advance(&self, scene: &Scene, wave: &mut [WaveSample], b: &mut Buffers) {
         let WavefrontSettings {
             max_depth,
             rr_depth,
+            ..
         } = self.settings;
         let density_needed = scene.lights.weighs_escapes();
-        let mut b = Buffers::default();
         // The camera rays: a camera ray that escapes sees the lights at infinity unweighted.
+        // (The buffers hold the last rays of the group before.)
+        b.next_rays.clear();
+        b.next.clear();
         b.next_rays.extend(wave.iter().map(|w| w.ray));
-        b.next.extend((0..wave.len() as u32).map(|path| Continuation {
-            path,
-            throughput: Rgb::ONE,
-            depth: 0,
-            scatter_pdf: None,
-        }));
+        b.next
+            .extend((0..wave.len() as u32).map(|path| Continuation {
+                path,
+                throughput: Rgb::ONE,
+                depth: 0,
+                scatter_pdf: None,
+            }));
         for w in wave.iter_mut() {
             w.radiance = Rgb::ZERO;
         }
-        Self::arrive(scene, wave, &b.next_rays, &b.next, &mut b.hits, &mut b.vertices);
+        Self::arrive(
+            scene,
+            wave,
+            &b.next_rays,
+            &b.next,
+            &mut b.hits,
+            &mut b.vertices,
+            &mut b.escaped,
+        );
         while !b.vertices.is_empty() {
             // Paths at the same fiber segment one after another: shading reads its control
             // points and material once for all of them.
@@ -185,16 +229,30 @@ impl Integrator for WavefrontPathTracer {
             b.shadow_gain.clear();
             b.next_rays.clear();
             b.next.clear();
+            // Every vertex's first two draws, taken ahead of its shading (its path's stream
+            // is unchanged: they are its first), so that the light tables they read (an
+            // environment map's alias entries) are fetched for all vertices at once.
+            b.draws.clear();
             for v in &b.vertices {
                 if v.depth >= max_depth {
+                    b.draws.push(None);
                     continue;
                 }
-                let sample = &mut wave[v.path as usize];
-                let sampler = &mut sample.sampler;
-                // Exactly `continue_path`'s draws, in its order.
-                let sp = ShadingPoint::new(&v.hit, &v.ray, &scene.materials);
+                let sampler = &mut wave[v.path as usize].sampler;
                 let u_select = sampler.next_1d();
                 let u_light = sampler.next_2d();
+                if let Some((light, _)) = scene.lights.choose(u_select) {
+                    light.prefetch_sample(u_light);
+                }
+                b.draws.push(Some((u_select, u_light)));
+            }
+            for (v, draws) in b.vertices.iter().zip(&b.draws) {
+                let Some((u_select, u_light)) = *draws else {
+                    continue;
+                };
+                let sampler = &mut wave[v.path as usize].sampler;
+                // Then exactly `continue_path`'s draws, in its order.
+                let sp = ShadingPoint::new(&v.hit, &v.ray, &scene.materials);
                 if let Some((light, select_pdf)) = scene.lights.choose(u_select) {
                     if let Some((shadow, d)) =
                         direct_light_unoccluded(&sp, light, u_light, select_pdf, |_, pdf| pdf)
@@ -230,7 +288,15 @@ impl Integrator for WavefrontPathTracer {
                     wave[path as usize].radiance += gain;
                 }
             }
-            Self::arrive(scene, wave, &b.next_rays, &b.next, &mut b.hits, &mut b.vertices);
+            Self::arrive(
+                scene,
+                wave,
+                &b.next_rays,
+                &b.next,
+                &mut b.hits,
+                &mut b.vertices,
+                &mut b.escaped,
+            );
         }
     }
 }
