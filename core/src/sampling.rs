@@ -226,6 +226,23 @@ fn alias_table(weights: &[f32]) -> Vec<(f32, u32)> {
     table
 }
 
+/// Asks the processor to bring the cache line holding `value` into its caches, so that a read
+/// issued later finds it there: integrators that shade many paths together issue the reads of
+/// the next ones' tables early, while the current ones compute. Changes no result.
+#[inline]
+pub fn prefetch<T>(value: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is a hint that never faults, of an address that is a valid reference;
+    // SSE, which it needs, is part of x86-64's baseline.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
+            (value as *const T).cast(),
+        );
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = value;
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -311,21 +328,4 @@ mod tests {
         assert_eq!(power_heuristic(f32::INFINITY, 1.0), 1.0);
         assert!((power_heuristic(1.0, 1.0) - 0.5).abs() < 1e-7);
     }
-}
-
-/// Asks the processor to bring the cache line holding `value` into its caches, so that a read
-/// issued later finds it there: integrators that shade many paths together issue the reads of
-/// the next ones' tables early, while the current ones compute. Changes no result.
-#[inline]
-pub fn prefetch<T>(value: &T) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch is a hint that never faults, of an address that is a valid reference;
-    // SSE, which it needs, is part of x86-64's baseline.
-    unsafe {
-        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
-            (value as *const T).cast(),
-        );
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = value;
 }

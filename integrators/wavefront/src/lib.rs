@@ -31,8 +31,8 @@ pub struct WavefrontSettings {
     pub max_depth: u32,
     /// Bounces before Russian roulette starts.
     pub rr_depth: u32,
-    /// Paths advanced together (at least 1): the render loop's waves are cut into groups of
-    /// this many. More paths hide more of the light tables' memory latency; fewer keep the
+    /// Paths advanced together (default 128; 0 counts as 1): the render loop's waves are cut
+    /// into groups of this many. More paths hide more of the light tables' memory latency; fewer keep the
     /// fibers each path shades and leaves in the cache until its rays are traced. The image
     /// does not depend on it.
     pub paths: u32,
@@ -43,7 +43,9 @@ impl Default for WavefrontSettings {
         WavefrontSettings {
             max_depth: 100,
             rr_depth: 5,
-            paths: 1024,
+            // Measured under an environment map (straight.hair tubes): groups of 128 took
+            // 0.925 of path's CPU time, of 1024 0.962.
+            paths: 128,
         }
     }
 }
