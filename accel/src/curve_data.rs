@@ -17,14 +17,18 @@ pub(crate) struct CurveData {
     /// Whether rays that start inside one of these fibers may hit it ([`Overlaps`]).
     pub(crate) overlaps: Overlaps,
     pub(crate) materials: SegmentMaterials,
-    /// Per primitive (segment): its `basis.order()` control points (position and radius),
-    /// copied out of the strand's so that a hit finds them from the primitive id alone: one
-    /// cache miss instead of two in a row through an index.
-    pub(crate) seg_cps: Vec<Vec4>,
-    /// Per primitive: its strand and place in it, one record so that a hit reads one cache
-    /// line for them.
-    pub(crate) segs: Vec<SegmentRecord>,
-    /// Per primitive: a capsule containing the fiber swept by the segment.
+    /// The strands' control points (position and radius), strand after strand: Embree's
+    /// vertex buffer, shared with it rather than copied, so the accelerator holds them once.
+    pub(crate) cps: Vec<Vec4>,
+    /// Per primitive (segment): the index in `cps` of its first control point, Embree's index
+    /// buffer (shared likewise). A hit reads its control points through it.
+    pub(crate) first_cp: Vec<u32>,
+    /// Per primitive: its strand slot (the segment's place in the strand's polyline is its
+    /// first control point's offset from the strand's).
+    pub(crate) strand_of: Vec<u32>,
+    /// Per primitive, for cubic bases only: a capsule containing the fiber swept by the
+    /// segment. A linear segment's capsule is its two control points and their larger radius,
+    /// computed when needed rather than stored (28 bytes a segment).
     pub(crate) capsules: Vec<Capsule>,
     /// Per strand slot: what hits and the filter need of a strand, in one record.
     pub(crate) strands: Vec<StrandRecord>,
@@ -91,13 +95,6 @@ fn tube_chord(
     (t_in.is_finite() && t_out.is_finite() && t_in <= 0.0 && t_out >= 0.0).then_some((t_in, t_out))
 }
 
-/// A primitive's strand slot and the index of the segment in the strand's polyline (for `v`).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct SegmentRecord {
-    pub(crate) strand: u32,
-    pub(crate) index: u32,
-}
-
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct StrandRecord {
     /// The strand's primitives, `first_prim..end_prim` (consecutive), so the filter tells a
@@ -107,6 +104,8 @@ pub(crate) struct StrandRecord {
     pub(crate) end_prim: u32,
     /// Polyline segment count.
     pub(crate) segments: u32,
+    /// The index in `cps` of the strand's first control point.
+    pub(crate) first_cp: u32,
     /// The strand's index in the hair object.
     pub(crate) id: u32,
 }
@@ -120,10 +119,10 @@ impl CurveData {
             return false;
         }
         let (s, k) = (from as usize, hit as usize);
-        let Some(seg) = self.segs.get(s) else {
+        let Some(&strand) = self.strand_of.get(s) else {
             return true;
         };
-        let strand = &self.strands[seg.strand as usize];
+        let strand = &self.strands[strand as usize];
         if !(strand.first_prim..strand.end_prim).contains(&hit) {
             return true;
         }
@@ -136,10 +135,11 @@ impl CurveData {
     /// [`Self::keep`] pads them. Hits on the strand before it are the fiber seen from inside.
     pub(crate) fn fiber_exit(&self, from: u32, org: Vec3, dir: Vec3) -> f32 {
         let s = from as usize;
-        let (Some(seg), Some(cap)) = (self.segs.get(s), self.capsules.get(s)) else {
+        let Some(&strand) = self.strand_of.get(s) else {
             return 0.0;
         };
-        let strand = &self.strands[seg.strand as usize];
+        let strand = &self.strands[strand as usize];
+        let cap = &self.capsule(s);
         let round = 8.0 * f32::EPSILON * org.abs().max_element();
         let pad = |c: &Capsule| 1e-3 * c.r + round;
         let mut reach = cap
@@ -147,7 +147,7 @@ impl CurveData {
             .map_or(0.0, |(_, out)| out.max(0.0));
         let mut walk = |prims: &mut dyn Iterator<Item = u32>| {
             for j in prims {
-                let cap = &self.capsules[j as usize];
+                let cap = &self.capsule(j as usize);
                 match cap.line_interval(org, dir, pad(cap)) {
                     Some((t_in, t_out)) if t_in <= reach + pad(cap) => reach = reach.max(t_out),
                     _ => break,
@@ -167,14 +167,14 @@ impl CurveData {
         // capsule it left; radii are padded by this much.
         let round = 8.0 * f32::EPSILON * org.abs().max_element();
         let pad = |c: &Capsule| 1e-3 * c.r + round;
-        let cap = &self.capsules[s];
+        let cap = &self.capsule(s);
         let mut reach = cap
             .line_interval(org, dir, pad(cap))
             .map_or(0.0, |(_, out)| out.max(0.0));
         let mut j = s;
         while j != k {
             j = if k > s { j + 1 } else { j - 1 };
-            let cap = &self.capsules[j];
+            let cap = &self.capsule(j);
             match cap.line_interval(org, dir, pad(cap)) {
                 Some((t_in, t_out)) if t_in <= reach + pad(cap) => reach = reach.max(t_out),
                 _ => return false,
@@ -195,22 +195,29 @@ impl CurveData {
         let p = ray.at(t);
         let prim = prim as usize;
         let (axis, tangent) = self.axis_at(prim, u);
-        let cap = &self.capsules[prim];
         let radius = axis.w.max(f32::MIN_POSITIVE);
         let frame = FiberFrame::new(tangent, -ray.dir);
         let h = ((p - axis.truncate()).dot(frame.width_axis()) / radius).clamp(-1.0, 1.0);
         let t = match self.shape {
             CurveShape::Flat => {
-                t + tube_chord(p, ray.dir, axis.truncate(), tangent, radius, cap).map_or(
+                t + tube_chord(
+                    p,
+                    ray.dir,
+                    axis.truncate(),
+                    tangent,
+                    radius,
+                    &self.capsule(prim),
+                )
+                .map_or(
                     0.0,
                     |(t_in, t_out)| if t + t_in >= 0.0 { t_in } else { t_out },
                 )
             }
             CurveShape::Round => t,
         };
-        let seg = self.segs[prim];
-        let strand = &self.strands[seg.strand as usize];
-        let v = ((seg.index as f32 + u) / strand.segments as f32).clamp(0.0, 1.0);
+        let strand = &self.strands[self.strand_of[prim] as usize];
+        let index = self.first_cp[prim] - strand.first_cp;
+        let v = ((index as f32 + u) / strand.segments as f32).clamp(0.0, 1.0);
         (
             HitKind::Fiber {
                 tangent,
@@ -226,12 +233,15 @@ impl CurveData {
     /// The curve point (position and radius) of primitive `prim` at parameter `u`, and the
     /// unit tangent there (the segment's chord where the derivative vanishes).
     fn axis_at(&self, prim: usize, u: f32) -> (Vec4, Vec3) {
-        let (axis, deriv) = self.basis.eval(self.control_points(prim), u);
-        let cap = &self.capsules[prim];
+        let cps = self.control_points(prim);
+        let (axis, deriv) = self.basis.eval(cps, u);
         let tangent = deriv
             .truncate()
             .try_normalize()
-            .or_else(|| (cap.b - cap.a).try_normalize())
+            .or_else(|| {
+                let cap = self.capsule_of(prim, cps);
+                (cap.b - cap.a).try_normalize()
+            })
             .unwrap_or(Vec3::Y);
         (axis, tangent)
     }
@@ -256,9 +266,15 @@ impl CurveData {
             CurveShape::Round => (p - axis.truncate()).dot(dir) > 0.0,
             CurveShape::Flat => {
                 let radius = axis.w.max(f32::MIN_POSITIVE);
-                let cap = &self.capsules[prim];
-                tube_chord(p, dir, axis.truncate(), tangent, radius, cap)
-                    .is_some_and(|(t_in, _)| t + t_in < 0.0)
+                tube_chord(
+                    p,
+                    dir,
+                    axis.truncate(),
+                    tangent,
+                    radius,
+                    &self.capsule(prim),
+                )
+                .is_some_and(|(t_in, _)| t + t_in < 0.0)
             }
         }
     }
@@ -278,8 +294,9 @@ impl CurveData {
             SegmentMaterials::PerSegment(m) => m.len() * 4,
         };
         materials
-            + self.seg_cps.len() * 16
-            + self.segs.len() * std::mem::size_of::<SegmentRecord>()
+            + self.cps.len() * std::mem::size_of::<Vec4>()
+            + self.first_cp.len() * 4
+            + self.strand_of.len() * 4
             + self.capsules.len() * std::mem::size_of::<Capsule>()
             + self.strands.len() * std::mem::size_of::<StrandRecord>()
     }
@@ -289,8 +306,23 @@ impl CurveData {
     /// The control points (position, radius) of segment `prim`, `basis.order()` of them.
     #[inline]
     pub(crate) fn control_points(&self, prim: usize) -> &[Vec4] {
-        let order = self.basis.order();
-        &self.seg_cps[prim * order..(prim + 1) * order]
+        let first = self.first_cp[prim] as usize;
+        &self.cps[first..first + self.basis.order()]
+    }
+
+    /// A capsule containing the fiber swept by segment `prim`.
+    #[inline]
+    pub(crate) fn capsule(&self, prim: usize) -> Capsule {
+        self.capsule_of(prim, self.control_points(prim))
+    }
+
+    /// [`Self::capsule`] of segment `prim`, whose control points `cps` the caller has read.
+    #[inline]
+    fn capsule_of(&self, prim: usize, cps: &[Vec4]) -> Capsule {
+        match self.basis {
+            CurveBasis::Linear => self.basis.capsule(cps),
+            _ => self.capsules[prim],
+        }
     }
 }
 
@@ -299,7 +331,7 @@ const CUBIC_PIECES: usize = 4;
 
 impl HairCurves for CurveData {
     fn segments(&self) -> usize {
-        self.segs.len()
+        self.first_cp.len()
     }
 
     fn for_each_piece(&self, prim: usize, f: &mut dyn FnMut(Vec4, Vec4)) {
@@ -318,6 +350,6 @@ impl HairCurves for CurveData {
     }
 
     fn same_strand(&self, a: usize, b: usize) -> bool {
-        self.segs[a].strand == self.segs[b].strand
+        self.strand_of[a] == self.strand_of[b]
     }
 }

@@ -50,6 +50,21 @@ pub trait Accel: Send + Sync {
     fn intersect(&self, ray: &Ray) -> Option<Hit>;
     /// Whether anything blocks `(0, ray.t_max)`, skipping `ray.exclude`.
     fn occluded(&self, ray: &Ray) -> bool;
+    /// [`Accel::intersect`] of each of `rays`, into `hits` (as long). The hits must be
+    /// exactly those of `intersect`; an accelerator overrides it where it traces many rays
+    /// at once faster than one at a time.
+    fn intersect_many(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        for (ray, hit) in rays.iter().zip(hits) {
+            *hit = self.intersect(ray);
+        }
+    }
+    /// [`Accel::occluded`] of each of `rays`, into `blocked` (as long); as
+    /// [`Accel::intersect_many`], the answers must be those of `occluded`.
+    fn occluded_many(&self, rays: &[Ray], blocked: &mut [bool]) {
+        for (ray, b) in rays.iter().zip(blocked) {
+            *b = self.occluded(ray);
+        }
+    }
     /// Whether a surface that is not hair (a mesh, a sphere) blocks `(0, ray.t_max)`; fibers are
     /// transparent to this query (dual scattering accounts for them statistically).
     fn occluded_by_surfaces(&self, ray: &Ray) -> bool;

@@ -286,6 +286,21 @@ impl EnvironmentMap {
         (texel.radiance, solid_angle_pdf(texel, sin_theta))
     }
 
+    /// Asks for the texel that [`EnvironmentMap::radiance_pdf`] reads for `dir` to be brought
+    /// into the cache (a hint; it changes no result).
+    pub fn prefetch_radiance(&self, dir: Vec3) {
+        let uv = self.uv_of(dir).0;
+        let i = ((uv.x * self.width as f32) as usize).min(self.width - 1);
+        let j = ((uv.y * self.height as f32) as usize).min(self.height - 1);
+        crate::sampling::prefetch(&self.texels[j * self.width + i]);
+    }
+
+    /// Asks for the alias entry that [`EnvironmentMap::sample`] reads first for `u` to be
+    /// brought into the cache (a hint; it changes no result).
+    pub fn prefetch_sample(&self, u: Vec2) {
+        self.distribution.prefetch_cell_2d(u.x);
+    }
+
     /// Solid-angle density with which [`EnvironmentMap::sample`] returns `wi`.
     pub fn pdf(&self, wi: Vec3) -> f32 {
         self.radiance_pdf(wi).1

@@ -28,6 +28,18 @@ pub trait Integrator: Send + Sync + std::fmt::Debug {
         self.li(ray, scene, sampler)
     }
 
+    /// [`Integrator::li_sample`] of every sample of `wave` (camera rays of several pixels and
+    /// sample indices, each with its own sampler), into each sample's `radiance`: the render
+    /// loop's entry point. Integrators that advance many paths together (tracing their rays in
+    /// batches) override it; each sample's radiance must still be what `li_sample` returns
+    /// for it, whatever the other samples of the wave, so that images do not depend on how
+    /// the film is cut into tiles, passes and waves.
+    fn li_wave(&self, scene: &Scene, wave: &mut [WaveSample]) {
+        for w in wave {
+            w.radiance = self.li_sample(&w.ray, scene, &mut w.sampler, w.sample_index);
+        }
+    }
+
     /// Precomputation that depends on the film as well as the scene (a radiance cache trained
     /// on paths through the film's own pixels), reporting the fraction done to `progress`. The
     /// render loop calls it before its first sample, so its cost is render time, and renders
@@ -55,6 +67,19 @@ pub trait Integrator: Send + Sync + std::fmt::Debug {
     fn sample_segments(&self, samples: Range<u64>) -> Vec<Range<u64>> {
         vec![samples]
     }
+}
+
+/// One camera sample of a wave ([`Integrator::li_wave`]).
+#[derive(Clone, Debug)]
+pub struct WaveSample {
+    /// The camera ray.
+    pub ray: Ray,
+    /// The sample's own random numbers (they depend only on pixel, sample index and seed).
+    pub sampler: Sampler,
+    /// The sample's index in its pixel.
+    pub sample_index: u64,
+    /// The radiance along `ray`, which `li_wave` writes.
+    pub radiance: Rgb,
 }
 
 /// An integrator prepared for one film by [`Integrator::for_film`].
@@ -305,28 +330,41 @@ pub fn direct_light_sample(
     select_pdf: f32,
     scatter_density: impl Fn(Vec3, f32) -> f32,
 ) -> Option<DirectSample> {
+    let (shadow, sample) = direct_light_unoccluded(sp, light, u, select_pdf, scatter_density)?;
+    (!scene.occluded(&shadow)).then_some(sample)
+}
+
+/// [`direct_light_sample`] before its shadow ray is traced: the shadow ray, and the estimate
+/// should nothing block it. For integrators that trace the shadow rays of many paths together.
+pub fn direct_light_unoccluded(
+    sp: &ShadingPoint,
+    light: &Light,
+    u: Vec2,
+    select_pdf: f32,
+    scatter_density: impl Fn(Vec3, f32) -> f32,
+) -> Option<(Ray, DirectSample)> {
     let ls = light.sample_li(sp.p, u)?;
-    // The scattering pdf comes with f at little extra cost; it is only used when the shadow
-    // ray is unoccluded.
+    // The scattering pdf comes with f at little extra cost.
     let (f, scatter_pdf) = sp.eval_pdf(ls.wi);
     if !(ls.pdf > 0.0 && f != Rgb::ZERO && ls.radiance != Rgb::ZERO) {
         return None;
     }
-    if scene.occluded(&sp.spawn(ls.wi).with_t_max(ls.distance * (1.0 - 1e-4))) {
-        return None;
-    }
+    let shadow = sp.spawn(ls.wi).with_t_max(ls.distance * (1.0 - 1e-4));
     let light_pdf = select_pdf * ls.pdf;
     let weight = if ls.is_delta {
         1.0
     } else {
         power_heuristic(light_pdf, scatter_density(ls.wi, scatter_pdf))
     };
-    Some(DirectSample {
-        wi: ls.wi,
-        f,
-        radiance: ls.radiance,
-        scale: weight / light_pdf,
-    })
+    Some((
+        shadow,
+        DirectSample {
+            wi: ls.wi,
+            f,
+            radiance: ls.radiance,
+            scale: weight / light_pdf,
+        },
+    ))
 }
 
 /// What the light at infinity `light` adds to a path of weight `throughput` that escaped along

@@ -256,6 +256,22 @@ impl Light {
         }
     }
 
+    /// Asks for what [`Light::sample_li`] reads first for `u` to be brought into the cache,
+    /// where it reads a table (environment maps): a hint for integrators that shade many paths
+    /// together, which changes no result.
+    pub fn prefetch_sample(&self, u: Vec2) {
+        if let Light::Environment(env) = self {
+            env.prefetch_sample(u);
+        }
+    }
+
+    /// As [`Light::prefetch_sample`], for what [`Light::le_pdf`] reads for `dir`.
+    pub fn prefetch_le(&self, dir: Vec3) {
+        if let Light::Environment(env) = self {
+            env.prefetch_radiance(dir);
+        }
+    }
+
     /// `(le(dir), pdf_li(dir))` in one call (the environment map locates its texel once).
     pub fn le_pdf(&self, dir: Vec3) -> (Rgb, f32) {
         match self {

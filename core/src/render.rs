@@ -40,7 +40,7 @@ use crate::accel::{Hit, HitKind};
 use crate::camera::Camera;
 use crate::film::{counts_hits, Aov, FilmSettings, Image, Outputs};
 pub use crate::film::{quantities, quantity_count, Quantity};
-use crate::integrator::Integrator;
+use crate::integrator::{Integrator, WaveSample};
 use crate::math::{Ray, Rgb, Vec3};
 use crate::rng::{hash_words, pixel_position, Sampler};
 use crate::scene::Scene;
@@ -52,6 +52,11 @@ use std::time::{Duration, Instant};
 
 /// Side of the square tiles the film is split into.
 pub const TILE_SIZE: u32 = 16;
+
+/// Camera samples handed to [`Integrator::li_wave`] at once: enough paths for a wavefront
+/// integrator's batches of rays, few enough that a wave's state stays in the cache (at 64
+/// spp, a wave is 16 pixels).
+pub const WAVE: usize = 1024;
 
 /// Why sample sums cannot be joined.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -791,43 +796,71 @@ impl TileJob<'_> {
         let closest_hit = [Aov::Depth, Aov::Tangent, Aov::Albedo]
             .iter()
             .any(|&a| outputs.has(a));
-        for y in ty0..ty1 {
-            for x in tx0..tx1 {
-                acc.clear();
-                for s in self.samples.clone() {
-                    if self.cancel.load(Ordering::Relaxed) {
-                        return None;
-                    }
-                    let (ray, mut sampler) = camera_sample(&scene.camera, film, x, y, s);
-                    let mut record = SampleRecord::default();
-                    if closest_hit {
-                        if let Some(hit) = scene.intersect(&ray) {
-                            record.hit = true;
-                            record.distance = hit.t;
-                            if let HitKind::Fiber { tangent, .. } = hit.kind {
-                                record.tangent = Some(tangent);
-                            }
-                            if outputs.has(Aov::Albedo) {
-                                record.albedo =
-                                    albedo_estimate(scene, &hit, &ray, (x, y), s, film.seed);
-                            }
-                        }
-                    } else if outputs.alpha {
-                        // Alpha needs no hit record: an any-hit query stops at the first fiber.
-                        record.hit = scene.occluded(&ray);
-                    }
-                    let l = self.integrator.li_sample(&ray, scene, &mut sampler, s);
-                    if l.is_finite() {
-                        record.radiance = [l.x as f64, l.y as f64, l.z as f64];
-                    } else {
-                        nonfinite += 1;
-                    }
-                    record.write(outputs, &mut values);
-                    acc.push_unchecked(s..s + 1, &values);
-                }
-                debug_assert_eq!(acc.ranges(), self.blocks);
-                sums.extend_from_slice(acc.sums());
+        // Samples go to the integrator in waves of up to `WAVE` (pixel after pixel, in
+        // sample order), and their values into each pixel's block sums in the same order.
+        let mut wave: Vec<WaveSample> = Vec::with_capacity(WAVE);
+        let mut records: Vec<SampleRecord> = Vec::with_capacity(WAVE);
+        let samples_per_pixel = (self.samples.end - self.samples.start) as usize;
+        let pixels = (tx0..tx1).len() * (ty0..ty1).len();
+        let total = pixels * samples_per_pixel;
+        let mut next = 0;
+        while next < total {
+            if self.cancel.load(Ordering::Relaxed) {
+                return None;
             }
+            let end = (next + WAVE).min(total);
+            wave.clear();
+            records.clear();
+            for k in next..end {
+                let (pixel, s) = (k / samples_per_pixel, k % samples_per_pixel);
+                let (x, y) = (
+                    tx0 + (pixel % (tx1 - tx0) as usize) as u32,
+                    ty0 + (pixel / (tx1 - tx0) as usize) as u32,
+                );
+                let s = self.samples.start + s as u64;
+                let (ray, sampler) = camera_sample(&scene.camera, film, x, y, s);
+                let mut record = SampleRecord::default();
+                if closest_hit {
+                    if let Some(hit) = scene.intersect(&ray) {
+                        record.hit = true;
+                        record.distance = hit.t;
+                        if let HitKind::Fiber { tangent, .. } = hit.kind {
+                            record.tangent = Some(tangent);
+                        }
+                        if outputs.has(Aov::Albedo) {
+                            record.albedo =
+                                albedo_estimate(scene, &hit, &ray, (x, y), s, film.seed);
+                        }
+                    }
+                } else if outputs.alpha {
+                    // Alpha needs no hit record: an any-hit query stops at the first fiber.
+                    record.hit = scene.occluded(&ray);
+                }
+                records.push(record);
+                wave.push(WaveSample {
+                    ray,
+                    sampler,
+                    sample_index: s,
+                    radiance: Rgb::ZERO,
+                });
+            }
+            self.integrator.li_wave(scene, &mut wave);
+            for (k, (w, record)) in (next..end).zip(wave.iter().zip(&mut records)) {
+                let l = w.radiance;
+                if l.is_finite() {
+                    record.radiance = [l.x as f64, l.y as f64, l.z as f64];
+                } else {
+                    nonfinite += 1;
+                }
+                record.write(outputs, &mut values);
+                acc.push_unchecked(w.sample_index..w.sample_index + 1, &values);
+                if (k + 1) % samples_per_pixel == 0 {
+                    debug_assert_eq!(acc.ranges(), self.blocks);
+                    sums.extend_from_slice(acc.sums());
+                    acc.clear();
+                }
+            }
+            next = end;
         }
         Some((sums, nonfinite))
     }

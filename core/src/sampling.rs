@@ -158,6 +158,15 @@ impl Distribution1D {
         (cell, (scaled - entry as f32).clamp(0.0, 1.0), rest)
     }
 
+    /// Asks for the alias entry that [`Self::sample_cell_2d`] reads for `u_entry` to be
+    /// brought into the cache: a hint, which changes no result.
+    #[inline]
+    pub fn prefetch_cell_2d(&self, u_entry: f32) {
+        let n = self.func.len();
+        let entry = ((u_entry.clamp(0.0, 1.0) * n as f32) as usize).min(n - 1);
+        prefetch(&self.alias[entry]);
+    }
+
     /// Entry `entry`'s cell or its alias, by `u` ∈ [0, 1]; and `u` rescaled to [0, 1].
     fn choose(&self, entry: usize, u: f32) -> (usize, f32) {
         let (keep, other) = self.alias[entry];
@@ -215,6 +224,23 @@ fn alias_table(weights: &[f32]) -> Vec<(f32, u32)> {
         }
     }
     table
+}
+
+/// Asks the processor to bring the cache line holding `value` into its caches, so that a read
+/// issued later finds it there: integrators that shade many paths together issue the reads of
+/// the next ones' tables early, while the current ones compute. Changes no result.
+#[inline]
+pub fn prefetch<T>(value: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is a hint that never faults, of an address that is a valid reference;
+    // SSE, which it needs, is part of x86-64's baseline.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
+            (value as *const T).cast(),
+        );
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = value;
 }
 
 #[cfg(test)]

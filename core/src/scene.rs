@@ -210,8 +210,13 @@ impl Scene {
 
     #[inline]
     fn count_ray(&self) {
+        self.count_rays(1);
+    }
+
+    #[inline]
+    fn count_rays(&self, n: usize) {
         let rays = self.rays.get_or_default();
-        rays.set(rays.get() + 1);
+        rays.set(rays.get() + n as u64);
     }
 
     /// The geometry, for queries that bypass the ray statistics (tests, benchmarks).
@@ -265,6 +270,20 @@ impl Scene {
     pub fn occluded(&self, ray: &Ray) -> bool {
         self.count_ray();
         self.accel.occluded(ray)
+    }
+
+    /// [`Scene::intersect`] of each of `rays` into `hits` (as long), counted in the ray
+    /// statistics.
+    pub fn intersect_many(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        self.count_rays(rays.len());
+        self.accel.intersect_many(rays, hits);
+    }
+
+    /// [`Scene::occluded`] of each of `rays` into `blocked` (as long), counted in the ray
+    /// statistics.
+    pub fn occluded_many(&self, rays: &[Ray], blocked: &mut [bool]) {
+        self.count_rays(rays.len());
+        self.accel.occluded_many(rays, blocked);
     }
 
     /// Visibility against non-hair surfaces only, counted in the ray statistics.

@@ -102,6 +102,9 @@ integrators! {
     /// Path tracing whose continuations are drawn from a mixture of the light learned from
     /// the film's own training paths and the fibers' own sampling: unbiased.
     Guided => tress_guided::GuidedPathTracer,
+    /// The path tracer's estimator with the paths of many camera samples advanced together,
+    /// their rays traced in batches: the same image as `Path`, bit for bit.
+    Wavefront => tress_wavefront::WavefrontPathTracer,
 }
 
 #[cfg(test)]

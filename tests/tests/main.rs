@@ -17,4 +17,5 @@ mod radiance_cache;
 mod round_curves;
 mod strand_variation;
 mod test_files;
+mod wavefront;
 mod workspace;

@@ -2,7 +2,7 @@
 //! ray queries with [`tress_core::Hit`]s. See the crate docs for the fiber frame, the sign of
 //! `h` and the self-intersection rule.
 
-use crate::curve_data::{CurveData, HairSegment, SegmentMaterials, SegmentRecord, StrandRecord};
+use crate::curve_data::{CurveData, HairSegment, SegmentMaterials, StrandRecord};
 use crate::curves::{CurveBasis, CurveShape, Overlaps};
 use crate::error::{Error, Result};
 use crate::fp_mode;
@@ -412,13 +412,16 @@ impl SceneBuilder {
         let mut curves = Curves::new(hair, ids, options, per_segment)?;
         let material_span = curves.set_materials(materials, &hair.name)?;
         check_extent(&hair.name, &curves.bounds)?;
-        let geometry = curves.geometry(&self.device, &hair.name, options.curve)?;
-        let data = Arc::new(curves.data);
+        let mut data = curves.data;
+        data.cps.shrink_to_fit();
+        data.first_cp.shrink_to_fit();
+        let data = Arc::new(data);
+        let geometry = shared_geometry(&self.device, &hair.name, options.curve, &data)?;
         let info = ObjectInfo {
             name: hair.name.clone(),
             kind: ObjectKind::Hair {
                 strands: data.strands.len(),
-                segments: data.segs.len(),
+                segments: data.first_cp.len(),
                 points: curves.points,
                 basis: options.basis,
                 curve: options.curve,
@@ -626,7 +629,7 @@ fn max_fiber_radius(geoms: &[GeomData]) -> f32 {
     geoms
         .iter()
         .filter_map(|g| match g {
-            GeomData::Hair(c) => Some(c.seg_cps.iter().fold(0.0f32, |m, p| m.max(p.w))),
+            GeomData::Hair(c) => Some(c.cps.iter().fold(0.0f32, |m, p| m.max(p.w))),
             _ => None,
         })
         .fold(0.0, f32::max)
@@ -708,14 +711,10 @@ fn strands_to_draw<'a>(
     })
 }
 
-/// A hair object cut into curve segments: what the accelerator keeps of it, and Embree's
-/// buffers.
+/// A hair object cut into curve segments: what the accelerator keeps of it, Embree's vertex
+/// and index buffers included (Embree reads them where they are).
 struct Curves {
     data: CurveData,
-    /// Embree's vertex buffer: every drawn strand's control points.
-    cps: Vec<Vec4>,
-    /// Embree's index buffer: each segment's first control point.
-    seg_first_cp: Vec<u32>,
     /// Points of the strands drawn.
     points: usize,
     bounds: Aabb,
@@ -743,13 +742,12 @@ impl Curves {
                 shape: options.curve,
                 overlaps: options.overlaps,
                 materials: SegmentMaterials::Uniform(0),
-                seg_cps: Vec::new(),
-                segs: Vec::new(),
+                cps: Vec::new(),
+                first_cp: Vec::new(),
+                strand_of: Vec::new(),
                 capsules: Vec::new(),
                 strands: Vec::new(),
             },
-            cps: Vec::new(),
-            seg_first_cp: Vec::new(),
             points: 0,
             bounds: Aabb::EMPTY,
             segments: Vec::new(),
@@ -772,27 +770,25 @@ impl Curves {
                 })
                 .collect();
             let strand = c.data.strands.len() as u32;
-            let base = c.cps.len();
-            c.cps.extend(basis.control_points(&pts));
-            let before = c.seg_first_cp.len();
+            let base = c.data.cps.len();
+            c.data.cps.extend(basis.control_points(&pts));
+            let before = c.data.first_cp.len();
             for j in 0..n - 1 {
                 // A zero-length segment has no area and no tangent.
                 if pts[j].truncate() == pts[j + 1].truncate() {
                     continue;
                 }
-                let seg = &c.cps[base + j..base + j + order];
-                let cap = basis.capsule(seg);
+                let cap = basis.capsule(&c.data.cps[base + j..base + j + order]);
                 c.bounds.grow(cap.a - Vec3::splat(cap.r));
                 c.bounds.grow(cap.a + Vec3::splat(cap.r));
                 c.bounds.grow(cap.b - Vec3::splat(cap.r));
                 c.bounds.grow(cap.b + Vec3::splat(cap.r));
-                c.data.seg_cps.extend_from_slice(seg);
-                c.seg_first_cp.push((base + j) as u32);
-                c.data.segs.push(SegmentRecord {
-                    strand,
-                    index: j as u32,
-                });
-                c.data.capsules.push(cap);
+                c.data.first_cp.push((base + j) as u32);
+                c.data.strand_of.push(strand);
+                // A linear segment's capsule is its two control points: computed when needed.
+                if basis != CurveBasis::Linear {
+                    c.data.capsules.push(cap);
+                }
                 if per_segment {
                     let color = hair.colors.as_ref().map(|colors| {
                         let at = first_point + j;
@@ -805,25 +801,26 @@ impl Curves {
                     });
                 }
             }
-            if c.seg_first_cp.len() == before {
-                c.cps.truncate(base);
+            if c.data.first_cp.len() == before {
+                c.data.cps.truncate(base);
                 continue;
             }
             c.data.strands.push(StrandRecord {
                 first_prim: before as u32,
-                end_prim: c.seg_first_cp.len() as u32,
+                end_prim: c.data.first_cp.len() as u32,
                 segments: (n - 1) as u32,
+                first_cp: base as u32,
                 id,
             });
             c.points += n;
         }
-        if c.seg_first_cp.is_empty() {
+        if c.data.first_cp.is_empty() {
             return Err(Error::InvalidGeometry {
                 object: hair.name.clone(),
                 reason: "no strand has a segment of non-zero length".into(),
             });
         }
-        if c.cps.len() > u32::MAX as usize {
+        if c.data.cps.len() > u32::MAX as usize {
             return Err(Error::InvalidGeometry {
                 object: hair.name.clone(),
                 reason: "too many control points for one Embree geometry".into(),
@@ -860,31 +857,45 @@ impl Curves {
             }
         })
     }
+}
 
-    /// The Embree curves, their buffers moved out of `self`.
-    fn geometry(
-        &mut self,
-        device: &Device,
-        name: &str,
-        curve: CurveShape,
-    ) -> Result<GeometryBuilder<'static>> {
-        let cps = std::mem::take(&mut self.cps);
-        let seg_first_cp = std::mem::take(&mut self.seg_first_cp);
-        let mut geometry = device
-            .create_geometry(self.data.basis.geometry_kind(curve))
-            .map_err(|e| embree_error(name, "cannot create curves", e))?;
-        geometry
-            .set_new_buffer::<[f32; 4]>(BufferUsage::VERTEX, 0, Format::FLOAT4, 16, cps.len())
-            .map_err(|e| embree_error(name, "cannot allocate control points", e))?
-            .iter_mut()
-            .zip(&cps)
-            .for_each(|(dst, src)| *dst = src.to_array());
-        geometry
-            .set_new_buffer::<u32>(BufferUsage::INDEX, 0, Format::UINT, 4, seg_first_cp.len())
-            .map_err(|e| embree_error(name, "cannot allocate curve indices", e))?
-            .copy_from_slice(&seg_first_cp);
-        Ok(geometry)
+/// The Embree curves of `data`, reading its control points and segment indices where they are
+/// instead of a copy of each.
+fn shared_geometry(
+    device: &Device,
+    name: &str,
+    curve: CurveShape,
+    data: &Arc<CurveData>,
+) -> Result<GeometryBuilder<'static>> {
+    let geometry = device
+        .create_geometry(data.basis.geometry_kind(curve))
+        .map_err(|e| embree_error(name, "cannot create curves", e))?;
+    // SAFETY: Embree reads the two buffers until the scene is released. They live in the
+    // `Arc<CurveData>` that `geoms` keeps, are never written again, and `EmbreeAccel` and
+    // `SceneBuilder` declare `scene` before `geoms`, so the scene is dropped first.
+    unsafe {
+        embree3::sys::rtcSetSharedGeometryBuffer(
+            geometry.handle(),
+            BufferUsage::VERTEX,
+            0,
+            Format::FLOAT4,
+            data.cps.as_ptr().cast(),
+            0,
+            std::mem::size_of::<Vec4>(),
+            data.cps.len(),
+        );
+        embree3::sys::rtcSetSharedGeometryBuffer(
+            geometry.handle(),
+            BufferUsage::INDEX,
+            0,
+            Format::UINT,
+            data.first_cp.as_ptr().cast(),
+            0,
+            4,
+            data.first_cp.len(),
+        );
     }
+    Ok(geometry)
 }
 
 /// Hair curves, triangle meshes and spheres in an Embree scene; implements [`Accel`].
@@ -1000,7 +1011,7 @@ impl EmbreeAccel {
                 p.geom == h.geom
                     && a + 1 == b
                     && c.same_strand(a, b)
-                    && (t - tp).abs() <= c.capsules[a].r + c.capsules[b].r
+                    && (t - tp).abs() <= c.capsule(a).r + c.capsule(b).r
             };
             count += u32::from(!through_joint);
         }
