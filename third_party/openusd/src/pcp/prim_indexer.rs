@@ -2866,11 +2866,12 @@ impl<'a, 'f> Indexer<'a, 'f> {
 
         // An arc target authoring no spec is kept as a culled node (C++
         // culling): visible to change tracking and dependency registration, but
-        // contributing no opinions to value resolution. A resolved-layer payload
+        // contributing no opinions to value resolution. A reference or payload
         // to such a prim is additionally an unresolved-prim-path error (C++
-        // `PcpErrorUnresolvedPrimPath`); the node is still culled.
+        // `PcpErrorUnresolvedPrimPath`, which C++ reports for both arcs); the node is
+        // still culled.
         let empty = !self.stack_has_spec(target_stack, &source);
-        if empty && !is_internal && arc == ArcType::Payload {
+        if empty && matches!(arc, ArcType::Payload | ArcType::Reference) {
             self.errors.push(Error::UnresolvedPrimPath {
                 arc,
                 target_layer: self.inputs.stack.layer(rep).identifier.clone(),

@@ -313,6 +313,16 @@ pub type PayloadListOp = ListOp<Payload>;
 
 pub type TimeSampleMap = Vec<(f64, Value)>;
 
+/// Puts samples read from a file in time order, as [`TimeSampleMap`] consumers (which
+/// binary-search it) expect; of samples at one time the last written wins, as in C++ USD's map.
+/// Files may write samples in any order: read unsorted, the earliest time took the first
+/// sample written.
+pub(crate) fn sort_time_samples(samples: &mut TimeSampleMap) {
+    samples.reverse();
+    samples.sort_by(|a, b| a.0.total_cmp(&b.0));
+    samples.dedup_by(|later, earlier| later.0 == earlier.0);
+}
+
 /// A single namespace relocation `(source, target)`: the prim at `source` is
 /// moved to `target` in composed namespace. An empty `target` is a deletion
 /// that makes `source` a prohibited (invalid) child name. Mirrors C++

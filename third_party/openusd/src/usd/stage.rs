@@ -3131,6 +3131,15 @@ impl Stage {
     /// inactive, unloaded, undefined, or abstract prims when the predicate
     /// excludes those regions.
     pub fn traverse(&self, predicate: PrimPredicate, mut visitor: impl FnMut(&sdf::Path)) -> Result<()> {
+        self.traverse_while(predicate, |path| {
+            visitor(path);
+            true
+        })
+    }
+
+    /// [`traverse`](Self::traverse) until `visitor` returns `false`: a caller can bound the
+    /// work, as instance proxies of nested instances multiply the prims without end.
+    pub fn traverse_while(&self, predicate: PrimPredicate, mut visitor: impl FnMut(&sdf::Path) -> bool) -> Result<()> {
         let needed = predicate.consulted_bits();
         let mut stack = vec![sdf::Path::abs_root()];
 
@@ -3144,8 +3153,8 @@ impl Stage {
                 // threaded down the stack so each prim only consults its own
                 // local opinion — turning the per-prim O(depth) walk into O(1).
                 let status = self.prim_status_masked(&path, needed)?;
-                if predicate.matches(status) {
-                    visitor(&path);
+                if predicate.matches(status) && !visitor(&path) {
+                    return Ok(());
                 }
                 if predicate.prunes_descendants(status) {
                     continue;

@@ -51,7 +51,14 @@ impl sdf::FileFormat for UsdaFileFormat {
     fn read(&self, resolver: &dyn ar::Resolver, resolved: &ar::ResolvedPath) -> Result<sdf::LayerData> {
         let bytes = resolver.open_asset(resolved)?.read_all()?;
         let text = String::from_utf8(bytes).context("layer is not valid UTF-8")?;
-        Ok(Box::new(parse(&text).context("failed to parse USDA layer")?))
+        // Where the error is, as `read_file` says it: a layer read through the registry named
+        // neither line nor column.
+        let mut parser = Parser::new(&text);
+        let specs = parser.parse().map_err(|e| match parser.last_error_highlight() {
+            Some(h) => e.context(format!("failed to parse USDA layer at line {}, column {}", h.line, h.column)),
+            None => e.context("failed to parse USDA layer"),
+        })?;
+        Ok(Box::new(sdf::Data::from_specs(specs)))
     }
 
     fn write(&self, data: &dyn sdf::AbstractData, mut sink: &mut dyn sdf::WriteSeek) -> Result<()> {

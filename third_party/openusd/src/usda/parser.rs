@@ -21,7 +21,13 @@ pub struct Parser<'a> {
     iter: Peekable<logos::SpannedIter<'a, Token<'a>>>,
     source: &'a str,
     last_span: Option<Range<usize>>,
+    /// Blocks (`()`, `[]`, `{}`) open around the current token.
+    depth: usize,
 }
+
+/// The deepest nesting of blocks parsed: the parser recurses once per block (prims, dictionaries,
+/// arrays), and 6,000 nested prims in a 70 KB file overflowed the stack.
+pub const MAX_BLOCK_DEPTH: usize = 256;
 
 /// Captures the line context for the most recent token consumed by the parser.
 #[derive(Debug, Clone)]
@@ -48,6 +54,7 @@ impl<'a> Parser<'a> {
             iter: Token::lexer(data).spanned().peekable(),
             source: data,
             last_span: None,
+            depth: 0,
         }
     }
 
@@ -615,7 +622,8 @@ impl<'a> Parser<'a> {
         if matches!(suffix, Some(Token::TimeSamples)) {
             push_unique(suffixed_properties, name);
             self.ensure_pun('=')?;
-            let samples = self.parse_time_samples(type_info)?;
+            let mut samples = self.parse_time_samples(type_info)?;
+            sdf::sort_time_samples(&mut samples);
             let path = current_path.append_property(name)?;
 
             let spec = data
@@ -1764,14 +1772,23 @@ impl<'a> Parser<'a> {
     /// Handles empty blocks and trailing commas.
     fn parse_block(&mut self, open: char, close: char, mut entry: impl FnMut(&mut Self) -> Result<()>) -> Result<()> {
         self.ensure_pun(open)?;
-        loop {
-            if self.try_consume(Token::Punctuation(close)) {
-                break;
+        ensure!(
+            self.depth < MAX_BLOCK_DEPTH,
+            "blocks nested more than {MAX_BLOCK_DEPTH} deep"
+        );
+        self.depth += 1;
+        let result = (|| {
+            loop {
+                if self.try_consume(Token::Punctuation(close)) {
+                    break;
+                }
+                entry(self)?;
+                while self.try_consume(Token::Punctuation(',')) || self.try_consume(Token::Punctuation(';')) {}
             }
-            entry(self)?;
-            while self.try_consume(Token::Punctuation(',')) || self.try_consume(Token::Punctuation(';')) {}
-        }
-        Ok(())
+            Ok(())
+        })();
+        self.depth -= 1;
+        result
     }
 
     /// Parse fixed-size tuples, preserving order and surfacing contextual errors.
@@ -1788,6 +1805,9 @@ impl<'a> Parser<'a> {
             i += 1;
             Ok(())
         })?;
+        // Only the first `i` elements are initialised: a short tuple such as `(x, y)` for a
+        // point3f was read with its missing elements from uninitialised memory.
+        ensure!(i == N, "tuple has {i} elements, expected {N}");
         let result = unsafe { std::mem::transmute_copy::<_, [T; N]>(&result) };
         Ok(result)
     }

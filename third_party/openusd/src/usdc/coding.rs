@@ -4,7 +4,7 @@
 
 use std::{collections::HashMap, io, mem};
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use num_traits::{AsPrimitive, PrimInt};
 
 use super::reader::ReadExt;
@@ -18,8 +18,11 @@ pub fn encoded_buffer_size<T: PrimInt>(count: usize) -> usize {
     if count == 0 {
         0
     } else {
+        // Saturating: a count read from a corrupt file must not overflow here; the caller
+        // compares the size against what the file holds.
         let sz = mem::size_of::<T>();
-        sz + (count * 2).div_ceil(8) + (sz * count)
+        sz.saturating_add(count.saturating_mul(2).div_ceil(8))
+            .saturating_add(sz.saturating_mul(count))
     }
 }
 
@@ -41,11 +44,15 @@ where
         codes_reader.read_pod::<i32>()? as i64
     };
 
-    let num_code_bytes = (count * 2).div_ceil(8);
-
+    // The code bytes must be there before anything is allocated for what they describe: a
+    // corrupt count panicked slicing past the data or reserved memory for it.
+    let num_code_bytes = count.checked_mul(2).context("integer count overflows")?.div_ceil(8);
     let mut ints_reader = {
         let offset = mem::size_of::<T>() + num_code_bytes;
-        io::Cursor::new(&data[offset..])
+        let ints = data
+            .get(offset..)
+            .with_context(|| format!("{count} encoded integers need more than the {} bytes given", data.len()))?;
+        io::Cursor::new(ints)
     };
 
     let mut prev = 0_i64;

@@ -87,7 +87,12 @@ where
         let mut data = HashMap::with_capacity(specs.len());
 
         for spec in &specs {
-            let path = file.paths[spec.path_index].clone();
+            // `validate` checks the index; unsafe opens must not panic either.
+            let path = file
+                .paths
+                .get(spec.path_index)
+                .with_context(|| format!("spec path index {} out of range", spec.path_index))?
+                .clone();
             data.insert(
                 path,
                 Spec {
@@ -233,22 +238,23 @@ fn crate_fields<R>(file: &CrateFile<R>, start: usize) -> impl Iterator<Item = (&
         .unwrap_or(&[])
         .iter()
         .map_while(|slot| *slot)
-        .map(move |index| {
-            let field = &file.fields[index];
-            (field_name(file, field.token_index), field.value_rep)
+        // `validate` checked the field and token indices when the file was opened.
+        .filter_map(move |index| {
+            let field = file.fields.get(index)?;
+            Some((field_name(file, field.token_index)?, field.value_rep))
         })
 }
 
 /// Resolves a crate token index to a field name, translating the crate's
 /// internal property-children token to the Sdf `propertyChildren` key the rest
 /// of the toolkit uses.
-fn field_name<R>(file: &CrateFile<R>, token_index: usize) -> &str {
-    let raw = file.tokens[token_index].as_str();
-    if raw == CRATE_PROPERTY_CHILDREN {
+fn field_name<R>(file: &CrateFile<R>, token_index: usize) -> Option<&str> {
+    let raw = file.tokens.get(token_index)?.as_str();
+    Some(if raw == CRATE_PROPERTY_CHILDREN {
         sdf::ChildrenKey::PropertyChildren.as_str()
     } else {
         raw
-    }
+    })
 }
 
 /// Read `usdc` data from a file on disk.

@@ -50,7 +50,18 @@ pub struct CrateFile<R> {
     pub paths: Vec<sdf::Path>,
     // All specs.
     pub specs: Vec<Spec>,
+    /// How deep [`CrateFile::value`] is in nested values (dictionaries, time samples): file
+    /// offsets can nest them without end.
+    value_depth: usize,
 }
+
+/// The deepest nesting of values (dictionaries in dictionaries, time samples) read: each level
+/// is a few stack frames, and a dictionary pointing at itself recursed until the stack overflowed.
+const MAX_VALUE_DEPTH: usize = 64;
+
+/// The most bytes LZ4 can expand one compressed byte into (a block of a repeated byte): no count
+/// in a crate file can exceed its size times this.
+const MAX_LZ4_EXPANSION: u64 = 255;
 
 impl<R> CrateFile<R> {
     /// Returns file's version extracted from bootstrap header.
@@ -75,6 +86,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
             fieldsets: Vec::new(),
             paths: Vec::new(),
             specs: Vec::new(),
+            value_depth: 0,
         };
 
         file.read_sections().context("Unable to read sections")?;
@@ -163,11 +175,11 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
     fn read_sections(&mut self) -> Result<()> {
         self.set_position(self.bootstrap.toc_offset)?;
 
-        let count = self.reader.read_count()?;
+        let count = self.read_count_checked()?;
         ensure!(count > 0, "Crate file has no sections");
         ensure!(count < 64, "Suspiciously large number of sections: {count}");
 
-        self.sections = self.reader.read_vec::<Section>(count)?;
+        self.sections = self.read_vec_checked::<Section>(count)?;
 
         Ok(())
     }
@@ -182,12 +194,12 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         let file_ver = self.version();
 
         // Read the number of tokens.
-        let count = self.reader.read_count()?;
+        let count = self.read_count_checked()?;
 
         self.tokens = if file_ver < version(0, 4, 0) {
-            todo!("Support TOKENS reader for < 0.4.0 files");
+            bail!("not supported: TOKENS reader for < 0.4.0 files")
         } else {
-            let uncompressed_size = self.reader.read_count()?;
+            let uncompressed_size = self.read_count_checked()?;
             let mut buffer = self.read_compressed(uncompressed_size)?;
 
             ensure!(
@@ -239,13 +251,13 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
         self.set_position(section.start)?;
 
-        let count = self.reader.read_count()?;
+        let count = self.read_count_checked()?;
         ensure!(
             count < 128 * 1024 * 1024,
             "Suspiciously large number of strings: {count}"
         );
 
-        let strings = self.reader.read_vec::<u32>(count)?;
+        let strings = self.read_vec_checked::<u32>(count)?;
 
         // These are indices, so convert to usize for convenience.
         self.strings = strings.into_iter().map(|offset| offset as usize).collect::<Vec<_>>();
@@ -263,9 +275,9 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         let file_ver = self.version();
 
         self.fields = if file_ver < version(0, 4, 0) {
-            todo!("Support FIELDS reader before < 0.4.0")
+            bail!("not supported: FIELDS reader before < 0.4.0")
         } else {
-            let field_count = self.reader.read_count()?;
+            let field_count = self.read_count_checked()?;
 
             // Compressed fields in 0.4.0.
             let indices = self.read_encoded_ints(field_count)?;
@@ -297,9 +309,9 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         let file_ver = self.version();
 
         self.fieldsets = if file_ver < version(0, 4, 0) {
-            todo!("Support FIELDSETS reader for < 0.4.0 files");
+            bail!("not supported: FIELDSETS reader for < 0.4.0 files")
         } else {
-            let count = self.reader.read_count()?;
+            let count = self.read_count_checked()?;
 
             let decoded = self.read_encoded_ints::<u32>(count)?;
 
@@ -328,12 +340,12 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         let file_ver = self.version();
 
         if file_ver == version(0, 0, 1) {
-            todo!("Support PATHS reader for == 0.0.1 files");
+            bail!("not supported: PATHS reader for == 0.0.1 files")
         } else if file_ver < version(0, 4, 0) {
-            todo!("Support PATHS reader for < 0.4.0 files");
+            bail!("not supported: PATHS reader for < 0.4.0 files")
         } else {
             // Read # of paths.
-            let path_count = self.reader.read_count()?;
+            let path_count = self.read_count_checked()?;
             self.paths = vec![sdf::Path::default(); path_count];
 
             self.read_compressed_paths()?;
@@ -345,7 +357,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
     /// Read compressed paths.
     fn read_compressed_paths(&mut self) -> Result<()> {
         // Read number of encoded paths.
-        let count: usize = self.reader.read_count()?;
+        let count: usize = self.read_count_checked()?;
 
         // Read compressed data.
 
@@ -387,23 +399,46 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
             return Ok(());
         }
 
+        ensure!(
+            element_token_indexes.len() == path_indexes.len() && jumps.len() == path_indexes.len(),
+            "path tables of different lengths"
+        );
+        // Every entry is decoded once in a valid file: jumps that lead back into decoded
+        // entries made the walk exponential. The paths' text together is bounded as other
+        // decompressed data is, since deep nesting makes it grow as the square of the depth.
+        let mut visits = 0;
+        let mut text = 0u64;
+        let most_text = self.stream_len()?.saturating_mul(MAX_LZ4_EXPANSION);
         let mut pending = vec![(0usize, sdf::Path::default())];
 
         while let Some((mut current_index, mut parent_path)) = pending.pop() {
             loop {
                 let index = current_index;
                 current_index += 1;
+                visits += 1;
+                ensure!(
+                    index < path_indexes.len() && visits <= path_indexes.len(),
+                    "path tree entry {index} out of order ({} entries)",
+                    path_indexes.len()
+                );
+                let path_index = path_indexes[index] as usize;
+                ensure!(
+                    path_index < self.paths.len(),
+                    "path index {path_index} is outside the {} paths",
+                    self.paths.len()
+                );
 
                 if parent_path.is_empty() {
                     parent_path = sdf::Path::new("/")?;
+                    ensure!(index < self.paths.len(), "no room for the root path");
                     self.paths[index] = parent_path.clone();
                 } else {
                     let token_index = element_token_indexes[index];
                     let is_prim_property_path = token_index < 0;
                     let token_index = token_index.unsigned_abs() as usize;
-                    let element_token = self.tokens[token_index].as_str();
+                    let element_token = Self::lookup(&self.tokens, token_index, "token")?.as_str();
 
-                    self.paths[path_indexes[index] as usize] = if is_prim_property_path {
+                    self.paths[path_index] = if is_prim_property_path {
                         parent_path.append_property(element_token)?
                     } else if element_token.starts_with('{') {
                         // Variant segments are appended directly without a separator
@@ -412,6 +447,11 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                     } else {
                         parent_path.append_path(element_token)?
                     };
+                    text += self.paths[path_index].as_str().len() as u64;
+                    ensure!(
+                        text <= most_text,
+                        "the paths' text exceeds what the file can hold (nested too deep)"
+                    );
                 }
 
                 let has_child = jumps[index] > 0 || jumps[index] == -1;
@@ -419,14 +459,14 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
                 if has_child {
                     if has_sibling {
-                        let sibling_index = index + jumps[index] as usize;
+                        let sibling_index = index.saturating_add(jumps[index] as usize);
                         // Siblings share this node's parent; defer the subtree.
                         pending.push((sibling_index, parent_path.clone()));
                     }
 
                     // Descend into the child (the next sequential entry) under
                     // this node's path.
-                    parent_path = self.paths[path_indexes[index] as usize].clone();
+                    parent_path = self.paths[path_index].clone();
                 }
 
                 if !has_child && !has_sibling {
@@ -448,13 +488,13 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         let file_ver = self.version();
 
         self.specs = if file_ver == version(0, 0, 1) {
-            todo!("Support SPECS reader for == 0.0.1 files");
+            bail!("not supported: SPECS reader for == 0.0.1 files")
         } else if file_ver < version(0, 4, 0) {
-            todo!("Support SPECS reader for < 0.4.0 files");
+            bail!("not supported: SPECS reader for < 0.4.0 files")
         } else {
             // Version 0.4.0 specs are compressed
 
-            let spec_count = self.reader.read_count()?;
+            let spec_count = self.read_count_checked()?;
 
             let path_indexes = self.read_encoded_ints::<u32>(spec_count)?;
             let fieldset_indexes = self.read_encoded_ints::<u32>(spec_count)?;
@@ -478,14 +518,56 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         Ok(())
     }
 
+    /// The stream's length in bytes.
+    fn stream_len(&mut self) -> Result<u64> {
+        let position = self.reader.stream_position()?;
+        let len = self.reader.seek(io::SeekFrom::End(0))?;
+        self.reader.seek(io::SeekFrom::Start(position))?;
+        Ok(len)
+    }
+
+    /// A count read from the file, refused when more than the whole file could decompress to:
+    /// corrupt counts reserved petabytes (an abort) or ran loops for hours.
+    fn read_count_checked(&mut self) -> Result<usize> {
+        let count = self.reader.read_count()?;
+        let len = self.stream_len()?;
+        ensure!(
+            (count as u64) <= len.saturating_mul(MAX_LZ4_EXPANSION),
+            "a count of {count} is more than a {len}-byte file can hold"
+        );
+        Ok(count)
+    }
+
+    /// `count` values read in place, refused before allocating when the rest of the file is
+    /// shorter than they are.
+    fn read_vec_checked<T: Default + NoUninit + AnyBitPattern>(&mut self, count: usize) -> Result<Vec<T>> {
+        let bytes = count
+            .checked_mul(mem::size_of::<T>())
+            .with_context(|| format!("{count} values overflow"))?;
+        let position = self.reader.stream_position()?;
+        let remaining = self.stream_len()?.saturating_sub(position);
+        ensure!(
+            bytes as u64 <= remaining,
+            "{count} values need {bytes} bytes, {remaining} are left in the file"
+        );
+        self.reader.read_vec(count)
+    }
+
+    /// `index` in one of the file's tables, or an error naming the table.
+    fn lookup<'t, T>(table: &'t [T], index: usize, what: &str) -> Result<&'t T> {
+        table
+            .get(index)
+            .with_context(|| format!("{what} index {index} is outside the {} in the file", table.len()))
+    }
+
     /// Find section by name.
     pub fn find_section(&self, name: &str) -> Option<&Section> {
         self.sections.iter().find(|s| s.name() == name)
     }
 
-    fn resolve_string(&self, string_index: u32) -> String {
-        let token = self.strings[string_index as usize];
-        self.tokens[token].clone()
+    fn resolve_string(&self, string_index: u32) -> Result<String> {
+        let token = *Self::lookup(&self.strings, string_index as usize, "string")?;
+        Ok(Self::lookup(&self.tokens, token, "token")?.clone())
     }
 
     fn set_position(&mut self, position: u64) -> Result<()> {
@@ -516,7 +598,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
     fn read_token(&mut self, value: ValueRep) -> Result<String> {
         let index: u64 = self.unpack_value(value)?;
-        let value = self.tokens[index as usize].clone();
+        let value = Self::lookup(&self.tokens, index as usize, "token")?.clone();
 
         Ok(value)
     }
@@ -530,9 +612,9 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
     fn read_asset_path(&mut self, value: ValueRep) -> Result<String> {
         let index = self.unpack_value::<u32>(value)?;
         if value.is_inlined() {
-            Ok(self.tokens[index as usize].clone())
+            Ok(Self::lookup(&self.tokens, index as usize, "token")?.clone())
         } else {
-            Ok(self.resolve_string(index))
+            self.resolve_string(index)
         }
     }
 
@@ -546,11 +628,15 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
     /// - `estimated_size`: Size enough to hold uncompressed data.
     fn read_compressed<T: Default + NoUninit + AnyBitPattern>(&mut self, estimated_count: usize) -> Result<Vec<T>> {
         // Read data to memory.
-        let compressed_size = self.reader.read_count()?;
-        let mut input = vec![0_u8; compressed_size];
-        self.reader.read_exact(&mut input)?;
+        let compressed_size = self.read_count_checked()?;
+        let input = self.read_vec_checked::<u8>(compressed_size)?;
 
-        // Decompress to output buffer.
+        // Decompress to output buffer, no larger than the input can expand to.
+        let most = (compressed_size as u64).saturating_mul(MAX_LZ4_EXPANSION);
+        ensure!(
+            (estimated_count as u64).saturating_mul(mem::size_of::<T>() as u64) <= most,
+            "{estimated_count} values cannot come from {compressed_size} compressed bytes"
+        );
         let mut output = vec![T::default(); estimated_count];
         let actual_size = decompress_lz4(&input, cast_slice_mut(&mut output))?;
 
@@ -648,7 +734,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         if compressed {
             self.read_encoded_ints(count)
         } else {
-            self.reader.read_vec(count)
+            self.read_vec_checked(count)
         }
     }
 
@@ -669,12 +755,14 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                 // straight out of LZ4.
                 b'i' => {
                     let ints: Vec<i32> = self.read_encoded_ints(count)?;
-                    ints.into_iter().map(|i| cast(i).unwrap()).collect()
+                    ints.into_iter()
+                        .map(|i| cast(i).context("an integer-coded float out of range"))
+                        .collect::<Result<_>>()?
                 }
                 // Lookup table and indexes
                 b't' => {
                     let lut_size = self.reader.read_pod::<u32>()? as usize;
-                    let lut: Vec<T> = self.reader.read_vec(lut_size)?;
+                    let lut: Vec<T> = self.read_vec_checked(lut_size)?;
 
                     let indexes: Vec<u32> = self.read_encoded_ints(count)?;
                     ensure!(
@@ -682,17 +770,15 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                         "Read invalid number of indexes to decompress doubles array"
                     );
 
-                    let mut output = vec![T::zero(); count];
-                    for (i, index) in indexes.into_iter().enumerate() {
-                        output[i] = lut[index as usize];
-                    }
-
-                    output
+                    indexes
+                        .into_iter()
+                        .map(|index| Self::lookup(&lut, index as usize, "lookup table").copied())
+                        .collect::<Result<_>>()?
                 }
                 _ => bail!("Invalid compressed double array code: {code}"),
             }
         } else {
-            self.reader.read_vec(count)?
+            self.read_vec_checked(count)?
         };
 
         Ok(vec)
@@ -742,43 +828,39 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
     /// Reads a count-prefixed vector of `u32` indices and maps each through
     /// `lookup` to produce the element value.
-    fn read_indexed_vec<T>(&mut self, lookup: impl Fn(&Self, usize) -> T) -> Result<Vec<T>> {
-        let count = self.reader.read_count()?;
-        let indices = self.reader.read_vec::<u32>(count)?;
+    fn read_indexed_vec<T>(&mut self, lookup: impl Fn(&Self, usize) -> Result<T>) -> Result<Vec<T>> {
+        let count = self.read_count_checked()?;
+        let indices = self.read_vec_checked::<u32>(count)?;
 
-        Ok(indices.into_iter().map(|index| lookup(self, index as usize)).collect())
+        indices.into_iter().map(|index| lookup(self, index as usize)).collect()
     }
 
     fn read_string_vec(&mut self) -> Result<Vec<String>> {
-        self.read_indexed_vec(|file, index| file.tokens[file.strings[index]].clone())
+        self.read_indexed_vec(|file, index| file.resolve_string(index as u32))
     }
 
     fn read_token_vec(&mut self) -> Result<Vec<String>> {
-        self.read_indexed_vec(|file, index| file.tokens[index].clone())
+        self.read_indexed_vec(|file, index| Ok(Self::lookup(&file.tokens, index, "token")?.clone()))
     }
 
     fn read_path_vec(&mut self) -> Result<Vec<sdf::Path>> {
-        self.read_indexed_vec(|file, index| file.paths[index].clone())
+        self.read_indexed_vec(|file, index| Ok(Self::lookup(&file.paths, index, "path")?.clone()))
     }
 
     /// Reads a count-prefixed vector of POD values.
     fn read_pod_vec<T: Default + NoUninit + AnyBitPattern>(&mut self) -> Result<Vec<T>> {
-        let count = self.reader.read_count()?;
-        self.reader.read_vec(count)
+        let count = self.read_count_checked()?;
+        self.read_vec_checked(count)
     }
 
     fn read_string(&mut self) -> Result<String> {
         let index = self.reader.read_pod::<u32>()?;
-        let string = self.resolve_string(index);
-
-        Ok(string)
+        self.resolve_string(index)
     }
 
     fn read_path(&mut self) -> Result<sdf::Path> {
         let index = self.reader.read_pod::<u32>()?;
-        let path = self.paths[index as usize].clone();
-
-        Ok(path)
+        Ok(Self::lookup(&self.paths, index as usize, "path")?.clone())
     }
 
     fn read_reference(&mut self) -> Result<sdf::Reference> {
@@ -838,7 +920,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
     /// depth (a guard or an explicit stack), as `build_compressed_paths` does
     /// for wide path trees.
     fn read_custom_data(&mut self) -> Result<HashMap<String, Value>> {
-        let mut count = self.reader.read_count()?;
+        let mut count = self.read_count_checked()?;
         let mut dict = HashMap::default();
 
         while count > 0 {
@@ -881,7 +963,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         if count == 0 {
             return Ok(Vec::default());
         }
-        self.reader.read_vec::<U>(count)
+        self.read_vec_checked::<U>(count)
     }
 
     fn read_vec_array<T: Default + NoUninit + AnyBitPattern, const N: usize>(
@@ -898,7 +980,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
             return Ok(Vec::default());
         }
 
-        let flat: Vec<T> = self.reader.read_vec(count * N)?;
+        let flat: Vec<T> = self.read_vec_checked(count.checked_mul(N).context("array size overflows")?)?;
 
         // Reinterpret the flat vec as a vec of fixed-size arrays. `chunks_exact(N)`
         // always yields slices of exactly N elements, so `try_into` cannot fail.
@@ -911,6 +993,17 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
     }
 
     pub fn value(&mut self, value: ValueRep) -> Result<sdf::Value> {
+        ensure!(
+            self.value_depth < MAX_VALUE_DEPTH,
+            "values nested more than {MAX_VALUE_DEPTH} deep"
+        );
+        self.value_depth += 1;
+        let result = self.value_at_depth(value);
+        self.value_depth -= 1;
+        result
+    }
+
+    fn value_at_depth(&mut self, value: ValueRep) -> Result<sdf::Value> {
         let ty = value.ty()?;
         ensure!(ty != Type::Invalid, "Invalid value type");
 
@@ -996,7 +1089,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                 ensure!(!value.is_array());
 
                 let string_index = self.unpack_value::<u32>(value)?;
-                sdf::Value::String(self.resolve_string(string_index))
+                sdf::Value::String(self.resolve_string(string_index)?)
             }
             Type::AssetPath if value.is_array() => {
                 // Asset arrays (`asset[]`, e.g. value-clip `assetPaths`) are
@@ -1009,11 +1102,11 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
             Type::Token if value.is_array() => {
                 let (count, _) = self.unpack_array_len(value, ArrayKind::Other)?;
-                let indices = self.reader.read_vec::<u32>(count)?;
+                let indices = self.read_vec_checked::<u32>(count)?;
                 let tokens = indices
                     .into_iter()
-                    .map(|i| self.tokens[i as usize].as_str().into())
-                    .collect();
+                    .map(|i| Ok(Self::lookup(&self.tokens, i as usize, "token")?.as_str().into()))
+                    .collect::<Result<_>>()?;
 
                 sdf::Value::TokenVec(tokens)
             }
@@ -1203,7 +1296,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                 ensure!(!value.is_inlined());
 
                 let list = self.read_list_op(value, |file: &mut Self| {
-                    let count = file.reader.read_count()?;
+                    let count = file.read_count_checked()?;
                     let mut vec = Vec::with_capacity(count);
 
                     for _ in 0..count {
@@ -1286,8 +1379,8 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
                 self.set_position(value.payload())?;
 
-                let count = self.reader.read_count()?;
-                let vec = self.reader.read_vec(count)?;
+                let count = self.read_count_checked()?;
+                let vec = self.read_vec_checked(count)?;
 
                 sdf::Value::LayerOffsetVec(vec)
             }
@@ -1305,7 +1398,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
             Type::PayloadListOp => {
                 let list = self.read_list_op(value, |file: &mut Self| {
-                    let count = file.reader.read_count()?;
+                    let count = file.read_count_checked()?;
                     let mut vec = Vec::with_capacity(count);
                     for _ in 0..count {
                         let payload = file.read_payload()?;
@@ -1325,7 +1418,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
                 self.set_position(value.payload())?;
 
-                let count = self.reader.read_count()?;
+                let count = self.read_count_checked()?;
                 let mut map = HashMap::with_capacity(count);
 
                 for _ in 0..count {
@@ -1366,10 +1459,10 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
                 self.apply_recursive_offset()?;
 
-                let count = self.reader.read_count()?;
+                let count = self.read_count_checked()?;
                 ensure!(count == times.len(), "Invalid time samples count");
 
-                let value_reps = self.reader.read_vec::<ValueRep>(count)?;
+                let value_reps = self.read_vec_checked::<ValueRep>(count)?;
                 debug_assert_eq!(value_reps.len(), count);
 
                 let values = value_reps
@@ -1377,7 +1470,8 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                     .map(|value| self.value(value))
                     .collect::<Result<Vec<_>>>()?;
 
-                let samples = times.into_iter().zip(values).collect();
+                let mut samples = times.into_iter().zip(values).collect();
+                sdf::sort_time_samples(&mut samples);
 
                 sdf::Value::TimeSamples(samples)
             }
@@ -1429,13 +1523,13 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
             Type::Relocates => {
                 ensure!(!value.is_inlined());
                 self.set_position(value.payload())?;
-                let count = self.reader.read_count()?;
+                let count = self.read_count_checked()?;
                 let mut pairs = Vec::with_capacity(count);
                 for _ in 0..count {
                     let src_idx: u32 = self.reader.read_pod()?;
                     let tgt_idx: u32 = self.reader.read_pod()?;
-                    let src = self.paths[src_idx as usize].clone();
-                    let tgt = self.paths[tgt_idx as usize].clone();
+                    let src = Self::lookup(&self.paths, src_idx as usize, "path")?.clone();
+                    let tgt = Self::lookup(&self.paths, tgt_idx as usize, "path")?.clone();
                     pairs.push((src, tgt));
                 }
                 sdf::Value::Relocates(pairs)
@@ -1498,7 +1592,7 @@ fn decompress_lz4(mut input: &[u8], output: &mut [u8]) -> Result<usize> {
         // Decompress chunk by chunk.
         // See https://github.com/PixarAnimationStudios/OpenUSD/blob/0b18ad3f840c24eb25e16b795a5b0821cf05126e/pxr/base/tf/fastCompression.cpp#L125
 
-        todo!("Support lz4 chunked decompression")
+        bail!("not supported: lz4 chunked decompression")
     }
 }
 
