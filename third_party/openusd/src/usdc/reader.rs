@@ -291,7 +291,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                 .map(|(index, value)| Field::new(*index, *value))
                 .collect();
 
-            debug_assert_eq!(fields.len(), field_count);
+            ensure!(fields.len() == field_count, "fields: {} decoded, {} expected", fields.len(), field_count);
 
             fields
         };
@@ -322,7 +322,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                 .map(|i| if i == INVALID_INDEX { None } else { Some(i as usize) })
                 .collect::<Vec<_>>();
 
-            debug_assert_eq!(sets.len(), count);
+            ensure!(sets.len() == count, "sets: {} decoded, {} expected", sets.len(), count);
 
             sets
         };
@@ -362,13 +362,13 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         // Read compressed data.
 
         let path_indexes = self.read_encoded_ints::<u32>(count)?;
-        debug_assert_eq!(path_indexes.len(), count);
+        ensure!(path_indexes.len() == count, "path indexes: {} decoded, {} expected", path_indexes.len(), count);
 
         let element_token_indexes = self.read_encoded_ints::<i32>(count)?;
-        debug_assert_eq!(element_token_indexes.len(), count);
+        ensure!(element_token_indexes.len() == count, "element token indexes: {} decoded, {} expected", element_token_indexes.len(), count);
 
         let jumps = self.read_encoded_ints::<i32>(count)?;
-        debug_assert_eq!(jumps.len(), count);
+        ensure!(jumps.len() == count, "jumps: {} decoded, {} expected", jumps.len(), count);
 
         self.build_compressed_paths(&path_indexes, &element_token_indexes, &jumps)?;
 
@@ -659,7 +659,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         let buffer = self.read_compressed::<u8>(estimated_size)?;
 
         let ints = coding::decode_ints(buffer.as_slice(), count)?;
-        debug_assert_eq!(ints.len(), count);
+        ensure!(ints.len() == count, "ints: {} decoded, {} expected", ints.len(), count);
 
         Ok(ints)
     }
@@ -668,7 +668,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
 
     // Implements various logic and compatibility checks to figure out the array length and whether it's compressed.
     fn unpack_array_len(&mut self, value: ValueRep, kind: ArrayKind) -> Result<(usize, bool)> {
-        debug_assert!(!value.is_inlined());
+        ensure!(!value.is_inlined(), "an array value marked inlined");
 
         // Empty array.
         if value.payload() == 0 {
@@ -702,7 +702,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
             ArrayKind::Other => {
                 // Fallback to uncompressed.
                 // See https://github.com/PixarAnimationStudios/OpenUSD/blob/0b18ad3f840c24eb25e16b795a5b0821cf05126e/pxr/usd/usd/crateFile.cpp#L1868
-                debug_assert!(!value.is_compressed());
+                // A compressed flag here is read as uncompressed, as C++ USD does.
                 compressed = false;
             }
         }
@@ -958,7 +958,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
     /// the on-disk element — safe for all gf vec types since they are
     /// `#[repr(C)]` and `bytemuck::Pod`.
     fn read_gf_array<U: Default + NoUninit + AnyBitPattern>(&mut self, value: ValueRep) -> Result<Vec<U>> {
-        debug_assert!(value.is_array() && !value.is_compressed());
+        ensure!(value.is_array(), "an array value not marked as one");
         let (count, _) = self.unpack_array_len(value, ArrayKind::Other)?;
         if count == 0 {
             return Ok(Vec::default());
@@ -970,8 +970,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
         &mut self,
         value: ValueRep,
     ) -> Result<Vec<[T; N]>> {
-        debug_assert!(value.is_array());
-        debug_assert!(!value.is_compressed());
+        ensure!(value.is_array(), "an array value not marked as one");
 
         let (count, _) = self.unpack_array_len(value, ArrayKind::Other)?;
 
@@ -1463,7 +1462,7 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                 ensure!(count == times.len(), "Invalid time samples count");
 
                 let value_reps = self.read_vec_checked::<ValueRep>(count)?;
-                debug_assert_eq!(value_reps.len(), count);
+                ensure!(value_reps.len() == count, "value reps: {} decoded, {} expected", value_reps.len(), count);
 
                 let values = value_reps
                     .into_iter()
