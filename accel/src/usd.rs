@@ -265,10 +265,10 @@ impl UsdFile {
 
     /// The stage composed, and the paths of the prims its default traversal reaches, within
     /// the limits: the library is given files only through [`GuardedResolver`], its
-    /// traversal stops at [`MAX_PRIM_DEPTH`] or when the prims reached would pass the memory
+    /// traversal (through instance `proxies` or not) stops at [`MAX_PRIM_DEPTH`] or when the prims reached would pass the memory
     /// limit, and every composition error (a reference, payload, sublayer or prim that is
     /// missing or cannot be read) is an error.
-    fn compose(&self, limits: &Limits) -> Result<(usd::Stage, Vec<sdf::Path>)> {
+    fn compose(&self, limits: &Limits, proxies: bool) -> Result<(usd::Stage, Vec<sdf::Path>)> {
         let path = &self.path;
         // The usual messages for a missing file or a folder, before openusd's own.
         let io = |source| crate::Error::Io {
@@ -308,7 +308,7 @@ impl UsdFile {
         let mut stopped = None;
         stage
             .traverse_while(
-                usd::PrimPredicate::DEFAULT.with_instance_proxies(true),
+                usd::PrimPredicate::DEFAULT.with_instance_proxies(proxies),
                 |p| {
                     let depth = p.as_str().matches('/').count();
                     if depth > MAX_PRIM_DEPTH {
@@ -347,7 +347,10 @@ impl UsdFile {
     /// package), so that caches can key on their contents.
     pub fn files(&self) -> Result<Vec<PathBuf>> {
         self.contained(|| {
-            let (stage, _) = self.compose(&Limits::default())?;
+            // The prims as authored: an instance composes its arcs (loading their layers)
+            // without its prototype being walked once per instance, which nested instancing
+            // multiplies (the reading itself is bounded by the memory limit it is given).
+            let (stage, _) = self.compose(&Limits::default(), false)?;
             let mut files = vec![self.path.clone()];
             let root = std::fs::canonicalize(&self.path).ok();
             for id in stage.layer_identifiers() {
@@ -374,7 +377,7 @@ impl UsdFile {
     fn read_contained(&self, limits: &Limits) -> Result<HairGeometry> {
         let path = &self.path;
         let fail = |reason: String| format_error(path, reason);
-        let (stage, paths) = self.compose(limits)?;
+        let (stage, paths) = self.compose(limits, true)?;
         let metadata = |field: &str| {
             stage
                 .stage_metadata(field)
