@@ -131,7 +131,7 @@ pub fn run(args: FarmArgs) -> Result<()> {
     if dir.exists() && !dir.is_dir() {
         bail!(
             "--out {}: exists and is not a folder (the pieces and the merged image go in it)",
-            dir.display()
+            args.out.as_deref().unwrap_or(&dir).display()
         );
     }
     let tress = match &args.tress {
