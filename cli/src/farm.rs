@@ -39,8 +39,9 @@ pub struct FarmArgs {
     /// Integrator override, passed to every job (see `tress render --integrator`).
     #[arg(long)]
     pub integrator: Option<String>,
-    /// Worker threads per job (default: all cores of the machine running it).
-    #[arg(long)]
+    /// Worker threads per job (default: all cores of the machine running it), checked as
+    /// `tress render --threads` checks it on this machine.
+    #[arg(long, value_parser = crate::args::parse_threads)]
     pub threads: Option<usize>,
     /// Also write the alpha channel (passed to every job; see `tress render --alpha`).
     #[arg(long)]
@@ -126,7 +127,18 @@ pub fn run(args: FarmArgs) -> Result<()> {
             .clone()
             .unwrap_or_else(|| PathBuf::from(format!("{stem}-farm"))),
     );
+    // Every job would fail on what is wrong here: refuse it before printing them.
+    if dir.exists() && !dir.is_dir() {
+        bail!(
+            "--out {}: exists and is not a folder (the pieces and the merged image go in it)",
+            args.out.as_deref().unwrap_or(&dir).display()
+        );
+    }
     let tress = match &args.tress {
+        // A path must name an executable file; a bare name is looked up where the jobs run.
+        Some(t) if t.contains('/') && !is_executable(Path::new(t)) => {
+            bail!("--tress {t}: not an executable file")
+        }
         Some(t) => shell_quote(t),
         None => utf8(&std::env::current_exe().context("finding the tress executable")?)?,
     };
@@ -204,6 +216,20 @@ fn job_options(args: &FarmArgs, defines: &Defines) -> String {
         common.push(format!("--aov {}", names.join(",")));
     }
     common.iter().map(|c| format!(" {c}")).collect::<String>()
+}
+
+/// Whether `path` is a regular file someone may execute.
+fn is_executable(path: &Path) -> bool {
+    let Ok(meta) = std::fs::metadata(path) else {
+        return false;
+    };
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        meta.is_file() && meta.permissions().mode() & 0o111 != 0
+    }
+    #[cfg(not(unix))]
+    meta.is_file()
 }
 
 /// Decimal digits of `n` (at least 1), for zero-padded names that sort in order.

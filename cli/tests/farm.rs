@@ -443,6 +443,23 @@ fn bad_farm_requests_are_refused() {
         (vec!["--spp", "0"], "spp must be at least 1"),
         (vec!["--integrator", "bogus"], "bogus"),
         (vec!["--aov", "depth,bogus"], "unknown AOV 'bogus'"),
+        // Forwarded to every job unchecked before: each job would have failed.
+        (
+            vec!["--threads", "100000"],
+            "100000 worker threads: at most",
+        ),
+        (
+            vec!["--out", "scene.ron"],
+            "--out scene.ron: exists and is not a folder",
+        ),
+        (
+            vec!["--tress", "./nowhere/tress"],
+            "--tress ./nowhere/tress: not an executable file",
+        ),
+        (
+            vec!["--tress", "./scene.ron"],
+            "--tress ./scene.ron: not an executable file",
+        ),
     ] {
         let mut a = vec!["farm", "scene.ron"];
         a.extend_from_slice(&args);

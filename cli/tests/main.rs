@@ -9,3 +9,4 @@ mod hardening;
 mod log_format;
 mod outputs;
 mod study;
+mod usd;

@@ -144,6 +144,18 @@ impl PbrtFile {
                 format!("ObjectBegin \"{}\" without ObjectEnd", d.name),
             ));
         }
+        // A scope left open is a file cut short or an end forgotten.
+        if let Some(scope) = reader.saved.last() {
+            let end = match scope.kind {
+                ScopeKind::Attribute => "AttributeEnd",
+                _ => "TransformEnd",
+            };
+            return Err(at(
+                &scope.path,
+                scope.pos,
+                format!("{} without {end}", scope.kind.begin()),
+            ));
+        }
         reader.close_strand();
         reader.instantiate()?;
         let mut hair = reader.hair;
@@ -374,6 +386,36 @@ impl Default for GraphicsState {
     }
 }
 
+/// What opened a scope that [`CurveReader::saved`] holds the state from before, which the
+/// matching end restores: an end of another kind (`ObjectBegin` … `AttributeEnd`) restored the
+/// wrong state without a word.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum ScopeKind {
+    Attribute,
+    Transform,
+    Object,
+    Import,
+}
+
+impl ScopeKind {
+    fn begin(self) -> &'static str {
+        match self {
+            ScopeKind::Attribute => "AttributeBegin",
+            ScopeKind::Transform => "TransformBegin",
+            ScopeKind::Object => "ObjectBegin",
+            ScopeKind::Import => "Import",
+        }
+    }
+}
+
+/// A scope open, with where it began.
+struct Scope {
+    kind: ScopeKind,
+    state: GraphicsState,
+    path: PathBuf,
+    pos: Pos,
+}
+
 /// An object being defined (between `ObjectBegin` and `ObjectEnd`).
 struct Definition {
     name: String,
@@ -398,7 +440,7 @@ struct CurveReader {
     /// Folder that relative `Include`/`Import` paths are resolved against.
     base: PathBuf,
     state: GraphicsState,
-    saved: Vec<GraphicsState>,
+    saved: Vec<Scope>,
     /// `CoordinateSystem` names (and "camera").
     named: HashMap<String, DMat4>,
     defining: Option<Definition>,
@@ -503,17 +545,17 @@ impl CurveReader {
         };
         match keyword.text {
             "AttributeBegin" | "TransformBegin" => {
-                self.saved.push(self.state.clone());
+                let kind = if keyword.text == "AttributeBegin" {
+                    ScopeKind::Attribute
+                } else {
+                    ScopeKind::Transform
+                };
+                self.open_scope(kind, path, keyword.pos);
                 // Curves on either side of a scope boundary are separate strands.
                 self.strand_open = false;
             }
-            "AttributeEnd" | "TransformEnd" => {
-                self.state = self
-                    .saved
-                    .pop()
-                    .ok_or_else(|| st.err(format!("{} without a matching begin", keyword.text)))?;
-                self.strand_open = false;
-            }
+            "AttributeEnd" => self.close_scope(ScopeKind::Attribute, path, keyword)?,
+            "TransformEnd" => self.close_scope(ScopeKind::Transform, path, keyword)?,
             "Identity" | "Translate" | "Scale" | "Rotate" | "LookAt" | "ConcatTransform"
             | "Transform" | "CoordinateSystem" | "CoordSysTransform" | "Camera"
             | "ActiveTransform" | "WorldBegin" => self.transform_statement(&st)?,
@@ -585,6 +627,17 @@ impl CurveReader {
                 let v = st.numbers(16)?;
                 // pbrt lists the matrix column by column (translation in elements 12–14).
                 let m = DMat4::from_cols_slice(&v);
+                // Curves are mapped as points by affine transforms: a projective bottom row
+                // was dropped without a word.
+                let row = m.row(3);
+                let size = v.iter().fold(1.0f64, |a, b| a.max(b.abs()));
+                if (row - glam::DVec4::W).abs().max_element() > 1e-9 * size {
+                    return Err(st.err(format!(
+                        "{}: a projective matrix (its last row is {} {} {} {}, not 0 0 0 1): \
+                         curves take affine transforms only",
+                        keyword.text, row.x, row.y, row.z, row.w
+                    )));
+                }
                 self.transform(m, keyword.text == "Transform");
             }
             "CoordinateSystem" => {
@@ -644,7 +697,7 @@ impl CurveReader {
                     )));
                 }
                 // As in pbrt, a definition is an attribute scope.
-                self.saved.push(self.state.clone());
+                self.open_scope(ScopeKind::Object, path, keyword.pos);
                 self.close_strand();
                 let outside = std::mem::replace(&mut self.hair, HairGeometry::empty(&name));
                 self.defining = Some(Definition {
@@ -656,19 +709,15 @@ impl CurveReader {
                 self.strand_open = false;
             }
             "ObjectEnd" => {
-                let d = self
-                    .defining
-                    .take()
-                    .ok_or_else(|| err("ObjectEnd without ObjectBegin".into()))?;
+                if self.defining.is_none() {
+                    return Err(err("ObjectEnd without ObjectBegin".into()));
+                }
+                self.close_scope(ScopeKind::Object, path, *keyword)?;
+                let d = self.defining.take().expect("checked above");
                 self.close_strand();
                 let object = std::mem::replace(&mut self.hair, d.outside);
                 self.object_points += object.points.len();
                 self.objects.insert(d.name, object);
-                self.state = self
-                    .saved
-                    .pop()
-                    .ok_or_else(|| err("ObjectEnd without a matching begin".into()))?;
-                self.strand_open = false;
             }
             "ObjectInstance" => {
                 let name = st.name()?.to_owned();
@@ -715,14 +764,57 @@ impl CurveReader {
         // An imported file's changes to the graphics state stay in it.
         let import = keyword.text == "Import";
         if import {
-            self.saved.push(self.state.clone());
+            self.open_scope(ScopeKind::Import, st.path, keyword.pos);
         }
-        let level = self.saved.len();
         self.read_file(&file, depth + 1)?;
         if import {
-            self.saved.truncate(level);
-            self.state = self.saved.pop().unwrap_or_default();
+            // Its scopes must close in it: pbrt-v4 reads an imported file on its own.
+            self.close_scope(ScopeKind::Import, st.path, st.keyword)?;
         }
+        self.strand_open = false;
+        Ok(())
+    }
+
+    /// Saves the graphics state for the end of a scope of `kind` begun at `pos` of `path`.
+    fn open_scope(&mut self, kind: ScopeKind, path: &Path, pos: Pos) {
+        self.saved.push(Scope {
+            kind,
+            state: self.state.clone(),
+            path: path.to_owned(),
+            pos,
+        });
+    }
+
+    /// Restores the state saved by the scope `end` closes, which must be of `kind`: an end
+    /// with no scope open, or closing a scope of another kind, is an error naming both.
+    fn close_scope(&mut self, kind: ScopeKind, path: &Path, end: Token) -> Result<()> {
+        let what = match kind {
+            ScopeKind::Import => "the end of the imported file".to_string(),
+            _ => end.text.to_string(),
+        };
+        match self.saved.last() {
+            Some(scope) if scope.kind == kind => {}
+            Some(scope) => {
+                return Err(at(
+                    path,
+                    end.pos,
+                    format!(
+                        "{what} closes the {} at {}:{}",
+                        scope.kind.begin(),
+                        scope.path.display(),
+                        scope.pos.line
+                    ),
+                ))
+            }
+            None => {
+                return Err(at(
+                    path,
+                    end.pos,
+                    format!("{what} without a matching {}", kind.begin()),
+                ))
+            }
+        }
+        self.state = self.saved.pop().expect("checked above").state;
         self.strand_open = false;
         Ok(())
     }
@@ -1552,7 +1644,7 @@ mod tests {
                 "widths must be finite and positive",
             ),
             ("Shape \"curve\" \"point3 P [0 0 0", "unterminated string"),
-            ("AttributeEnd", "without a matching begin"),
+            ("AttributeEnd", "AttributeEnd without a matching AttributeBegin"),
             ("Translate 1 2", "Translate takes 3 numbers, found 2"),
             ("Shape \"sphere\"", "no `Shape \"curve\"` statements (1 other shapes)"),
             ("Include \"missing.pbrt\"", "missing.pbrt"),
@@ -1580,6 +1672,89 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("hair.pbrt.gz") && e.contains("gzip"), "{e}");
+    }
+
+    /// Scopes close with the end of their own kind, in the file they opened in, and matrices
+    /// are affine: each of these was accepted without a word.
+    #[test]
+    fn mismatched_scopes_and_projective_matrices_are_named_where_they_stand() {
+        const CURVE: &str = "Shape \"curve\" \"point3 P\" [0 0 0 1 1 1 2 2 2 3 3 3]\n";
+        for (text, expect) in [
+            (
+                format!("ObjectBegin \"a\"\n{CURVE}AttributeEnd\nObjectEnd\nObjectInstance \"a\""),
+                "line 3, column 1: AttributeEnd closes the ObjectBegin at ",
+            ),
+            (
+                format!("AttributeBegin\nObjectBegin \"a\"\n{CURVE}AttributeEnd\nObjectEnd"),
+                "line 4, column 1: AttributeEnd closes the ObjectBegin at ",
+            ),
+            (
+                format!("AttributeBegin\n{CURVE}TransformEnd"),
+                "line 3, column 1: TransformEnd closes the AttributeBegin at ",
+            ),
+            (
+                format!("TransformBegin\n{CURVE}AttributeEnd"),
+                "AttributeEnd closes the TransformBegin",
+            ),
+            (
+                format!("AttributeBegin\nObjectBegin \"a\"\n{CURVE}ObjectEnd\n{CURVE}"),
+                "line 1, column 1: AttributeBegin without AttributeEnd",
+            ),
+            (
+                format!("{CURVE}TransformBegin\n{CURVE}"),
+                "line 2, column 1: TransformBegin without TransformEnd",
+            ),
+            (
+                format!("{CURVE}ObjectEnd"),
+                "line 2, column 1: ObjectEnd without ObjectBegin",
+            ),
+            (
+                format!("{CURVE}ObjectInstance \"nowhere\""),
+                "line 2, column 1: ObjectInstance \"nowhere\": no object of that name",
+            ),
+            (
+                format!("ConcatTransform [1 0 0 0  0 1 0 0  0 0 1 0.5  0 0 0 1]\n{CURVE}"),
+                "line 1, column 1: ConcatTransform: a projective matrix (its last row is 0 0 0.5 1",
+            ),
+            (
+                format!("Transform [2 0 0 0  0 2 0 0  0 0 2 0  0 0 0 2]\n{CURVE}"),
+                "Transform: a projective matrix",
+            ),
+        ] {
+            let e = read(&text).unwrap_err().to_string();
+            assert!(
+                e.contains("scene.pbrt") && e.contains(expect),
+                "{expect}: {e}"
+            );
+        }
+        // An imported file's scopes close in it.
+        for (inner, expect) in [
+            (
+                "AttributeBegin\n",
+                "the end of the imported file closes the AttributeBegin at ",
+            ),
+            ("AttributeEnd\n", "AttributeEnd closes the Import at "),
+        ] {
+            let e = read_files(
+                &format!("AttributeBegin\nImport \"part.pbrt\"\nAttributeEnd\n{CURVE}"),
+                &[("part.pbrt", inner)],
+            )
+            .unwrap_err()
+            .to_string();
+            assert!(e.contains(expect), "{expect}: {e}");
+        }
+        // Balanced scopes across an Include (text inserted in place) and an affine matrix
+        // read as before.
+        let g = read_files(
+            &format!("AttributeBegin\nInclude \"end.pbrt\"\nConcatTransform [1 0 0 0  0 1 0 0  0 0 1 0  5 0 0 1]\n{CURVE}"),
+            &[("end.pbrt", "AttributeEnd\n")],
+        )
+        .unwrap();
+        assert!(
+            close(g.points[0], Vec3::new(5.0, 0.0, 0.0)),
+            "{:?}",
+            g.points[0]
+        );
     }
 
     /// Columns are counted on from the last token, each byte once: a one-line curve of many

@@ -113,7 +113,7 @@ impl HairSource {
                     Some("data") => UscFile::new(path).read(),
                     Some("ply") => PlyFile::new(path).read(),
                     Some("pbrt") => PbrtFile::new(path).read(limits),
-                    Some("usda" | "usdc" | "usd") => UsdFile::new(path).read(),
+                    Some("usda" | "usdc" | "usd") => UsdFile::new(path).read(limits),
                     _ => Err(format_error(
                         path,
                         "unknown hair file type: expected a .hair, .tfx, .data, .ply, .pbrt, \

@@ -36,9 +36,28 @@ use crate::geometry::{HairAttribute, HairGeometry};
 use crate::pbrt::{bezier, bezier_segments, refinement_depth};
 use glam::{DMat3, DMat4, DVec3};
 use openusd::schemas::geom::{BasisCurves, Curves, Gprim, PointBased, Xform, Xformable};
-use openusd::{sdf, usd};
-use std::path::PathBuf;
+use openusd::{ar, sdf, usd};
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use tress_core::limits::Limits;
 use tress_core::math::Rgb;
+
+/// Layers a stage may open in all (its root, sublayers, references, payloads): a groom needs a
+/// handful, and each is parsed.
+const MAX_LAYERS: usize = 10_000;
+/// How deep prims may nest: the USD library composes a prim in time growing with its depth
+/// (2,000 levels took over 20 s); grooms nest a few levels. A text layer's blocks are bounded
+/// by the library itself (`openusd::usda::parser::MAX_BLOCK_DEPTH`).
+const MAX_PRIM_DEPTH: usize = 256;
+/// What each prim the traversal reaches is counted as against the memory limit: instance
+/// proxies of nested instances multiply prims without end (5 KB of text grew to 1.6 GB). Ten
+/// thousand instanced one-curve prims took 137 MB and 3.8 s, a million 2.4 GB before they
+/// were stopped (so 16 GiB, the default limit, allows a million).
+const BYTES_PER_PRIM: f64 = 16384.0;
+/// The longest stretch of a USD library message kept: messages may quote a whole token of the
+/// file (a megabyte).
+const MAX_MESSAGE_RUN: usize = 200;
 
 /// A USD file whose `BasisCurves` to load.
 #[derive(Clone, Debug, PartialEq)]
@@ -72,6 +91,151 @@ fn value<T: sdf::FromValueCast>(attr: &usd::Attribute) -> anyhow::Result<Option<
     }
 }
 
+/// `message` with every run of more than [`MAX_MESSAGE_RUN`] characters without a line break
+/// cut to its start and end.
+fn bounded(message: &str) -> String {
+    message
+        .split('\n')
+        .map(|line| {
+            let chars: Vec<char> = line.chars().collect();
+            if chars.len() <= MAX_MESSAGE_RUN {
+                return line.to_string();
+            }
+            let half = MAX_MESSAGE_RUN / 2;
+            let head: String = chars[..half].iter().collect();
+            let tail: String = chars[chars.len() - half..].iter().collect();
+            format!("{head} … ({} characters) … {tail}", chars.len())
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// What the resolver has let the USD library read, and why it refused something.
+#[derive(Default)]
+struct Reads {
+    bytes: u64,
+    layers: usize,
+    refused: Option<String>,
+}
+
+/// The USD library's file-system resolver, with every file it reads going through tress's own
+/// checks first: regular files only, opened without blocking (a FIFO as a sublayer blocked in
+/// `open`), and no more layers or bytes in all than the limits allow. The library sees the
+/// bytes, never the files.
+struct GuardedResolver {
+    inner: ar::DefaultResolver,
+    limit_bytes: u64,
+    reads: Arc<Mutex<Reads>>,
+}
+
+impl GuardedResolver {
+    /// An error for the library, kept to report as the reason (the library may word it as a
+    /// layer that failed to load, or drop it).
+    fn refuse(&self, message: String) -> std::io::Error {
+        let mut reads = self.reads.lock().unwrap_or_else(|p| p.into_inner());
+        reads.refused.get_or_insert_with(|| message.clone());
+        std::io::Error::new(std::io::ErrorKind::InvalidData, message)
+    }
+
+    /// Counts a layer of `len` bytes, refused beyond the limits.
+    fn admit(&self, name: &str, len: u64) -> std::io::Result<()> {
+        let mut reads = self.reads.lock().unwrap_or_else(|p| p.into_inner());
+        reads.layers += 1;
+        reads.bytes = reads.bytes.saturating_add(len);
+        let (layers, bytes) = (reads.layers, reads.bytes);
+        drop(reads);
+        if layers > MAX_LAYERS {
+            return Err(self.refuse(format!(
+                "{name}: more than {MAX_LAYERS} layers opened in all (layers that sublayer or \
+                 reference each other many times over?)"
+            )));
+        }
+        if bytes > self.limit_bytes {
+            return Err(self.refuse(format!(
+                "{name}: the layers read come to {bytes} bytes, over the memory limit ({} GiB); \
+                 set {} to more GiB to read them",
+                self.limit_bytes as f64 / (1u64 << 30) as f64,
+                tress_core::limits::MEMORY_LIMIT_VAR
+            )));
+        }
+        Ok(())
+    }
+
+    /// Entry `inner` of the `.usdz` package at `package`, read no further than the size it
+    /// declares, which counts against the limits before anything is decompressed.
+    fn read_packaged(&self, package: &Path, inner: &str) -> std::io::Result<Vec<u8>> {
+        let file = tress_core::files::open_regular(package)?;
+        let mut archive = zip::ZipArchive::new(file).map_err(std::io::Error::other)?;
+        let entry = archive.by_name(inner).map_err(std::io::Error::other)?;
+        let len = entry.size();
+        self.admit(&format!("{}[{inner}]", package.display()), len)?;
+        let mut bytes = Vec::new();
+        entry.take(len).read_to_end(&mut bytes)?;
+        Ok(bytes)
+    }
+}
+
+impl ar::Resolver for GuardedResolver {
+    fn create_identifier(&self, asset_path: &str, anchor: Option<&ar::ResolvedPath>) -> String {
+        self.inner.create_identifier(asset_path, anchor)
+    }
+
+    fn resolve(&self, asset_path: &str) -> Option<ar::ResolvedPath> {
+        // The library opens a package to look inside it while resolving: the file (the
+        // package, for a path into one) must be a regular file before that.
+        let package = ar::split_package_relative_path_outer(asset_path).map(|(p, _)| p);
+        let file = self
+            .inner
+            .resolve(package.as_deref().unwrap_or(asset_path))?;
+        // Named as the library identifies it: canonical, a link followed.
+        if !std::fs::metadata(&*file).is_ok_and(|m| m.is_file()) {
+            self.refuse(format!(
+                "{}: not a regular file (a directory, device or pipe)",
+                file.display()
+            ));
+            return None;
+        }
+        match package {
+            Some(_) => self.inner.resolve(asset_path),
+            None => Some(file),
+        }
+    }
+
+    fn resolve_for_new_asset(&self, asset_path: &str) -> Option<ar::ResolvedPath> {
+        self.inner.resolve_for_new_asset(asset_path)
+    }
+
+    fn open_asset(&self, resolved: &ar::ResolvedPath) -> std::io::Result<Box<dyn ar::Asset>> {
+        let name = resolved.to_string_lossy();
+        let bytes = match ar::split_package_relative_path_outer(&name) {
+            Some((package, inner)) => self.read_packaged(Path::new(&package), &inner)?,
+            None => {
+                let file = tress_core::files::open_regular(resolved)
+                    .map_err(|e| self.refuse(format!("{name}: {e}")))?;
+                let len = file.metadata()?.len();
+                self.admit(&name, len)?;
+                let mut bytes = Vec::new();
+                file.take(len).read_to_end(&mut bytes)?;
+                bytes
+            }
+        };
+        Ok(Box::new(std::io::Cursor::new(bytes)))
+    }
+
+    fn identity(&self) -> String {
+        self.inner.identity()
+    }
+}
+
+/// The message of a panic caught from the USD library.
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "no message".into())
+}
+
 /// An openusd matrix (row vectors, rows stored in order) as a glam matrix acting on column
 /// vectors: the same array read column by column is its transpose, which is what that takes.
 fn to_dmat4(m: &openusd::gf::Matrix4d) -> DMat4 {
@@ -84,8 +248,27 @@ impl UsdFile {
         UsdFile { path: path.into() }
     }
 
-    /// The stage composed, and the paths of the prims its default traversal reaches.
-    fn compose(&self) -> Result<(usd::Stage, Vec<sdf::Path>)> {
+    /// `f`, which calls the USD library, with a panic inside it turned into an error naming
+    /// the file: a last resort for faults of the library that tress's bounds do not prevent.
+    fn contained<T>(&self, f: impl FnOnce() -> Result<T>) -> Result<T> {
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|panic| {
+            Err(format_error(
+                &self.path,
+                format!(
+                    "the USD library failed on it ({}): a fault of the library, please report it \
+                     with the file",
+                    bounded(&panic_message(&*panic))
+                ),
+            ))
+        })
+    }
+
+    /// The stage composed, and the paths of the prims its default traversal reaches, within
+    /// the limits: the library is given files only through [`GuardedResolver`], its
+    /// traversal (through instance `proxies` or not) stops at [`MAX_PRIM_DEPTH`] or when the prims reached would pass the memory
+    /// limit, and every composition error (a reference, payload, sublayer or prim that is
+    /// missing or cannot be read) is an error.
+    fn compose(&self, limits: &Limits, proxies: bool) -> Result<(usd::Stage, Vec<sdf::Path>)> {
         let path = &self.path;
         // The usual messages for a missing file or a folder, before openusd's own.
         let io = |source| crate::Error::Io {
@@ -102,18 +285,60 @@ impl UsdFile {
         let name = path
             .to_str()
             .ok_or_else(|| fail("the path is not valid UTF-8".into()))?;
-        let stage = usd::Stage::open(name)
-            .map_err(|e| fail(format!("cannot read it as a USD stage: {e:#}")))?;
-        if let Some(e) = stage.composition_errors().first() {
-            return Err(fail(format!("composing the stage: {e}")));
-        }
+        let reads = Arc::new(Mutex::new(Reads::default()));
+        let resolver = GuardedResolver {
+            inner: ar::DefaultResolver::new(),
+            limit_bytes: (limits.memory_gib * (1u64 << 30) as f64) as u64,
+            reads: reads.clone(),
+        };
+        // What the resolver refused is the reason, however the library words its failure.
+        let fail_with = |library: String| {
+            let refused = reads
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .refused
+                .clone();
+            fail(refused.unwrap_or_else(|| bounded(&library)))
+        };
+        let stage = usd::Stage::builder()
+            .resolver(resolver)
+            .open(name)
+            .map_err(|e| fail_with(format!("cannot read it as a USD stage: {e:#}")))?;
         let mut paths = Vec::new();
+        let mut stopped = None;
         stage
-            .traverse(
-                usd::PrimPredicate::DEFAULT.with_instance_proxies(true),
-                |p| paths.push(p.clone()),
+            .traverse_while(
+                usd::PrimPredicate::DEFAULT.with_instance_proxies(proxies),
+                |p| {
+                    let depth = p.as_str().matches('/').count();
+                    if depth > MAX_PRIM_DEPTH {
+                        stopped = Some(format!(
+                            "<{}>: prims nested more than {MAX_PRIM_DEPTH} deep",
+                            bounded(p.as_str())
+                        ));
+                        return false;
+                    }
+                    let need_gib = (paths.len() + 1) as f64 * BYTES_PER_PRIM / (1u64 << 30) as f64;
+                    if let Err(reason) = limits.check_scene_memory(need_gib) {
+                        stopped = Some(format!(
+                            "{} prims and counting (instances of instances?) take {reason}",
+                            paths.len() + 1
+                        ));
+                        return false;
+                    }
+                    paths.push(p.clone());
+                    true
+                },
             )
-            .map_err(|e| fail(format!("traversing the stage: {e:#}")))?;
+            .map_err(|e| fail_with(format!("traversing the stage: {e:#}")))?;
+        if let Some(reason) = stopped {
+            return Err(fail(reason));
+        }
+        // Composition errors are recorded as prims compose, during the traversal: a missing
+        // reference or prim was dropped without a word when they were checked before it.
+        if let Some(e) = stage.composition_errors().first() {
+            return Err(fail_with(format!("composing the stage: {e}")));
+        }
         Ok((stage, paths))
     }
 
@@ -121,28 +346,38 @@ impl UsdFile {
     /// (sublayers, references, payloads, each once; a layer inside a `.usdz` package is its
     /// package), so that caches can key on their contents.
     pub fn files(&self) -> Result<Vec<PathBuf>> {
-        let (stage, _) = self.compose()?;
-        let mut files = vec![self.path.clone()];
-        let root = std::fs::canonicalize(&self.path).ok();
-        for id in stage.layer_identifiers() {
-            let file = match openusd::ar::split_package_relative_path_outer(&id) {
-                Some((package, _)) => PathBuf::from(package),
-                None => PathBuf::from(id),
-            };
-            // Session and anonymous layers are not files; the root is listed as given.
-            let is_root = root.is_some() && std::fs::canonicalize(&file).ok() == root;
-            if file.is_file() && !is_root && !files.contains(&file) {
-                files.push(file);
+        self.contained(|| {
+            // The prims as authored: an instance composes its arcs (loading their layers)
+            // without its prototype being walked once per instance, which nested instancing
+            // multiplies (the reading itself is bounded by the memory limit it is given).
+            let (stage, _) = self.compose(&Limits::default(), false)?;
+            let mut files = vec![self.path.clone()];
+            let root = std::fs::canonicalize(&self.path).ok();
+            for id in stage.layer_identifiers() {
+                let file = match ar::split_package_relative_path_outer(&id) {
+                    Some((package, _)) => PathBuf::from(package),
+                    None => PathBuf::from(id),
+                };
+                // Session and anonymous layers are not files; the root is listed as given.
+                let is_root = root.is_some() && std::fs::canonicalize(&file).ok() == root;
+                if file.is_file() && !is_root && !files.contains(&file) {
+                    files.push(file);
+                }
             }
-        }
-        Ok(files)
+            Ok(files)
+        })
     }
 
-    /// Reads the stage's `BasisCurves` and validates them.
-    pub fn read(&self) -> Result<HairGeometry> {
+    /// Reads the stage's `BasisCurves` and validates them, within the memory limit of
+    /// `limits` (the layers read, the prims reached and the points made).
+    pub fn read(&self, limits: &Limits) -> Result<HairGeometry> {
+        self.contained(|| self.read_contained(limits))
+    }
+
+    fn read_contained(&self, limits: &Limits) -> Result<HairGeometry> {
         let path = &self.path;
         let fail = |reason: String| format_error(path, reason);
-        let (stage, paths) = self.compose()?;
+        let (stage, paths) = self.compose(limits, true)?;
         let metadata = |field: &str| {
             stage
                 .stage_metadata(field)
@@ -168,10 +403,11 @@ impl UsdFile {
             hair: HairGeometry::empty(path.display().to_string()),
             colors: Colors::None,
             scale: DMat4::from_scale(DVec3::splat(meters_per_unit)),
+            limits: *limits,
         };
         let mut others = 0;
         for p in &paths {
-            let at = |e: anyhow::Error| fail(format!("<{}>: {e:#}", p.as_str()));
+            let at = |e: anyhow::Error| fail(bounded(&format!("<{}>: {e:#}", p.as_str())));
             match BasisCurves::get(&stage, p.clone()).map_err(at)? {
                 Some(curves) => reader.add(&stage, &curves).map_err(at)?,
                 None => others += 1,
@@ -219,6 +455,8 @@ struct Reader {
     colors: Colors,
     /// `metersPerUnit` as a transform, applied after every prim's own.
     scale: DMat4,
+    /// The memory limit the points made are checked against.
+    limits: Limits,
 }
 
 /// A primvar's values (widths, or colours as vectors) with their interpolation.
@@ -420,6 +658,7 @@ impl Reader {
                     let w0 = at(&widths, &width_segments, s, 0.0).x;
                     let w1 = at(&widths, &width_segments, s, 1.0).x;
                     let pieces = 1u32 << refinement_depth(&b, w0.max(w1) * width_scale);
+                    self.check_points(pieces as usize)?;
                     if s == 0 {
                         point_colors.extend(push(&mut self.hair, b[0], 0, 0.0));
                     }
@@ -429,6 +668,7 @@ impl Reader {
                     }
                 }
             } else {
+                self.check_points(n)?;
                 for (k, p) in cp.iter().enumerate() {
                     let (s, u) = if k + 1 < n { (k, 0.0) } else { (k - 1, 1.0) };
                     let color = push(&mut self.hair, transform.transform_point3(*p), s, u);
@@ -440,6 +680,16 @@ impl Reader {
             self.add_colors(colors.as_ref(), point_colors);
         }
         Ok(())
+    }
+
+    /// Refuses `more` points when the hair would then pass the memory limit.
+    fn check_points(&self, more: usize) -> anyhow::Result<()> {
+        let points = (self.hair.points.len() + more) as f64;
+        self.limits
+            .check_scene_memory(points * crate::geometry::BYTES_PER_POINT / (1u64 << 30) as f64)
+            .map_err(|reason| {
+                anyhow::anyhow!("the curves up to here make {points:.3e} points: {reason}")
+            })
     }
 
     /// Records the colours of the strand just added: one per point, or none when its prim has
@@ -503,6 +753,7 @@ fn catmull_rom_segments(cp: &[DVec3]) -> Result<Vec<[DVec3; 4]>, String> {
 /// `curves`' local-to-world transform: its own `xformOpOrder` and its ancestors', up to a
 /// `!resetXformStack!`. Only `Xform` ancestors may carry transforms.
 fn world_transform(stage: &usd::Stage, curves: &BasisCurves) -> anyhow::Result<DMat4> {
+    check_xform_ops(stage, curves.path(), false)?;
     let mut m = to_dmat4(&curves.local_to_parent_transform(usd::TimeCode::EARLIEST)?);
     if curves.resets_xform_stack()? {
         return Ok(m);
@@ -514,6 +765,7 @@ fn world_transform(stage: &usd::Stage, curves: &BasisCurves) -> anyhow::Result<D
         }
         match Xform::get(stage, p.clone())? {
             Some(x) => {
+                check_xform_ops(stage, &p, true)?;
                 m = to_dmat4(&x.local_to_parent_transform(usd::TimeCode::EARLIEST)?) * m;
                 if x.resets_xform_stack()? {
                     break;
@@ -533,6 +785,37 @@ fn world_transform(stage: &usd::Stage, curves: &BasisCurves) -> anyhow::Result<D
         path = p.parent();
     }
     Ok(m)
+}
+
+/// Refuses an `xformOpOrder` on `prim` (an `ancestor` of the curves read, or the curves) that
+/// names an op the prim does not have: the library skips it, and the prim lands elsewhere than
+/// its file says.
+fn check_xform_ops(stage: &usd::Stage, prim: &sdf::Path, ancestor: bool) -> anyhow::Result<()> {
+    let order = stage.prim(prim.clone()).attribute("xformOpOrder");
+    let ops = match value::<Vec<String>>(&order)? {
+        Some(ops) => ops,
+        None => return Ok(()),
+    };
+    for op in &ops {
+        if op == "!resetXformStack!" {
+            continue;
+        }
+        let name = op.strip_prefix("!invert!").unwrap_or(op);
+        let attr = stage.prim(prim.clone()).attribute(name);
+        let authored = attr.get::<sdf::Value>()?.is_some() || attr.num_time_samples()? > 0;
+        if !authored {
+            let whose = if ancestor {
+                format!(" of the ancestor <{}>", prim.as_str())
+            } else {
+                String::new()
+            };
+            anyhow::bail!(
+                "xformOpOrder{whose} names \"{}\", which is not authored there",
+                bounded(op)
+            );
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -689,7 +972,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join(name);
         std::fs::write(&path, text).unwrap();
-        match UsdFile::new(&path).read() {
+        match UsdFile::new(&path).read(&Limits::default()) {
             Ok(g) => panic!("{text}: read {} strands", g.strand_count()),
             Err(e) => e.to_string(),
         }
@@ -765,14 +1048,18 @@ def BasisCurves "Hair"
                 );
         let dir = tempfile::tempdir().unwrap();
         std::fs::write(dir.path().join("two.usda"), &two).unwrap();
-        let g = UsdFile::new(dir.path().join("two.usda")).read().unwrap();
+        let g = UsdFile::new(dir.path().join("two.usda"))
+            .read(&Limits::default())
+            .unwrap();
         assert_eq!((g.strand_count(), g.colors), (2, None));
         std::fs::write(
             dir.path().join("one.usda"),
             two.replace("def BasisCurves \"Hair\"", "over \"Hair\""),
         )
         .unwrap();
-        let g = UsdFile::new(dir.path().join("one.usda")).read().unwrap();
+        let g = UsdFile::new(dir.path().join("one.usda"))
+            .read(&Limits::default())
+            .unwrap();
         assert_eq!(
             g.colors,
             Some(HairAttribute::PerStrand(vec![Vec3::new(1.0, 0.0, 0.0)]))
@@ -783,5 +1070,252 @@ def BasisCurves "Hair"
             .load(&tress_core::limits::Limits::default())
             .unwrap_err();
         assert!(e.to_string().contains("/nowhere/groom.usd"), "{e}");
+    }
+
+    /// Reads `text` as `groom.usda` in `dir` with `limits`.
+    fn read_in(dir: &Path, text: &str, limits: &Limits) -> Result<HairGeometry> {
+        let path = dir.join("groom.usda");
+        std::fs::write(&path, text).unwrap();
+        UsdFile::new(&path).read(limits)
+    }
+
+    const LINEAR: &str = r#"#usda 1.0
+def BasisCurves "Hair"
+{
+    uniform token type = "linear"
+    int[] curveVertexCounts = [3]
+    point3f[] points = [(0, 0, 0), (0, 1, 0), (0, 2, 0)]
+    float[] widths = [0.1] (interpolation = "constant")
+    color3f[] primvars:displayColor = [(0.5, 0.3, 0.1)] (interpolation = "constant")
+}
+"#;
+
+    #[test]
+    fn short_tuples_are_refused_where_they_stand() {
+        let dir = tempfile::tempdir().unwrap();
+        for (from, to, expect) in [
+            ("(0, 2, 0)]", "(0, 2)]", "line 6, column "),
+            ("(0, 2, 0)]", "()]", "tuple has 0 elements, expected 3"),
+            ("[(0.5, 0.3, 0.1)]", "[(0.5, 0.3)]", "line 8"),
+            ("(0, 2, 0)]", "(0, 2, 0, 1)]", "too many elements"),
+        ] {
+            let e = read_in(dir.path(), &LINEAR.replace(from, to), &Limits::default())
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("groom.usda") && e.contains(expect), "{to}: {e}");
+        }
+    }
+
+    #[test]
+    fn deep_nesting_and_long_tokens_are_refused_quickly_with_short_messages() {
+        let dir = tempfile::tempdir().unwrap();
+        let deep = |n: usize, open: &str, close: &str| {
+            format!("#usda 1.0\n{}{}", open.repeat(n), close.repeat(n))
+        };
+        let started = std::time::Instant::now();
+        for text in [
+            deep(6000, "def Xform \"a\" {\n", "}\n"),
+            deep(300, "def Xform \"a\" {\n", "}\n"),
+            format!(
+                "#usda 1.0\ndef \"A\" (customData = {}1{})\n{{\n}}\n",
+                "{ dictionary d = ".repeat(5000),
+                "}".repeat(5000)
+            ),
+            format!(
+                "#usda 1.0\ndef \"A\" {{\n int[] a = {}{}\n}}\n",
+                "[".repeat(100_000),
+                "]".repeat(100_000)
+            ),
+        ] {
+            let e = read_in(dir.path(), &text, &Limits::default())
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("groom.usda") && e.len() < 1000, "{e}");
+        }
+        // 2,000 levels took over 20 s before the bound.
+        assert!(started.elapsed().as_secs() < 20, "{:?}", started.elapsed());
+        let token = "x".repeat(1 << 20);
+        let e = read_in(
+            dir.path(),
+            &LINEAR.replace("(0, 0, 0), ", &format!("{token}, ")),
+            &Limits::default(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("line 6") && e.len() < 1000,
+            "{}",
+            &e[..e.len().min(2000)]
+        );
+    }
+
+    #[test]
+    fn missing_layers_prims_and_ops_are_errors_naming_them() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("other.usda"), "#usda 1.0\ndef \"X\" {}\n").unwrap();
+        let arc = |arc: &str| {
+            LINEAR.replace(
+                "def BasisCurves \"Hair\"",
+                &format!("def BasisCurves \"Hair\" ({arc})"),
+            )
+        };
+        for (text, expect) in [
+            (arc("references = @missing.usda@</X>"), "missing.usda"),
+            (arc("payload = @missing.usda@</X>"), "missing.usda"),
+            (arc("references = @other.usda@</Nope>"), "</Nope>"),
+            (arc("payload = @other.usda@</Nope>"), "</Nope>"),
+            (arc("references = </Nope>"), "</Nope>"),
+            (
+                LINEAR.replace("#usda 1.0", "#usda 1.0\n(subLayers = [@gone.usda@])"),
+                "gone.usda",
+            ),
+            (
+                LINEAR.replace(
+                    "uniform token type",
+                    "double3 xformOp:translate = (1, 0, 0)\n    uniform token[] xformOpOrder = \
+                     [\"xformOp:translate\", \"xformOp:scale\"]\n    uniform token type",
+                ),
+                "xformOpOrder names \"xformOp:scale\"",
+            ),
+            (
+                format!(
+                    "#usda 1.0\ndef Xform \"S\"\n{{\n    uniform token[] xformOpOrder = \
+                     [\"!invert!xformOp:rotateX\"]\n{}}}\n",
+                    LINEAR.replace("#usda 1.0", "")
+                ),
+                "xformOpOrder of the ancestor </S> names \"!invert!xformOp:rotateX\"",
+            ),
+        ] {
+            let e = read_in(dir.path(), &text, &Limits::default())
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("groom.usda") && e.contains(expect),
+                "{expect}: {e}"
+            );
+        }
+        // An op that is there, inverted, is read.
+        let moved = LINEAR.replace(
+            "uniform token type",
+            "double3 xformOp:translate = (1, 0, 0)\n    uniform token[] xformOpOrder = \
+             [\"!invert!xformOp:translate\"]\n    uniform token type",
+        );
+        let g = read_in(dir.path(), &moved, &Limits::default()).unwrap();
+        assert_eq!(g.points[0], Vec3::new(-0.01, 0.0, 0.0));
+    }
+
+    #[test]
+    fn the_earliest_time_sample_is_read_whatever_the_order_written() {
+        let dir = tempfile::tempdir().unwrap();
+        let samples = LINEAR.replace(
+            "point3f[] points = [(0, 0, 0), (0, 1, 0), (0, 2, 0)]",
+            "point3f[] points.timeSamples = {\n        5: [(5, 0, 0), (5, 1, 0), (5, 2, 0)],\n        \
+             -2: [(2, 0, 0), (2, 1, 0), (2, 2, 0)],\n        1: [(1, 0, 0), (1, 1, 0), (1, 2, 0)],\n    }",
+        );
+        let g = read_in(dir.path(), &samples, &Limits::default()).unwrap();
+        assert_eq!(g.points[0], Vec3::new(0.02, 0.0, 0.0));
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn layers_that_are_not_regular_files_are_refused_without_blocking() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("fifo.usda");
+        assert!(std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success());
+        std::os::unix::fs::symlink("/dev/zero", dir.path().join("zero.usda")).unwrap();
+        std::fs::create_dir(dir.path().join("folder.usda")).unwrap();
+        for layer in ["fifo.usda", "zero.usda", "folder.usda"] {
+            for text in [
+                LINEAR.replace(
+                    "#usda 1.0",
+                    &format!("#usda 1.0\n(subLayers = [@{layer}@])"),
+                ),
+                LINEAR.replace(
+                    "def BasisCurves \"Hair\"",
+                    &format!("def BasisCurves \"Hair\" (references = @{layer}@</X>)"),
+                ),
+                LINEAR.replace(
+                    "def BasisCurves \"Hair\"",
+                    &format!("def BasisCurves \"Hair\" (payload = @{layer}@</X>)"),
+                ),
+            ] {
+                let e = read_in(dir.path(), &text, &Limits::default())
+                    .unwrap_err()
+                    .to_string();
+                let named = if layer == "zero.usda" {
+                    "/dev/zero"
+                } else {
+                    layer
+                };
+                assert!(
+                    e.contains("groom.usda") && e.contains(named) && e.contains("not a regular"),
+                    "{e}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn instances_of_instances_stop_at_the_memory_limit() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut text = LINEAR.replace(
+            "def BasisCurves \"Hair\"",
+            "class \"L0\" {\ndef BasisCurves \"C\"",
+        ) + "}\n";
+        for level in 1..8 {
+            text += &format!("class \"L{level}\"\n{{\n");
+            for i in 0..10 {
+                text += &format!(
+                    "    def \"I{i}\" (instanceable = true\n        references = </L{}>) {{}}\n",
+                    level - 1
+                );
+            }
+            text += "}\n";
+        }
+        text += "def \"Top\" (instanceable = true\n    references = </L7>) {}\n";
+        let limits = Limits {
+            memory_gib: 0.01,
+            ..Limits::default()
+        };
+        let e = read_in(dir.path(), &text, &limits).unwrap_err().to_string();
+        assert!(e.contains("groom.usda") && e.contains("prims"), "{e}");
+        // Within the limit, each instance gives its strand.
+        let few = text.replace("references = </L7>", "references = </L2>");
+        assert_eq!(
+            read_in(dir.path(), &few, &limits).unwrap().strand_count(),
+            100
+        );
+    }
+
+    /// Every one-byte change of a binary groom is read or refused, never a panic inside the
+    /// USD library (the reader would contain it and say so) or an abort.
+    #[test]
+    fn one_byte_changes_of_a_usdc_are_read_or_refused() {
+        let original =
+            std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/usd_linear.usdc"))
+                .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("groom.usdc");
+        let mut refused = 0;
+        for i in 0..original.len() {
+            for byte in [0x00, 0xff, original[i] ^ 0x80, original[i].wrapping_add(1)] {
+                let mut bytes = original.clone();
+                bytes[i] = byte;
+                std::fs::write(&path, &bytes).unwrap();
+                if let Err(e) = UsdFile::new(&path).read(&Limits::default()) {
+                    let e = e.to_string();
+                    assert!(
+                        !e.contains("USD library failed"),
+                        "byte {i} = {byte:#x}: {e}"
+                    );
+                    refused += 1;
+                }
+            }
+        }
+        assert!(refused > 0);
     }
 }

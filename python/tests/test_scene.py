@@ -4,6 +4,7 @@ import _thread
 import signal
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -226,3 +227,55 @@ def test_the_memory_limit_holds_for_the_whole_scene(scene_dict, monkeypatch):
         r"for the whole scene",
     ):
         tress.Scene.from_dict(scene_dict)
+
+
+USD_GROOM = """#usda 1.0
+def BasisCurves "Hair"
+{
+    uniform token type = "linear"
+    int[] curveVertexCounts = [3]
+    point3f[] points = [(0, 0, 0), (0, 1, 0), (0, 2, 0)]
+    float[] widths = [0.1] (interpolation = "constant")
+}
+"""
+
+
+def test_hostile_usd_grooms_raise_valueerror_naming_them(tmp_path, scene_dict):
+    # Each raised PanicException, killed the interpreter or read uninitialised memory.
+    (tmp_path / "other.usda").write_text('#usda 1.0\ndef "X" {}\n')
+    usdc = bytearray(
+        (Path(__file__).parents[2] / "groom/tests/data/usd_linear.usdc").read_bytes()
+    )
+    deep = "#usda 1.0\n" + 'def Xform "a" {\n' * 6000 + "}\n" * 6000
+    cases = [
+        ("short.usda", USD_GROOM.replace("(0, 2, 0)]", "(0, 2)]"), r"line 6, column \d+: .*tuple has 2"),
+        ("empty.usda", USD_GROOM.replace("(0, 1, 0),", "(),"), "tuple has 0 elements"),
+        ("deep.usda", deep, "nested more than 256 deep"),
+        (
+            "ref.usda",
+            USD_GROOM.replace('"Hair"', '"Hair" (references = @other.usda@</Nope>)', 1),
+            "Nope",
+        ),
+        ("sub.usda", USD_GROOM.replace("#usda 1.0", "#usda 1.0\n(subLayers = [@gone.usda@])"), "gone.usda"),
+    ]
+    for i in range(0, len(usdc), 101):
+        bytes_ = bytearray(usdc)
+        bytes_[i] ^= 0xFF
+        cases.append((f"flip{i}.usdc", bytes(bytes_), None))
+    for name, content, expect in cases:
+        path = tmp_path / name
+        if isinstance(content, bytes):
+            path.write_bytes(content)
+        else:
+            path.write_text(content)
+        scene_dict["objects"][0]["Hair"]["source"] = {"File": str(path)}
+        if expect is None:
+            # A changed byte may leave a valid groom; an error names the file, never a panic.
+            try:
+                tress.Scene.from_dict(scene_dict)
+            except ValueError as e:
+                assert name in str(e) and "library failed" not in str(e), str(e)
+            continue
+        with pytest.raises(ValueError, match=expect) as e:
+            tress.Scene.from_dict(scene_dict)
+        assert name in str(e.value) and len(str(e.value)) < 2000
