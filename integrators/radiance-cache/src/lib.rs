@@ -452,6 +452,8 @@ fn train(
     progress: &(dyn Fn(u64) + Sync),
     records: &mut [Records],
 ) -> Option<()> {
+    // Classes below the first hand-off's are never read (the hand-off only recedes).
+    let first_read = settings.depth_class(settings.handoff(0));
     tress_learned_light::train(
         scene,
         film,
@@ -463,8 +465,6 @@ fn train(
             let (chunk_records, vertices) = chunk;
             chunk_records.resize_with(DEPTH_CLASSES as usize, Records::default);
             training_path(settings, ray, scene, sampler, vertices);
-            // Classes below the first hand-off's are never read (the hand-off only recedes).
-            let first_read = settings.depth_class(settings.handoff(0));
             for (depth, v) in vertices.iter().enumerate() {
                 let class = settings.depth_class(depth as u32);
                 if class >= first_read {
