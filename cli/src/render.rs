@@ -389,10 +389,10 @@ struct Rendered {
 
 impl Waves<'_> {
     /// Renders waves of cumulative 1, 2, 4, … spp, writing the partial image after each with
-    /// `--partial`. Before each wave the integrator prepares for the wave's samples
-    /// ([`Integrator::for_film`]: a radiance cache trains the caches of the sample blocks the
-    /// wave reaches, going on from the blocks before, whose caches it lets go), with a bar of
-    /// its own; that time counts as render time.
+    /// `--partial`. Before each of a wave's sample segments ([`Integrator::sample_segments`])
+    /// the integrator prepares for its samples ([`Integrator::for_film`]: a radiance cache
+    /// trains the caches of the segment's sample block, going on from the block before, whose
+    /// caches it lets go), with a bar of its own; that time counts as render time.
     fn run(&self, cancel: &AtomicBool, verbose: bool) -> Result<Rendered> {
         let (args, film) = (self.args, &self.desc.film);
         let outputs = args.outputs();
@@ -400,7 +400,6 @@ impl Waves<'_> {
         let target = film.spp as u64;
         let first = args.spp_offset;
         let bar = progress_bar((x1 - x0) as u64 * (y1 - y0) as u64 * target, verbose, "");
-        let progress = |n: u64| bar.inc(n);
         let limit = args.time_limit.map(Duration::from_secs_f64);
         // The limit counts the precomputation (a radiance cache's training) as render time.
         let start = Instant::now();
@@ -416,52 +415,20 @@ impl Waves<'_> {
         let mut status = Status::Complete;
         while reached < target {
             let next = (2 * reached).clamp(1, target);
-            let samples = first + reached..first + next;
-            let t_prepare = Instant::now();
-            let prepared = bar.suspend(|| {
-                let prepare_bar = progress_bar(1000, verbose, "precomputing ");
-                let prepared = self.pool.install(|| {
-                    self.integrator
-                        .for_film(self.scene, film, samples.clone(), cancel, &|done| {
-                            prepare_bar.set_position((done * 1000.0) as u64)
-                        })
-                });
-                prepare_bar.finish_and_clear();
-                prepared
-            });
-            if cancel.load(Ordering::Relaxed) {
-                status = Status::Interrupted;
+            // A wave that reaches into a new sample block is prepared for and rendered block by
+            // block, so that one block's caches are held at a time.
+            for samples in self
+                .integrator
+                .sample_segments(first + reached..first + next)
+            {
+                if !self.render_segment(samples, &mut sums, &mut stats, cancel, verbose, &bar)? {
+                    status = Status::Interrupted;
+                    break;
+                }
+            }
+            if status == Status::Interrupted {
                 break;
             }
-            let prepare_time = t_prepare.elapsed();
-            stats.add(&RenderStats {
-                wall: prepare_time,
-                precompute: prepare_time,
-                ..Default::default()
-            });
-            let integrator: &dyn Integrator = match &prepared {
-                Some(p) => {
-                    if stats.precompute_note.as_ref() != Some(&p.note) {
-                        if verbose {
-                            bar.suspend(|| eprintln!("{}", p.note));
-                        }
-                        stats.precompute_note = Some(p.note.clone());
-                    }
-                    p.integrator.as_ref()
-                }
-                None => self.integrator,
-            };
-            let wave = self.pool.install(|| {
-                render::render_outputs(
-                    self.scene, integrator, film, &outputs, samples, cancel, &progress,
-                )
-            });
-            let Some(wave) = wave else {
-                status = Status::Interrupted;
-                break;
-            };
-            sums.append(&wave.sums).map_err(anyhow::Error::msg)?;
-            stats.add(&wave.stats);
             reached = next;
             if reached < target {
                 if limit.is_some_and(|l| start.elapsed() >= l) {
@@ -480,6 +447,65 @@ impl Waves<'_> {
             reached,
             status,
         })
+    }
+
+    /// Prepares for and renders sample indices `samples`, appending their sums to `sums`;
+    /// `false` when cancelled.
+    fn render_segment(
+        &self,
+        samples: std::ops::Range<u64>,
+        sums: &mut SampleSums,
+        stats: &mut RenderStats,
+        cancel: &AtomicBool,
+        verbose: bool,
+        bar: &indicatif::ProgressBar,
+    ) -> Result<bool> {
+        let (film, outputs) = (&self.desc.film, self.args.outputs());
+        let progress = |n: u64| bar.inc(n);
+        let t_prepare = Instant::now();
+        let prepared = bar.suspend(|| {
+            let prepare_bar = progress_bar(1000, verbose, "precomputing ");
+            let prepared = self.pool.install(|| {
+                self.integrator
+                    .for_film(self.scene, film, samples.clone(), cancel, &|done| {
+                        prepare_bar.set_position((done * 1000.0) as u64)
+                    })
+            });
+            prepare_bar.finish_and_clear();
+            prepared
+        });
+        if cancel.load(Ordering::Relaxed) {
+            return Ok(false);
+        }
+        let prepare_time = t_prepare.elapsed();
+        stats.add(&RenderStats {
+            wall: prepare_time,
+            precompute: prepare_time,
+            ..Default::default()
+        });
+        let integrator: &dyn Integrator = match &prepared {
+            Some(p) => {
+                if stats.precompute_note.as_ref() != Some(&p.note) {
+                    if verbose {
+                        bar.suspend(|| eprintln!("{}", p.note));
+                    }
+                    stats.precompute_note = Some(p.note.clone());
+                }
+                p.integrator.as_ref()
+            }
+            None => self.integrator,
+        };
+        let segment = self.pool.install(|| {
+            render::render_outputs(
+                self.scene, integrator, film, &outputs, samples, cancel, &progress,
+            )
+        });
+        let Some(segment) = segment else {
+            return Ok(false);
+        };
+        sums.append(&segment.sums).map_err(anyhow::Error::msg)?;
+        stats.add(&segment.stats);
+        Ok(true)
     }
 }
 

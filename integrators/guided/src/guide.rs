@@ -93,6 +93,45 @@ struct Entry {
 #[derive(Default)]
 pub(crate) struct ChunkRecords {
     entries: Vec<Entry>,
+    pub(crate) continuations: Vec<Continuation>,
+}
+
+/// A continuation drawn at a guided vertex of a training path, kept to choose the probability
+/// of drawing from the guide in its cell ([`Guide::learn_probabilities`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Continuation {
+    /// The vertex's finest-level cell.
+    cell: [u32; 3],
+    bin: u16,
+    /// The square of the estimate the continuation made (the luminance of f·cos·L over its
+    /// density q), times q: its share of a second moment under another density p is this
+    /// over p (importance weights).
+    moment: f32,
+    /// The fiber's own density of the direction.
+    fiber_pdf: f32,
+}
+
+impl Continuation {
+    /// `estimate` is the luminance of the continuation's f·cos·L / `pdf`, drawn with `pdf`.
+    pub(crate) fn new(
+        lattice: &Lattice,
+        bins: &SphereBins,
+        p: Vec3,
+        wi: Vec3,
+        estimate: f32,
+        pdf: f32,
+        fiber_pdf: f32,
+    ) -> Option<Self> {
+        let moment = estimate * estimate * pdf;
+        (moment.is_finite() && moment > 0.0 && fiber_pdf.is_finite() && p.is_finite()).then(|| {
+            Continuation {
+                cell: lattice.cell_of(p),
+                bin: bins.bin(wi) as u16,
+                moment,
+                fiber_pdf,
+            }
+        })
+    }
 }
 
 impl ChunkRecords {
@@ -172,18 +211,73 @@ impl Records {
 pub(crate) struct Guide {
     lattice: Lattice,
     bins: SphereBins,
-    /// Cumulative distribution over the bins of each cell (every level's), ending at 1.
-    cells: FxHashMap<u64, Box<[f32]>>,
+    /// Every level's cells that hold enough records.
+    cells: FxHashMap<u64, GuideCell>,
     min_records: u32,
     records: u64,
 }
 
+/// One cell's learned density, and how often continuations are drawn from it.
+pub(crate) struct GuideCell {
+    /// Cumulative distribution over the bins, ending at 1.
+    cdf: Box<[f32]>,
+    /// The probability of drawing a continuation from the guide rather than the fiber.
+    pub(crate) probability: f32,
+}
+
+/// Candidate probabilities of drawing from the guide, as eighths of the largest allowed.
+const PROBABILITY_STEPS: usize = 8;
+/// Continuations a cell needs before its own probability is chosen; cells with fewer take the
+/// one best over all continuations.
+const MIN_CONTINUATIONS: u32 = 64;
+/// How much smaller than the fiber's alone a mixture's predicted second moment must be for a
+/// cell to guide.
+const MIN_CELL_GAIN: f64 = 1.1;
+
 /// Share of a cell's density spread uniformly over the sphere.
 const UNIFORM_SHARE: f32 = 0.1;
 
+/// Second moments of a cell's continuations under each candidate probability: of the
+/// even-numbered continuations and of the odd-numbered ones.
+#[derive(Default)]
+struct CellMoments {
+    sums: [[f64; PROBABILITY_STEPS + 1]; 2],
+    count: u32,
+}
+
+impl CellMoments {
+    fn add(&mut self, other: &CellMoments) {
+        for (mine, theirs) in self.sums.iter_mut().zip(&other.sums) {
+            for (a, b) in mine.iter_mut().zip(theirs) {
+                *a += b;
+            }
+        }
+        self.count += other.count;
+    }
+
+    /// The candidate the even-numbered continuations favour, if the odd-numbered ones find it
+    /// [`MIN_CELL_GAIN`] times better than the fiber's sampling alone (guiding costs a lookup
+    /// and the guide's density at every guided vertex); otherwise 0.
+    fn choice(&self) -> usize {
+        let [choose, judge] = &self.sums;
+        let k = (0..=PROBABILITY_STEPS).fold(0, |b, k| if choose[k] < choose[b] { k } else { b });
+        if judge[0] > MIN_CELL_GAIN * judge[k] {
+            k
+        } else {
+            0
+        }
+    }
+}
+
 impl Guide {
     /// The densities of every level's cells that hold at least `min_records` records.
-    pub(crate) fn new(lattice: Lattice, records: &Records, min_records: u32) -> Self {
+    /// Each draws from the guide with `probability` until [`Guide::learn_probabilities`].
+    pub(crate) fn new(
+        lattice: Lattice,
+        records: &Records,
+        min_records: u32,
+        probability: f32,
+    ) -> Self {
         let n = records.bins.count();
         let mut cells = FxHashMap::default();
         let mut finer: FxHashMap<u64, CellSums> = records.cells.clone();
@@ -194,7 +288,7 @@ impl Guide {
                 let sums = &finer[&key];
                 if sums.count >= min_records {
                     if let Some(cdf) = cdf(&sums.bins) {
-                        cells.insert(key, cdf);
+                        cells.insert(key, GuideCell { cdf, probability });
                     }
                 }
             }
@@ -220,28 +314,116 @@ impl Guide {
         }
     }
 
-    /// The distribution of the finest cell around `p` that holds enough records.
-    pub(crate) fn find(&self, p: Vec3) -> Option<&[f32]> {
-        let c = self.lattice.cell_of(p);
+    /// The finest cell around `p` that holds enough records.
+    pub(crate) fn find(&self, p: Vec3) -> Option<&GuideCell> {
+        self.find_cell(self.lattice.cell_of(p))
+            .map(|(_, cell)| cell)
+    }
+
+    /// The finest cell holding enough records among those around finest cell `c`, with its key.
+    fn find_cell(&self, c: [u32; 3]) -> Option<(u64, &GuideCell)> {
         (0..self.lattice.levels()).find_map(|level| {
-            self.cells
-                .get(&self.lattice.key(level, c, 0))
-                .map(|cdf| &cdf[..])
+            let key = self.lattice.key(level, c, 0);
+            self.cells.get(&key).map(|cell| (key, cell))
         })
     }
 
     /// A direction drawn from a cell's distribution and its solid-angle density.
-    pub(crate) fn sample(&self, cdf: &[f32], u: [f32; 3]) -> (Vec3, f32) {
+    pub(crate) fn sample(&self, cell: &GuideCell, u: [f32; 3]) -> (Vec3, f32) {
+        let cdf = &cell.cdf;
         let bin = cdf.partition_point(|&c| c <= u[0]).min(cdf.len() - 1);
         let wi = self.bins.direction_in(bin, Vec2::new(u[1], u[2]));
         // The density of the bin the direction is found in: where rounding puts a direction
         // drawn at a bin's edge into its neighbour, sampling and `pdf` still agree.
-        (wi, self.pdf(cdf, wi))
+        (wi, self.pdf(cell, wi))
     }
 
     /// The solid-angle density of a cell's distribution at `wi`.
-    pub(crate) fn pdf(&self, cdf: &[f32], wi: Vec3) -> f32 {
-        self.bin_pdf(cdf, self.bins.bin(wi))
+    pub(crate) fn pdf(&self, cell: &GuideCell, wi: Vec3) -> f32 {
+        self.bin_pdf(&cell.cdf, self.bins.bin(wi))
+    }
+
+    /// Chooses each cell's probability of drawing from the guide among eighths of `largest`:
+    /// the one that minimises the second moment of the continuations' estimates in the cell
+    /// had they been drawn from that mixture, estimated from `continuations` (drawn from other
+    /// densities) by importance weights, if it is [`MIN_CELL_GAIN`] times smaller than the
+    /// fiber's sampling alone gives (half the continuations choose, the other half judge).
+    /// Where the guide does not follow the light that much better than the fiber's own sampling
+    /// does, it is 0 and the cell's vertices are the path tracer's. Returns the predicted gain:
+    /// the second moment with the fiber's sampling alone over the one with the chosen
+    /// probabilities, of the judging half of the continuations.
+    pub(crate) fn learn_probabilities(
+        &mut self,
+        continuations: &[Continuation],
+        largest: f32,
+    ) -> f64 {
+        let candidates: [f32; PROBABILITY_STEPS + 1] =
+            std::array::from_fn(|k| largest * k as f32 / PROBABILITY_STEPS as f32);
+        // Per cell, the second moment under each candidate of the even-numbered continuations,
+        // which choose the candidate, and of the odd-numbered ones, which judge it: chosen and
+        // judged by the same samples, the smallest of nine noisy sums promises gains the next
+        // samples do not see.
+        let mut moments: FxHashMap<u64, CellMoments> = FxHashMap::default();
+        for (i, c) in continuations.iter().enumerate() {
+            let Some((key, cell)) = self.find_cell(c.cell) else {
+                continue;
+            };
+            let guide_pdf = self.bin_pdf(&cell.cdf, c.bin as usize);
+            let m = moments.entry(key).or_default();
+            let sums = &mut m.sums[i % 2];
+            for (sum, &a) in sums.iter_mut().zip(&candidates) {
+                let density = a * guide_pdf + (1.0 - a) * c.fiber_pdf;
+                // A direction the mixture could not draw makes that candidate's estimator
+                // miss light: never chosen.
+                *sum += if density > 0.0 {
+                    c.moment as f64 / density as f64
+                } else {
+                    f64::INFINITY
+                };
+            }
+            m.count += 1;
+        }
+        let mut keys: Vec<u64> = moments.keys().copied().collect();
+        keys.sort_unstable();
+        let mut overall = CellMoments::default();
+        for key in &keys {
+            overall.add(&moments[key]);
+        }
+        let fallback = overall.choice();
+        let (mut unguided, mut guided) = (0.0f64, 0.0f64);
+        let choice = |m: &CellMoments| {
+            if m.count >= MIN_CONTINUATIONS {
+                m.choice()
+            } else {
+                fallback
+            }
+        };
+        for key in &keys {
+            let m = &moments[key];
+            unguided += m.sums[1][0];
+            guided += m.sums[1][choice(m)];
+        }
+        for (key, cell) in self.cells.iter_mut() {
+            cell.probability = candidates[moments.get(key).map_or(fallback, choice)];
+        }
+        if guided > 0.0 {
+            unguided / guided
+        } else {
+            1.0
+        }
+    }
+
+    /// The share of cells that draw from the guide, and their mean probability of doing so.
+    pub(crate) fn probabilities(&self) -> (f64, f64) {
+        let guiding: Vec<f32> = self
+            .cells
+            .values()
+            .map(|c| c.probability)
+            .filter(|&p| p > 0.0)
+            .collect();
+        let share = guiding.len() as f64 / self.cells.len().max(1) as f64;
+        let mean = guiding.iter().map(|&p| p as f64).sum::<f64>() / guiding.len().max(1) as f64;
+        (share, mean)
     }
 
     fn bin_pdf(&self, cdf: &[f32], bin: usize) -> f32 {
@@ -330,14 +512,14 @@ mod tests {
         }
         let mut records = Records::new(bins);
         records.merge(&chunk);
-        let guide = Guide::new(lattice, &records, 100);
-        let cdf = guide
+        let guide = Guide::new(lattice, &records, 100, 0.5);
+        let cell = guide
             .find(Vec3::splat(0.2))
             .expect("a cell with 400 records");
         // The integral over the sphere, by midpoint sums over each bin.
         let integral: f32 = (0..bins.count())
             .map(|b| {
-                guide.pdf(cdf, bins.direction_in(b, Vec2::splat(0.5))) * bins.bin_solid_angle()
+                guide.pdf(cell, bins.direction_in(b, Vec2::splat(0.5))) * bins.bin_solid_angle()
             })
             .sum();
         assert!((integral - 1.0).abs() < 1e-5, "{integral}");
@@ -346,12 +528,13 @@ mod tests {
         let mut rng = tress_core::Sampler::from_seed(5);
         for _ in 0..n {
             let u = rng.next_4d();
-            let (wi, pdf) = guide.sample(cdf, [u[0], u[1], u[2]]);
-            assert_eq!(pdf, guide.pdf(cdf, wi));
+            let (wi, pdf) = guide.sample(cell, [u[0], u[1], u[2]]);
+            assert_eq!(pdf, guide.pdf(cell, wi));
             counts[bins.bin(wi)] += 1;
         }
         for (b, &c) in counts.iter().enumerate() {
-            let p = guide.pdf(cdf, bins.direction_in(b, Vec2::splat(0.5))) * bins.bin_solid_angle();
+            let p =
+                guide.pdf(cell, bins.direction_in(b, Vec2::splat(0.5))) * bins.bin_solid_angle();
             let expected = p as f64 * n as f64;
             let sd = (expected * (1.0 - p as f64)).sqrt();
             assert!(
@@ -360,8 +543,66 @@ mod tests {
             );
         }
         // Too few records in the cell and the whole box: no guide.
-        assert!(Guide::new(lattice, &records, 401)
+        assert!(Guide::new(lattice, &records, 401, 0.5)
             .find(Vec3::splat(0.2))
             .is_none());
+    }
+
+    /// A cell whose continuations carry light only where the guide is dense and the fiber's
+    /// density is low learns to draw from the guide as often as allowed; one where the fiber's
+    /// density already follows the light learns not to guide at all.
+    #[test]
+    fn cells_learn_to_guide_only_where_the_guide_follows_the_light_better() {
+        let unit = Aabb {
+            min: Vec3::ZERO,
+            max: Vec3::ONE,
+        };
+        let lattice = Lattice::new(unit, 1, 1, 1);
+        let bins = SphereBins::new(2, 2);
+        let lit = bins.direction_in(0, Vec2::splat(0.5));
+        let dark = bins.direction_in(3, Vec2::splat(0.5));
+        let (guided_at, unguided_at) = (Vec3::splat(0.25), Vec3::splat(0.75));
+        // Both cells' guides see the light arrive through bin 0.
+        let mut chunk = ChunkRecords::default();
+        for p in [guided_at, unguided_at] {
+            for _ in 0..100 {
+                chunk.add(&lattice, &bins, p, lit, 1.0);
+            }
+        }
+        let mut records = Records::new(bins);
+        records.merge(&chunk);
+        let mut guide = Guide::new(lattice, &records, 100, 0.5);
+        let uniform = 1.0 / (4.0 * PI);
+        let mut continuations = Vec::new();
+        for i in 0..200 {
+            // Fiber-sampled directions (uniform density), light only in bin 0: the guide,
+            // dense there, would have done better.
+            let wi = if i % 4 == 0 { lit } else { dark };
+            let estimate = if i % 4 == 0 { 4.0 } else { 0.0 };
+            continuations.extend(Continuation::new(
+                &lattice, &bins, guided_at, wi, estimate, uniform, uniform,
+            ));
+            // The fiber's own density already puts its samples where the light is, and the
+            // light comes from every direction: the guide, dense in bin 0 only, can only add
+            // variance.
+            let wi = bins.direction_in(i % 4, Vec2::splat(0.5));
+            continuations.extend(Continuation::new(
+                &lattice,
+                &bins,
+                unguided_at,
+                wi,
+                1.0,
+                uniform,
+                uniform,
+            ));
+        }
+        let gain = guide.learn_probabilities(&continuations, 0.5);
+        assert_eq!(guide.find(guided_at).unwrap().probability, 0.5);
+        assert_eq!(guide.find(unguided_at).unwrap().probability, 0.0);
+        assert!(gain > 1.05, "{gain}");
+        // Nothing to learn from: every cell takes the fallback, which is not to guide.
+        let mut idle = Guide::new(lattice, &records, 100, 0.5);
+        assert_eq!(idle.learn_probabilities(&[], 0.5), 1.0);
+        assert_eq!(idle.probabilities().0, 0.0);
     }
 }

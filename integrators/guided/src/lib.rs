@@ -1,18 +1,29 @@
 //! Path tracing guided by the light learned from the film's own training paths.
 //!
-//! Before the first sample of a film, `training_rounds` rounds of training paths through the
-//! film's pixels (`training_spp` per pixel in the last round, half as many in each round before)
-//! record, at every vertex, the light that arrived along the direction the path continued in
-//! and along the direction next-event estimation looked in, each divided by the density it was
-//! drawn with ([`guide`]). Each round's paths are guided by what the rounds before learned.
-//! The render then samples each continuation from a mixture: with probability
-//! `guide_probability` from the learned density of the cell around the vertex, otherwise from
-//! the fiber's own sampling routine. The sample's weight is f over the mixture's exact density
-//! (the fiber's density at a guided direction comes from its `pdf`, the guide's at a
-//! fiber-sampled direction from its bins), and next-event estimation is MIS-weighted against
-//! the same mixture, so the estimator is unbiased whatever was learned. Only the first
-//! `guided_vertices` vertices are guided: a mixture's weights vary where the fiber's own are
-//! nearly constant, and along light hair's long paths their products grow heavy tails.
+//! A film's samples come in blocks that double in length (`block_spp`, then twice, four
+//! times as many, …, as the radiance cache's). The first block is the path tracer's: nothing
+//! has been learned yet, and short renders pay for no training. Before each later block,
+//! training paths through the whole film's pixels (`training_fraction` of the block's samples
+//! per pixel, `training_spp` per pixel in all) record, at every vertex, the light that arrived
+//! along the direction the path continued in and along the direction next-event estimation
+//! looked in, each divided by the density it was drawn with ([`guide`]); each block's paths
+//! are guided by what the blocks before learned, and its guide is built from all the records
+//! so far. What a sample sees depends only on its block, so passes, crops and tiles of one
+//! image render each sample alike.
+//!
+//! A block's samples draw each continuation from a mixture: with a probability learned per cell
+//! from the guide's density of that cell, otherwise from the fiber's own sampling routine. The
+//! probability is the one among eighths of `guide_probability` that would have given the
+//! training paths' continuations in the cell the smallest second moment (estimated by
+//! importance weights), so where the guide does not follow the light better than the fiber
+//! does the cell's vertices are the path tracer's, at its cost. When the guide predicts no
+//! gain at all, training stops and later blocks keep the last guide. The sample's weight is f
+//! over the mixture's exact density (the fiber's density at a guided direction comes from its
+//! `pdf`, the guide's at a fiber-sampled direction from its bins), and next-event estimation
+//! is MIS-weighted against the same mixture, so the estimator is unbiased whatever was
+//! learned. Only the first `guided_vertices` vertices are guided: a mixture's weights vary
+//! where the fiber's own are nearly constant, and along light hair's long paths their products
+//! grow heavy tails.
 //!
 //! A fiber has no normal and scatters into the whole sphere, so the guide is a density over the
 //! whole sphere too, in world space, and is mixed with the fiber's density rather than
@@ -22,20 +33,20 @@
 //! Optionally (`adjoint_roulette`), Russian roulette and splitting are driven by the radiance
 //! the training paths saw leave each cell (Vorba & Křivánek 2016).
 //!
-//! docs/src/research/radiance-cache.md measures it: unbiased, but not yet faster than the path
-//! tracer on hair.
+//! docs/src/research/radiance-cache.md measures it.
 //!
-//! RON: `Guided(training_spp: 4, training_rounds: 3, guide_probability: 0.5)`
+//! RON: `Guided(block_spp: 8, training_fraction: 0.0625, training_spp: 16, guide_probability: 0.5)`
 
 #![warn(missing_docs)]
 
 mod guide;
 
 pub use guide::Target;
-use guide::{ChunkRecords, Guide, Records, SphereBins};
+use guide::{ChunkRecords, Continuation, Guide, GuideCell, Records, SphereBins};
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 use tress_core::film::FilmSettings;
 use tress_core::integrator::{
@@ -47,21 +58,30 @@ use tress_core::{
     luminance, Hit, Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint,
 };
 use tress_learned_light::{
-    check_ranges, FilmKey, LastFilm, Lattice, OutOfRange, RadianceCache, Records as RadianceRecords,
+    block_of, block_segments, check_ranges, FilmKey, LastFilm, Lattice, OutOfRange, RadianceCache,
+    Records as RadianceRecords,
 };
+use tress_path::{PathSettings, PathTracer};
 
 /// Guided path tracer settings.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct GuidedSettings {
-    /// Training paths per pixel of the whole film in the last training round; each round
-    /// before traces half as many.
+    /// Samples per pixel of the first sample block, which is the path tracer's (nothing is
+    /// learned yet); each block after it is twice as long as the one before.
+    pub block_spp: u32,
+    /// Training paths per pixel traced before each later block, as a fraction of the block's
+    /// samples per pixel (at least one), until `training_spp` are reached.
+    pub training_fraction: f32,
+    /// Training paths per pixel in all; later blocks keep the last guide.
     pub training_spp: u32,
-    /// Training rounds, each guided by the ones before.
-    pub training_rounds: u32,
-    /// Probability of sampling a continuation from the guide where a cell has one (the rest
-    /// from the fiber's own sampling), in [0, 1).
+    /// The largest probability of sampling a continuation from the guide (the rest from the
+    /// fiber's own sampling), in [0, 1); each cell's own is learned among eighths of it,
+    /// unless `learn_probability` is off.
     pub guide_probability: f32,
+    /// Whether each cell learns its probability of drawing from the guide; otherwise every
+    /// cell uses `guide_probability`.
+    pub learn_probability: bool,
     /// Vertices of a path, from the camera's, at which continuations use the guide; deeper
     /// ones use the fiber's own sampling. A mixture's weight f / density varies from sample to
     /// sample where the fiber's own is nearly constant, and along the long paths of light
@@ -71,8 +91,6 @@ pub struct GuidedSettings {
     pub guided_vertices: u32,
     /// What the guide's density follows.
     pub target: Target,
-    /// How continuations use the guide.
-    pub sampling: Sampling,
     /// Cells along the longest side of the scene's bounds at the finest level, as a power of
     /// two (6: 64 cells).
     pub finest_cells_log2: u32,
@@ -100,12 +118,13 @@ pub struct GuidedSettings {
 impl Default for GuidedSettings {
     fn default() -> Self {
         GuidedSettings {
-            training_spp: 4,
-            training_rounds: 3,
+            block_spp: 8,
+            training_fraction: 0.0625,
+            training_spp: 16,
             guide_probability: 0.5,
+            learn_probability: true,
             guided_vertices: 2,
             target: Target::Radiance,
-            sampling: Sampling::Mixture,
             finest_cells_log2: 6,
             levels: 6,
             min_records: 256,
@@ -118,51 +137,37 @@ impl Default for GuidedSettings {
     }
 }
 
-/// How a continuation uses the guide.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
-pub enum Sampling {
-    /// With probability `guide_probability` a direction from the guide, otherwise from the
-    /// fiber; weighted by the mixture's exact density, which next-event estimation is
-    /// MIS-weighted against.
-    Mixture,
-    /// Resampled importance sampling: `candidates` directions from the fiber's own sampling,
-    /// one kept with probability proportional to its weight times the guide's density there;
-    /// the kept direction's weight is the fiber's times the candidates' mean over the
-    /// guide's density. It has no density, so lights that next-event estimation samples are
-    /// left to it alone (escaping continuations do not count them).
-    Resampled {
-        /// Candidates drawn per continuation.
-        candidates: u32,
-    },
-}
-
 impl GuidedSettings {
+    /// The path tracer of the same depth and roulette.
+    fn path_tracer(&self) -> PathTracer {
+        PathTracer::new(PathSettings {
+            max_depth: self.max_depth,
+            rr_depth: self.rr_depth,
+        })
+    }
+
     fn check(&self) -> Result<(), OutOfRange> {
         let s = self;
-        let candidates = match s.sampling {
-            Sampling::Resampled { candidates } => candidates,
-            Sampling::Mixture => 1,
-        };
         check_ranges(
             GuidedPathTracer::NAME,
             &[
                 (
-                    "candidates",
-                    candidates as f64,
-                    (1..=64).contains(&candidates),
-                    "must lie in 1..=64",
+                    "block_spp",
+                    s.block_spp as f64,
+                    (1..=4096).contains(&s.block_spp),
+                    "must lie in 1..=4096",
+                ),
+                (
+                    "training_fraction",
+                    s.training_fraction as f64,
+                    s.training_fraction > 0.0 && s.training_fraction <= 1.0,
+                    "must lie in (0, 1]",
                 ),
                 (
                     "training_spp",
                     s.training_spp as f64,
-                    (1..=4096).contains(&s.training_spp),
-                    "must lie in 1..=4096",
-                ),
-                (
-                    "training_rounds",
-                    s.training_rounds as f64,
-                    (1..=12).contains(&s.training_rounds),
-                    "must lie in 1..=12",
+                    s.training_spp <= 4096,
+                    "must lie in 0..=4096",
                 ),
                 (
                     "guide_probability",
@@ -197,14 +202,22 @@ impl GuidedSettings {
             ],
         )
     }
+
+    /// Training paths per pixel traced before block `block` (≥ 1), when `traced` were before.
+    fn training_before(&self, block: u32, traced: u64) -> u64 {
+        let block_len = (self.block_spp as u64).saturating_mul(1u64 << block.min(40));
+        let wanted = ((block_len as f64 * self.training_fraction as f64).round() as u64).max(1);
+        wanted.min((self.training_spp as u64).saturating_sub(traced))
+    }
 }
 
-/// The `guided` integrator as built for a scene: the guide of the film last rendered is kept,
-/// so the waves and sample ranges of one image train it once.
+/// The `guided` integrator as built for a scene: the guides of the film last rendered are
+/// kept, so the waves and sample ranges of one image train them once.
 #[derive(Debug)]
 pub struct GuidedPathTracer {
     settings: GuidedSettings,
     trained: LastFilm<Trained>,
+    unguided: PathTracer,
 }
 
 impl IntegratorKind for GuidedPathTracer {
@@ -221,16 +234,19 @@ impl IntegratorKind for GuidedPathTracer {
         Ok(Box::new(GuidedPathTracer {
             settings: settings.clone(),
             trained: LastFilm::default(),
+            unguided: settings.path_tracer(),
         }))
     }
 
-    /// Two short training rounds, few records per cell, the camera's vertex alone guided,
-    /// and paths deep enough for white furnaces.
+    /// Blocks of one sample (so that the tests' few samples are guided), one training path
+    /// per pixel before each, few records per cell, the camera's vertex alone guided, and
+    /// paths deep enough for white furnaces.
     fn test_settings() -> GuidedSettings {
         GuidedSettings {
+            block_spp: 1,
+            training_fraction: 0.25,
+            training_spp: 4,
             guided_vertices: 1,
-            training_spp: 2,
-            training_rounds: 2,
             min_records: 64,
             max_depth: 10_000,
             ..Default::default()
@@ -239,37 +255,81 @@ impl IntegratorKind for GuidedPathTracer {
 }
 
 impl Integrator for GuidedPathTracer {
-    /// Without a film there is no guide: the fiber's own sampling alone.
+    /// Without a film there is no guide: the path tracer's.
     fn li(&self, ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb {
-        trace(&self.settings, None, ray, scene, sampler, None)
+        self.unguided.li(ray, scene, sampler)
     }
 
     fn for_film(
         &self,
         scene: &Scene,
         film: &FilmSettings,
-        _: Range<u64>,
+        samples: Range<u64>,
         cancel: &AtomicBool,
         progress: &(dyn Fn(f64) + Sync),
     ) -> Option<FilmIntegrator> {
         let key = FilmKey::of(film);
+        let block_spp = self.settings.block_spp;
+        let blocks = block_of(block_spp, samples.start)
+            ..block_of(block_spp, samples.end.saturating_sub(1).max(samples.start)) + 1;
         let t = self.trained.get_or_train(
             key,
-            |_| true,
-            |_| Trained::new(&self.settings, scene, key, cancel, progress),
+            |t| t.covers(&blocks),
+            |before| {
+                Trained::new(
+                    &self.settings,
+                    scene,
+                    key,
+                    blocks.clone(),
+                    before,
+                    cancel,
+                    progress,
+                )
+            },
         )?;
         Some(FilmIntegrator {
             note: t.description.clone(),
             integrator: t,
         })
     }
+
+    /// One segment a sample block, so that a render holds one block's guide at a time.
+    fn sample_segments(&self, samples: Range<u64>) -> Vec<Range<u64>> {
+        block_segments(self.settings.block_spp, samples)
+    }
 }
 
-/// The integrator with its guide for one film.
+/// The integrator with the guides of one film's sample blocks.
 struct Trained {
     settings: GuidedSettings,
-    learned: Learned,
+    /// The first block it renders.
+    first_block: u32,
+    /// What blocks `first_block..` are guided by (`None`: the path tracer's first block).
+    guides: Vec<Option<Arc<Learned>>>,
+    /// What renders the blocks that nothing guides.
+    unguided: PathTracer,
+    /// Where the training of later blocks goes on from; taken by that training.
+    training: Mutex<Option<Training>>,
+    /// How the guides were made, for logs.
     description: String,
+}
+
+/// The state of a film's training after some blocks.
+struct Training {
+    /// The last block trained for.
+    block: u32,
+    /// Training paths traced per pixel.
+    traced: u64,
+    /// Whether training has stopped (all paths traced, or no gain predicted).
+    stopped: bool,
+    records: Records,
+    radiance_records: RadianceRecords,
+    /// The last block's guide.
+    learned: Option<Arc<Learned>>,
+    /// Wall seconds of training so far.
+    seconds: f64,
+    /// The last guide's predicted gain (second moment of fiber sampling over the mixture's).
+    gain: f64,
 }
 
 /// What training learned: the directions light comes from, and (for adjoint-driven roulette)
@@ -277,6 +337,8 @@ struct Trained {
 struct Learned {
     guide: Guide,
     radiance: Option<RadianceCache>,
+    /// Whether any path is sampled differently from the path tracer's.
+    guiding: bool,
 }
 
 impl std::fmt::Debug for Trained {
@@ -286,26 +348,48 @@ impl std::fmt::Debug for Trained {
 }
 
 impl Integrator for Trained {
+    /// Traced with the guide of the sample's block.
     fn li(&self, ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb {
-        trace(
-            &self.settings,
-            Some(&self.learned),
-            ray,
-            scene,
-            sampler,
-            None,
-        )
+        self.li_sample(ray, scene, sampler, 0)
+    }
+
+    /// Where nothing was learned, or what was learned guides nowhere, the path tracer's own
+    /// loop renders the sample, at its cost.
+    fn li_sample(&self, ray: &Ray, scene: &Scene, sampler: &mut Sampler, sample_index: u64) -> Rgb {
+        let block = block_of(self.settings.block_spp, sample_index);
+        let learned = block
+            .checked_sub(self.first_block)
+            .and_then(|i| self.guides.get(i as usize))
+            .and_then(|g| g.as_deref())
+            .filter(|l| l.guiding);
+        match learned {
+            Some(l) => trace(&self.settings, Some(l), ray, scene, sampler, None),
+            None => self.unguided.li(ray, scene, sampler),
+        }
     }
 }
 
 /// Stream tag of the training paths' random numbers (apart from every pixel sample's).
 const TRAINING_STREAM: u64 = 0x6775_6964_6564_0001;
 
+/// Continuations kept per block's training to learn the cells' probabilities from (24 bytes
+/// each): enough for a few hundred per cell, bounded whatever the film's size.
+const CONTINUATION_BUDGET: u64 = 1 << 20;
+
+/// The smallest predicted gain for which training goes on.
+const MIN_GAIN: f64 = 1.1;
+
 impl Trained {
+    /// The guides of sample blocks `blocks`, going on from `before` (the training of earlier
+    /// blocks of the same film) where it has trained for no block past the first of `blocks`;
+    /// the records are the same sums of the same paths in the same order either way, so the
+    /// guides are too. `None` when cancelled.
     fn new(
         settings: &GuidedSettings,
         scene: &Scene,
         film: FilmKey,
+        blocks: Range<u32>,
+        before: Option<Arc<Trained>>,
         cancel: &AtomicBool,
         progress: &(dyn Fn(f64) + Sync),
     ) -> Option<Self> {
@@ -323,77 +407,181 @@ impl Trained {
             settings.levels,
             RADIANCE_DIRECTION_BINS,
         );
-        let rounds = settings.training_rounds;
-        // Paths per pixel of each round: the last `training_spp`, each before it half.
-        let spp: Vec<u64> = (0..rounds)
-            .map(|r| (settings.training_spp as u64 >> (rounds - 1 - r)).max(1))
-            .collect();
-        let total = film.pixels() * spp.iter().sum::<u64>();
-        let mut records = Records::new(bins);
-        let mut radiance_records = RadianceRecords::default();
-        let mut learned: Option<Learned> = None;
-        let mut first = 0;
-        for round_spp in spp {
-            let paths = first..first + film.pixels() * round_spp;
-            let current = learned.as_ref();
-            tress_learned_light::train(
-                scene,
-                film,
-                TRAINING_STREAM,
-                paths.clone(),
-                cancel,
-                &|done| progress((first + done) as f64 / total as f64),
-                |ray, sampler, chunk: &mut (ChunkRecords, RadianceRecords, Vec<Vertex>)| {
-                    let (records, radiance_records, vertices) = chunk;
-                    vertices.clear();
-                    trace(settings, current, ray, scene, sampler, Some(vertices));
-                    let lattices = (&lattice, &radiance_lattice);
-                    let radiance_records = settings.adjoint_roulette.then_some(radiance_records);
-                    record(
-                        settings.target,
-                        lattices,
-                        &bins,
-                        vertices,
-                        records,
-                        radiance_records,
+        let went_on = before.and_then(|b| {
+            let mut training = b.training.lock().unwrap_or_else(|e| e.into_inner());
+            training.take_if(|t| t.block <= blocks.start)
+        });
+        let mut t = went_on.unwrap_or_else(|| Training {
+            block: 0,
+            traced: 0,
+            stopped: settings.training_spp == 0,
+            records: Records::new(bins),
+            radiance_records: RadianceRecords::default(),
+            learned: None,
+            seconds: 0.0,
+            gain: 1.0,
+        });
+        let seconds_before = t.seconds;
+        // Training paths per pixel still to trace for these blocks, for progress.
+        let total: u64 = {
+            let (mut traced, mut sum) = (t.traced, 0);
+            for block in t.block + 1..blocks.end {
+                let n = if t.stopped {
+                    0
+                } else {
+                    settings.training_before(block, traced)
+                };
+                traced += n;
+                sum += n;
+            }
+            sum.max(1)
+        };
+        let mut done = 0u64;
+        let mut guides = Vec::new();
+        for block in 0..blocks.end {
+            if block > t.block {
+                let n = if t.stopped {
+                    0
+                } else {
+                    settings.training_before(block, t.traced)
+                };
+                if n > 0 {
+                    let paths = t.traced * film.pixels()..(t.traced + n) * film.pixels();
+                    let current = t.learned.clone();
+                    let mut continuations = Vec::new();
+                    let stride = (paths.end - paths.start)
+                        .saturating_mul(settings.guided_vertices as u64)
+                        .div_ceil(CONTINUATION_BUDGET)
+                        .max(1);
+                    let mut seen = 0u64;
+                    let done_before = done;
+                    tress_learned_light::train(
+                        scene,
+                        film,
+                        TRAINING_STREAM,
+                        paths.clone(),
+                        cancel,
+                        &|d| {
+                            let paths_done = done_before * film.pixels() + d;
+                            progress(paths_done as f64 / (total * film.pixels()) as f64)
+                        },
+                        |ray, sampler, chunk: &mut (ChunkRecords, RadianceRecords, Vec<Vertex>)| {
+                            let (records, radiance_records, vertices) = chunk;
+                            vertices.clear();
+                            trace(
+                                settings,
+                                current.as_deref(),
+                                ray,
+                                scene,
+                                sampler,
+                                Some(vertices),
+                            );
+                            let radiance_records =
+                                settings.adjoint_roulette.then_some(radiance_records);
+                            record(
+                                settings,
+                                (&lattice, &radiance_lattice),
+                                &bins,
+                                vertices,
+                                records,
+                                radiance_records,
+                            );
+                        },
+                        |(chunk, radiance_chunk, _)| {
+                            t.records.merge(&chunk);
+                            t.radiance_records.merge(&radiance_chunk);
+                            // Every stride-th continuation, in path order: bounded memory.
+                            for c in &chunk.continuations {
+                                if seen.is_multiple_of(stride) {
+                                    continuations.push(*c);
+                                }
+                                seen += 1;
+                            }
+                        },
+                    )?;
+                    done += n;
+                    t.traced += n;
+                    let mut guide = Guide::new(
+                        lattice,
+                        &t.records,
+                        settings.min_records,
+                        settings.guide_probability,
                     );
-                },
-                |(chunk, radiance_chunk, _)| {
-                    records.merge(&chunk);
-                    radiance_records.merge(&radiance_chunk);
-                },
-            )?;
-            // Training paths are neither rouletted nor split by the learned radiance, so only
-            // the render needs it.
-            learned = Some(Learned {
-                guide: Guide::new(lattice, &records, settings.min_records),
-                radiance: None,
-            });
-            first = paths.end;
+                    if settings.learn_probability {
+                        t.gain =
+                            guide.learn_probabilities(&continuations, settings.guide_probability);
+                        t.stopped |= t.gain < MIN_GAIN;
+                    }
+                    // Training paths are neither rouletted nor split by the learned radiance,
+                    // so only the render needs it.
+                    let radiance = settings.adjoint_roulette.then(|| {
+                        RadianceCache::new(
+                            radiance_lattice,
+                            &t.radiance_records,
+                            RADIANCE_MIN_RECORDS,
+                        )
+                    });
+                    let guiding = radiance.is_some() || guide.probabilities().0 > 0.0;
+                    t.learned = Some(Arc::new(Learned {
+                        guide,
+                        radiance,
+                        guiding,
+                    }));
+                }
+                t.stopped |= t.traced >= settings.training_spp as u64;
+                t.block = block;
+            }
+            if block >= blocks.start {
+                guides.push(t.learned.clone());
+            }
         }
-        let mut learned = learned.expect("at least one training round");
-        if settings.adjoint_roulette {
-            learned.radiance = Some(RadianceCache::new(
-                radiance_lattice,
-                &radiance_records,
-                RADIANCE_MIN_RECORDS,
-            ));
-        }
-        let description = format!(
-            "{} ({:.1} MB){}, from {total} training paths in {rounds} rounds, built in {:.2} s",
-            learned.guide.describe(),
-            learned.guide.bytes() as f64 / 1e6,
-            learned
-                .radiance
-                .as_ref()
-                .map_or(String::new(), |r| format!(" and {}", r.describe())),
-            start.elapsed().as_secs_f64()
-        );
+        t.seconds = seconds_before + start.elapsed().as_secs_f64();
+        let description = match &t.learned {
+            None => format!(
+                "sample blocks {}..{}: the path tracer's (nothing learned yet)",
+                blocks.start, blocks.end
+            ),
+            Some(l) => {
+                let (share, mean) = l.guide.probabilities();
+                let guided = if share > 0.0 {
+                    format!(
+                        "{:.0} % of cells guided with probability {mean:.2} on average",
+                        share * 100.0
+                    )
+                } else {
+                    "no cell guided (the path tracer's)".to_string()
+                };
+                format!(
+                    "sample blocks {}..{}: {} ({:.1} MB){}; {} training paths a pixel so far, \
+                     {guided}, predicted gain {:.2}{}; trained in {:.2} s",
+                    blocks.start,
+                    blocks.end,
+                    l.guide.describe(),
+                    l.guide.bytes() as f64 / 1e6,
+                    l.radiance
+                        .as_ref()
+                        .map_or(String::new(), |r| format!(" and {}", r.describe())),
+                    t.traced,
+                    t.gain,
+                    if t.stopped { ", training stopped" } else { "" },
+                    t.seconds,
+                )
+            }
+        };
         Some(Trained {
             settings: settings.clone(),
-            learned,
+            first_block: blocks.start,
+            guides,
+            unguided: settings.path_tracer(),
+            training: Mutex::new(Some(t)),
             description,
         })
+    }
+
+    /// Whether it has the guides of every block of `blocks`.
+    fn covers(&self, blocks: &Range<u32>) -> bool {
+        blocks.start >= self.first_block
+            && blocks.end <= self.first_block + self.guides.len() as u32
     }
 }
 
@@ -412,18 +600,28 @@ struct Vertex {
     /// Next-event estimation's direction, and what it found there: the scattering value and
     /// the MIS-weighted incident radiance over the light sample's density.
     direct: Option<(Vec3, Rgb, Rgb)>,
-    /// The continuation's direction, f·cos over its density, and that density; `None` when
-    /// the path ended here.
-    continuation: Option<(Vec3, Rgb, f32)>,
+    /// Where the path went on from here; `None` when it ended here.
+    continuation: Option<Step>,
     /// The radiance arriving along the continuation, as the rest of the path estimated it.
     incident: Rgb,
 }
 
+/// A continuation: its direction, f·cos over the density it was drawn with, that density, and
+/// the fiber's own density of the direction.
+#[derive(Clone, Copy)]
+struct Step {
+    wi: Vec3,
+    weight: Rgb,
+    pdf: f32,
+    fiber_pdf: f32,
+}
+
 /// Records a training path's vertices, from the last back: the light each continuation
 /// brought back is the radiance leaving the vertex after it; the radiance leaving each vertex
-/// toward the one before goes into `radiance_records`, when given.
+/// toward the one before goes into `radiance_records`, when given. The continuations of
+/// guided vertices are kept for learning the cells' probabilities.
 fn record(
-    target: Target,
+    settings: &GuidedSettings,
     (lattice, radiance_lattice): (&Lattice, &Lattice),
     bins: &SphereBins,
     vertices: &mut [Vertex],
@@ -431,24 +629,36 @@ fn record(
     mut radiance_records: Option<&mut RadianceRecords>,
 ) {
     let mut after = vertices.last().map_or(Rgb::ZERO, |v| v.incident);
-    for v in vertices.iter_mut().rev() {
+    for (depth, v) in vertices.iter_mut().enumerate().rev() {
         v.incident = after;
         let mut leaving = Rgb::ZERO;
         if let Some((wi, f, li)) = v.direct {
-            let value = match target {
+            let value = match settings.target {
                 Target::Radiance => luminance(li),
                 Target::Contribution => luminance(f * li),
             };
             records.add(lattice, bins, v.p, wi, value);
             leaving += f * li;
         }
-        if let Some((wi, weight, pdf)) = v.continuation {
-            let value = match target {
-                Target::Radiance => luminance(after) / pdf,
-                Target::Contribution => luminance(weight * after),
+        if let Some(step) = v.continuation {
+            let value = match settings.target {
+                Target::Radiance => luminance(after) / step.pdf,
+                Target::Contribution => luminance(step.weight * after),
             };
-            records.add(lattice, bins, v.p, wi, value);
-            leaving += weight * after;
+            records.add(lattice, bins, v.p, step.wi, value);
+            if (depth as u32) < settings.guided_vertices {
+                let estimate = luminance(step.weight * after);
+                records.continuations.extend(Continuation::new(
+                    lattice,
+                    bins,
+                    v.p,
+                    step.wi,
+                    estimate,
+                    step.pdf,
+                    step.fiber_pdf,
+                ));
+            }
+            leaving += step.weight * after;
         }
         if let Some(r) = radiance_records.as_mut() {
             r.add(radiance_lattice, v.p, v.wo, leaving);
@@ -486,10 +696,6 @@ fn trace(
     mut vertices: Option<&mut Vec<Vertex>>,
 ) -> Rgb {
     let density_needed = scene.lights.weighs_escapes();
-    let resampled = match settings.sampling {
-        Sampling::Resampled { candidates } => Some(candidates),
-        Sampling::Mixture => None,
-    };
     let guide = learned.map(|l| &l.guide);
     let adjoint = learned
         .filter(|_| vertices.is_none())
@@ -507,13 +713,15 @@ fn trace(
         .map(luminance)
         .filter(|&v| v > 0.0);
     let mut radiance = Rgb::ZERO;
-    let mut stack = vec![PathState {
+    let mut next_path = Some(PathState {
         ray: *camera_ray,
         hit,
         throughput: Rgb::ONE,
         depth: 0,
-    }];
-    while let Some(mut path) = stack.pop() {
+    });
+    // A split's copies wait here; empty (and never allocated) without splitting.
+    let mut stack = Vec::new();
+    while let Some(mut path) = next_path.take().or_else(|| stack.pop()) {
         loop {
             let PathState {
                 ray, hit, depth, ..
@@ -544,20 +752,14 @@ fn trace(
                 }
             }
             let sp = ShadingPoint::new(&hit, &ray, &scene.materials);
+            // Cells that learned not to guide are the path tracer's, at its cost.
             let mixture = guide
                 .filter(|_| depth < settings.guided_vertices)
                 .and_then(|g| {
-                    let cdf = g.find(hit.p)?;
-                    Some(Mixture {
-                        guide: g,
-                        cdf,
-                        probability: settings.guide_probability,
-                    })
+                    let cell = g.find(hit.p).filter(|c| c.probability > 0.0)?;
+                    Some(Mixture { guide: g, cell })
                 });
-            let resampling = mixture.is_some() && resampled.is_some();
-            // With resampling, next-event estimation alone counts the lights it samples.
             let density = |wi: Vec3, pdf: f32| match &mixture {
-                Some(_) if resampling => 0.0,
                 Some(m) => m.pdf(wi, pdf),
                 None => pdf,
             };
@@ -574,18 +776,22 @@ fn trace(
                 }
             }
 
-            let continuation = match (&mixture, resampled) {
-                (Some(m), Some(candidates)) => m.resample(&sp, candidates, sampler),
-                (Some(m), None) => {
+            let continuation = match &mixture {
+                Some(m) => {
                     let u_mix = sampler.next_1d();
                     m.sample(&sp, u_mix, sampler.next_4d())
                 }
-                (None, _) => sp
+                None => sp
                     .sample(sampler.next_4d())
                     .filter(|s| s.pdf > 0.0)
-                    .map(|s| (s.wi, s.f / s.pdf, s.pdf)),
+                    .map(|s| Step {
+                        wi: s.wi,
+                        weight: s.f / s.pdf,
+                        pdf: s.pdf,
+                        fiber_pdf: s.pdf,
+                    }),
             }
-            .filter(|(_, weight, _)| *weight != Rgb::ZERO && weight.is_finite());
+            .filter(|s| s.weight != Rgb::ZERO && s.weight.is_finite());
             let mut vertex = Vertex {
                 p: hit.p,
                 wo: -ray.dir,
@@ -593,20 +799,23 @@ fn trace(
                 continuation: None,
                 incident: Rgb::ZERO,
             };
-            let Some((wi, weight, pdf)) = continuation else {
+            let Some(step) = continuation else {
                 if let Some(v) = vertices.as_mut() {
                     v.push(vertex);
                 }
                 break;
             };
-            path.throughput *= weight;
+            path.throughput *= step.weight;
             let survive = if adjoint_rouletted {
                 Some(1.0)
             } else {
                 roulette(depth, settings.rr_depth, &mut path.throughput, sampler)
             };
             if let (true, Some(survive)) = (vertices.is_some(), survive) {
-                vertex.continuation = Some((wi, weight / survive, pdf));
+                vertex.continuation = Some(Step {
+                    weight: step.weight / survive,
+                    ..step
+                });
             }
             if let Some(v) = vertices.as_mut() {
                 v.push(vertex);
@@ -614,21 +823,17 @@ fn trace(
             if survive.is_none() {
                 break;
             }
-            let next = sp.spawn(wi);
-            let scatter_pdf = density_needed.then_some(pdf);
+            let next = sp.spawn(step.wi);
+            let scatter_pdf = density_needed.then_some(step.pdf);
             let Some(next_hit) = scene.intersect(&next) else {
-                let mut escaped = Rgb::ZERO;
-                for light in scene.lights.infinite() {
-                    let select_pdf = scene.lights.select_pdf_of(light);
-                    escaped += match scatter_pdf {
-                        // Next-event estimation alone counts the lights it samples.
-                        Some(_) if resampling && select_pdf > 0.0 => Rgb::ZERO,
-                        Some(_) if resampling => {
-                            escaped_light(light, next.dir, Some(1.0), 0.0, Rgb::ONE)
-                        }
-                        _ => escaped_light(light, next.dir, scatter_pdf, select_pdf, Rgb::ONE),
-                    };
-                }
+                let escaped: Rgb = scene
+                    .lights
+                    .infinite()
+                    .map(|light| {
+                        let select_pdf = scene.lights.select_pdf_of(light);
+                        escaped_light(light, next.dir, scatter_pdf, select_pdf, Rgb::ONE)
+                    })
+                    .sum();
                 radiance += path.throughput * escaped;
                 if let Some(last) = vertices.as_mut().and_then(|v| v.last_mut()) {
                     last.incident = escaped;
@@ -647,70 +852,36 @@ fn trace(
 }
 
 /// The mixture a continuation is drawn from at one vertex: the guide's density of the vertex's
-/// cell and the shading point's own.
+/// cell, with the cell's probability, and the shading point's own.
 struct Mixture<'a> {
     guide: &'a Guide,
-    cdf: &'a [f32],
-    probability: f32,
+    cell: &'a GuideCell,
 }
 
 impl Mixture<'_> {
     /// The mixture's density at `wi`, where the shading point's own is `pdf`.
     fn pdf(&self, wi: Vec3, pdf: f32) -> f32 {
-        self.probability * self.guide.pdf(self.cdf, wi) + (1.0 - self.probability) * pdf
+        let a = self.cell.probability;
+        a * self.guide.pdf(self.cell, wi) + (1.0 - a) * pdf
     }
 
-    /// A direction from the mixture: its f·cos over the mixture's density, and that density.
-    fn sample(&self, sp: &ShadingPoint, u_mix: f32, u: [f32; 4]) -> Option<(Vec3, Rgb, f32)> {
-        let (wi, f, pdf) = if u_mix < self.probability {
-            let (wi, guide_pdf) = self.guide.sample(self.cdf, [u[0], u[1], u[2]]);
+    /// A direction from the mixture.
+    fn sample(&self, sp: &ShadingPoint, u_mix: f32, u: [f32; 4]) -> Option<Step> {
+        let a = self.cell.probability;
+        let (wi, f, pdf, fiber_pdf) = if u_mix < a {
+            let (wi, guide_pdf) = self.guide.sample(self.cell, [u[0], u[1], u[2]]);
             let (f, own_pdf) = sp.eval_pdf(wi);
-            (
-                wi,
-                f,
-                self.probability * guide_pdf + (1.0 - self.probability) * own_pdf,
-            )
+            (wi, f, a * guide_pdf + (1.0 - a) * own_pdf, own_pdf)
         } else {
             let s = sp.sample(u)?;
-            (s.wi, s.f, self.pdf(s.wi, s.pdf))
+            (s.wi, s.f, self.pdf(s.wi, s.pdf), s.pdf)
         };
-        (pdf > 0.0).then(|| (wi, f / pdf, pdf))
-    }
-
-    /// Resampled importance sampling with the fiber's sampling as the source and its weight
-    /// times the guide's density as the target: the kept direction, its weight (the fiber's
-    /// f·cos over the target, times the candidates' mean target-to-source ratio) and the
-    /// density resampling approximately drew it with (for training records only).
-    fn resample(
-        &self,
-        sp: &ShadingPoint,
-        candidates: u32,
-        sampler: &mut Sampler,
-    ) -> Option<(Vec3, Rgb, f32)> {
-        let mut sum = 0.0f32;
-        let mut kept: Option<(Vec3, Rgb, f32, f32)> = None;
-        for _ in 0..candidates {
-            let u = sampler.next_4d();
-            let u_keep = sampler.next_1d();
-            let Some(s) = sp.sample(u).filter(|s| s.pdf > 0.0) else {
-                continue;
-            };
-            let weight = s.f / s.pdf;
-            let ratio = luminance(weight) * self.guide.pdf(self.cdf, s.wi);
-            if !(ratio > 0.0 && ratio.is_finite()) {
-                continue;
-            }
-            sum += ratio;
-            if u_keep * sum < ratio {
-                kept = Some((s.wi, weight, ratio, s.pdf));
-            }
-        }
-        let (wi, weight, ratio, pdf) = kept?;
-        let mean = sum / candidates as f32;
-        // f / target = weight / ratio (the fiber's density cancels), times the mean ratio;
-        // resampling drew `wi` with about the target over the mean ratio as its density.
-        let scale = mean / ratio;
-        Some((wi, weight * scale, pdf / scale))
+        (pdf > 0.0).then(|| Step {
+            wi,
+            weight: f / pdf,
+            pdf,
+            fiber_pdf,
+        })
     }
 }
 
@@ -739,5 +910,23 @@ mod tests {
         .check()
         .unwrap_err();
         assert_eq!(e.field, "finest_cells_log2");
+    }
+
+    #[test]
+    fn training_grows_with_the_blocks_until_its_total() {
+        let s = GuidedSettings::default();
+        // block_spp 8, a sixteenth: blocks of 16, 32, 64, 128, 256 samples train 1, 2, 4, 8
+        // paths a pixel, then what is left of the 16.
+        let mut traced = 0;
+        let per_block: Vec<u64> = (1..=6)
+            .map(|b| {
+                let n = s.training_before(b, traced);
+                traced += n;
+                n
+            })
+            .collect();
+        assert_eq!(per_block, vec![1, 2, 4, 8, 1, 0]);
+        // Huge block numbers neither overflow nor exceed the total.
+        assert_eq!(s.training_before(u32::MAX, 0), 16);
     }
 }

@@ -6,6 +6,7 @@
 
 #![warn(missing_docs)]
 
+mod blocks;
 mod lattice;
 mod radiance;
 mod settings;
@@ -13,6 +14,7 @@ mod settings;
 mod test_util;
 mod training;
 
+pub use blocks::{block_of, block_segments, block_start};
 pub use lattice::Lattice;
 pub use radiance::{RadianceCache, Records};
 pub use settings::{check_ranges, LastFilm, OutOfRange, RangeCheck};
