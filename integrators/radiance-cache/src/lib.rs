@@ -59,7 +59,8 @@ pub struct CacheSettings {
     /// so that what the cache averages weighs less and less.
     pub handoff_growth: u32,
     /// Whether a lookup at a path's vertex number d reads only records made at training
-    /// paths' vertex number d (the last class, 5, holds every deeper one). Training paths
+    /// paths' vertex number d (the last class, 5, holds every deeper one; 23 with a growing
+    /// hand-off). Training paths
     /// start at the camera as rendered paths do, so their vertices of one number are spread
     /// over a cell as the lookups at that number are; records of all numbers together are
     /// not (the points a path reaches early are more open than deeper ones).
@@ -281,11 +282,15 @@ impl Integrator for Trained {
     }
 }
 
-/// Vertex-number classes of records (see [`CacheSettings::match_depth`]). Lookups past the
-/// hand-off's vertex happen only where its class has too few records, so few classes beyond
-/// it are needed: 16 classes rendered the same images as 6 and took 44 MB more (512², 100k
-/// strands).
+/// Vertex-number classes of records (see [`CacheSettings::match_depth`]) with a fixed
+/// hand-off. Lookups past the hand-off's vertex happen only where its class has too few
+/// records, so few classes beyond it are needed: 16 classes rendered the same images as 6 and
+/// took 44 MB more (512², 100k strands).
 const DEPTH_CLASSES: u32 = 6;
+/// Classes with a hand-off that grows: a block whose hand-off reaches the last class would
+/// read records pooled over every deeper vertex, darker than its own (measured: 4–6 % dark on
+/// platinum heads at 512–1024 spp with 6 classes); 24 last to block 21 at a growth of 1.
+const GROWING_DEPTH_CLASSES: u32 = 24;
 
 impl CacheSettings {
     /// The vertex number at which block `block`'s paths first read the cache.
@@ -294,10 +299,19 @@ impl CacheSettings {
             .saturating_add(block.saturating_mul(self.handoff_growth))
     }
 
+    /// Record classes by vertex number.
+    fn depth_classes(&self) -> u32 {
+        if self.handoff_growth == 0 {
+            DEPTH_CLASSES
+        } else {
+            GROWING_DEPTH_CLASSES
+        }
+    }
+
     /// The record class of vertex number `depth`.
     fn depth_class(&self, depth: u32) -> u32 {
         if self.match_depth {
-            depth.min(DEPTH_CLASSES - 1)
+            depth.min(self.depth_classes() - 1)
         } else {
             0
         }
@@ -352,7 +366,7 @@ impl Trained {
                 Some((records, b.traced, b.seconds))
             });
         let (mut records, mut traced, seconds_before) = went_on.unwrap_or_else(|| {
-            let empty = vec![Records::default(); DEPTH_CLASSES as usize];
+            let empty = vec![Records::default(); settings.depth_classes() as usize];
             (empty, 0, 0.0)
         });
         let first_traced = traced;
@@ -440,7 +454,7 @@ fn train(
         progress,
         |ray, sampler, chunk: &mut (Vec<Records>, Vec<Vertex>)| {
             let (chunk_records, vertices) = chunk;
-            chunk_records.resize_with(DEPTH_CLASSES as usize, Records::default);
+            chunk_records.resize_with(settings.depth_classes() as usize, Records::default);
             training_path(settings, ray, scene, sampler, vertices);
             for (depth, v) in vertices.iter().enumerate() {
                 let class = settings.depth_class(depth as u32);
@@ -593,5 +607,6 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(growing.handoff(3), growing.traced_bounces + 6);
+        assert_eq!(growing.depth_class(20), 20);
     }
 }
