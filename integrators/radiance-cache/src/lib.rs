@@ -198,11 +198,15 @@ impl IntegratorKind for RadianceCacheIntegrator {
     }
 
     /// A coarse cache from one path per pixel, sample blocks of two (so that the tests' few
-    /// samples cross blocks), and paths deep enough for white furnaces.
+    /// samples cross blocks), a budget of record cells that the tests' small films exceed from
+    /// the first block (a 40² film of dark hair fills 160–660), so that they hold coarsened
+    /// caches to the same images for any threads, crop and pass, and paths deep enough for
+    /// white furnaces.
     fn test_settings() -> CacheSettings {
         CacheSettings {
             training_spp: 1,
             block_spp: 2,
+            max_record_cells: 128,
             max_depth: 10_000,
             ..Default::default()
         }
