@@ -1,9 +1,11 @@
 //! Same scene + seed ⇒ the bit-identical image, whatever the integrator, the thread count, the
 //! crop window or the run.
 
+use std::ops::Range;
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use tress_core::light::{EnvironmentMap, Light};
-use tress_core::render::render;
+use tress_core::render::{render, render_samples};
 use tress_core::Scene;
 use tress_loader::integrators::IntegratorDesc;
 use tress_materials::pigment::Pigment;
@@ -85,6 +87,35 @@ fn crop_window_equals_the_same_window_of_the_full_render() {
                 );
             }
         }
+    }
+}
+
+#[test]
+fn a_sample_range_is_the_same_whether_or_not_the_ranges_before_it_were_rendered() {
+    // As `--spp-offset` passes split a render: a pass from sample 6 (the radiance cache's
+    // third block under its test settings, its records coarsened to their budget) learns from
+    // nothing, where an integrator that rendered 0..6 goes on from what it learned then.
+    let f = film(40, 40, 14, 5);
+    let never = AtomicBool::new(false);
+    for integrator in &integrators() {
+        let name = integrator.name();
+        let (alone, after) = on_threads(2, || {
+            let scene = scene();
+            let sums = |built: &dyn tress_core::Integrator, samples: Range<u64>| {
+                let out = render_samples(&scene, built, &f, samples, &never, &|_| {}).unwrap();
+                out.sums
+                    .sums
+                    .iter()
+                    .map(|v| v.to_bits())
+                    .collect::<Vec<_>>()
+            };
+            let fresh = integrator.build(&scene, &Default::default()).unwrap();
+            let alone = sums(fresh.as_ref(), 6..14);
+            let built = integrator.build(&scene, &Default::default()).unwrap();
+            sums(built.as_ref(), 0..6);
+            (alone, sums(built.as_ref(), 6..14))
+        });
+        assert!(alone == after, "{name}: samples 6..14 differ after 0..6");
     }
 }
 

@@ -90,8 +90,14 @@ impl Lattice {
 
     /// The key of level `level`'s cell `c` (in that level's cells), bin `bin`.
     pub fn key_at_level(&self, level: u32, c: [u32; 3], bin: u32) -> u64 {
-        let [x, y, z] = c.map(u64::from);
-        (level as u64) << 60 | (bin as u64) << 48 | z << 32 | y << 16 | x
+        pack(level, c, bin)
+    }
+
+    /// The key of the level-`level` cell holding the cell `key` names (of a level no coarser),
+    /// same bin.
+    pub fn coarsen_key(key: u64, level: u32) -> u64 {
+        let (_, c, bin) = Self::split_key(key);
+        pack(level, c.map(|v| v >> level), bin)
     }
 
     /// The finest-level cell a key names (its level, cell and bin), as coordinates of the
@@ -113,6 +119,12 @@ impl Lattice {
     pub fn origin(&self) -> Vec3 {
         self.origin
     }
+}
+
+/// A key from its level, the cell's coordinates in that level's cells and the bin.
+fn pack(level: u32, c: [u32; 3], bin: u32) -> u64 {
+    let [x, y, z] = c.map(u64::from);
+    (level as u64) << 60 | (bin as u64) << 48 | z << 32 | y << 16 | x
 }
 
 #[cfg(test)]
@@ -156,6 +168,12 @@ mod tests {
             let (l, first, b) = Lattice::split_key(key);
             assert_eq!((l, b), (level, bin));
             assert_eq!(first, c.map(|v| v >> level << level));
+            assert_eq!(Lattice::coarsen_key(key, level), key);
+            assert_eq!(
+                Lattice::coarsen_key(lattice.key(0, c, bin), level),
+                key,
+                "a finest cell's key coarsened is its level-{level} cell's"
+            );
         }
     }
 }

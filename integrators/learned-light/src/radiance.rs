@@ -28,10 +28,13 @@ impl Sums {
     }
 }
 
-/// Records of the finest level, summed: one training chunk's, or all of them.
+/// Records summed per cell and bin of one level — the finest until [`Records::coarsen`]: one
+/// training chunk's, or all of them.
 #[derive(Clone, Default)]
 pub struct Records {
     cells: FxHashMap<u64, Sums>,
+    /// The lattice level of `cells`' keys (0: the finest).
+    level: u32,
     /// Records added (those dropped for carrying no estimate not counted).
     pub count: u64,
 }
@@ -43,7 +46,10 @@ impl Records {
             return;
         }
         let (c, bin) = lattice.locate(p, dir);
-        let sums = self.cells.entry(lattice.key(0, c, bin)).or_default();
+        let sums = self
+            .cells
+            .entry(lattice.key(self.level, c, bin))
+            .or_default();
         sums.add(&Sums {
             rgb: radiance.to_array().map(f64::from),
             count: 1,
@@ -51,16 +57,61 @@ impl Records {
         self.count += 1;
     }
 
-    /// Adds a later chunk's records. Floating-point sums depend on their order, so chunks
-    /// must be merged in a fixed order for the cache to be the same on every run.
+    /// Adds a later chunk's records, at the coarser of the two levels. Floating-point sums
+    /// depend on their order, so chunks must be merged in a fixed order for the cache to be
+    /// the same on every run.
     pub fn merge(&mut self, later: &Records) {
+        while self.level < later.level {
+            self.coarsen_once();
+        }
         // Keys in sorted order: a map's iteration order depends on its history.
         let mut keys: Vec<_> = later.cells.keys().copied().collect();
         keys.sort_unstable();
         for key in keys {
-            self.cells.entry(key).or_default().add(&later.cells[&key]);
+            self.cells
+                .entry(Lattice::coarsen_key(key, self.level))
+                .or_default()
+                .add(&later.cells[&key]);
         }
         self.count += later.count;
+    }
+
+    /// Cells (cell and direction bin) that hold records.
+    pub fn cells(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// The lattice level the records are summed at (0: the finest).
+    pub fn level(&self) -> u32 {
+        self.level
+    }
+
+    /// Merges every cell's sums into those of its cell one level coarser, which becomes the
+    /// finest a cache built from them has: bounds their number (a quarter to an eighth as many
+    /// cells where records are dense) at the cost of the finest lookups. `false`, changing
+    /// nothing, at `lattice`'s coarsest level.
+    pub fn coarsen(&mut self, lattice: &Lattice) -> bool {
+        let coarser = self.level + 1 < lattice.levels();
+        if coarser {
+            self.coarsen_once();
+        }
+        coarser
+    }
+
+    fn coarsen_once(&mut self) {
+        self.level += 1;
+        // Keys in sorted order, as a cache sums its coarser levels, so that a coarsened level
+        // is bit for bit the one a cache would have built.
+        let mut keys: Vec<_> = self.cells.keys().copied().collect();
+        keys.sort_unstable();
+        let mut coarser = FxHashMap::<u64, Sums>::default();
+        for key in keys {
+            coarser
+                .entry(Lattice::coarsen_key(key, self.level))
+                .or_default()
+                .add(&self.cells[&key]);
+        }
+        self.cells = coarser;
     }
 }
 
@@ -75,12 +126,14 @@ struct Cell {
 pub struct RadianceCache {
     lattice: Lattice,
     cells: FxHashMap<u64, Cell>,
+    /// The finest level with cells: the records' level.
+    first_level: u32,
     min_records: u32,
     records: u64,
 }
 
 impl RadianceCache {
-    /// Every level's cells from the finest level's `records`; a lookup uses a cell only when
+    /// The cells of `records`' level and every coarser one; a lookup uses a cell only when
     /// it averages at least `min_records` records. Borrows the records (training goes on from
     /// them) and holds the sums of two levels at a time while it builds.
     pub fn new(lattice: Lattice, records: &Records, min_records: u32) -> Self {
@@ -94,16 +147,15 @@ impl RadianceCache {
         };
         add_level(&records.cells);
         let mut finer: Option<FxHashMap<u64, Sums>> = None;
-        for level in 1..lattice.levels() {
+        for level in records.level + 1..lattice.levels() {
             let from = finer.as_ref().unwrap_or(&records.cells);
             let mut coarser = FxHashMap::default();
             // Keys in sorted order: a sum's rounding depends on the order of its terms.
             let mut keys: Vec<_> = from.keys().copied().collect();
             keys.sort_unstable();
             for key in keys {
-                let (_, c, bin) = Lattice::split_key(key);
                 coarser
-                    .entry(lattice.key(level, c, bin))
+                    .entry(Lattice::coarsen_key(key, level))
                     .or_insert_with(Sums::default)
                     .add(&from[&key]);
             }
@@ -113,6 +165,7 @@ impl RadianceCache {
         RadianceCache {
             lattice,
             cells,
+            first_level: records.level,
             min_records,
             records: records.count,
         }
@@ -126,7 +179,7 @@ impl RadianceCache {
     pub fn lookup(&self, p: Vec3, dir: Vec3) -> Option<Rgb> {
         let p = self.lattice.clamp(p);
         let (c, bin) = self.lattice.locate(p, dir);
-        let level = (0..self.lattice.levels()).find(|&level| {
+        let level = (self.first_level..self.lattice.levels()).find(|&level| {
             self.cells
                 .get(&self.lattice.key(level, c, bin))
                 .is_some_and(|cell| cell.count >= self.min_records)
@@ -169,8 +222,8 @@ impl RadianceCache {
              longest side, {} direction bins)",
             self.records,
             self.cells.len(),
-            self.lattice.levels(),
-            1u32 << self.lattice.finest(),
+            self.lattice.levels() - self.first_level,
+            1u32 << (self.lattice.finest() - self.first_level),
             1u32 << (self.lattice.finest() + 1 - self.lattice.levels()),
             self.lattice.bins() * self.lattice.bins()
         )
@@ -241,5 +294,77 @@ mod tests {
         assert_eq!(records.count, 0);
         let cache = RadianceCache::new(lattice, &records, 1);
         assert_eq!(cache.lookup(Vec3::ZERO, Vec3::Z), None);
+    }
+
+    /// Records of fixed pseudo-random points, directions and values over the unit box.
+    fn scattered(lattice: &Lattice, n: u32) -> Records {
+        let mut records = Records::default();
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for _ in 0..n {
+            let p = Vec3::new(next(), next(), next());
+            let dir = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize();
+            records.add(lattice, p, dir, Rgb::new(next(), next(), 4.0 * next()));
+        }
+        records
+    }
+
+    #[test]
+    fn coarsening_drops_only_the_finest_level() {
+        let lattice = Lattice::new(unit_box(), 4, 5, 2);
+        let fine = scattered(&lattice, 20_000);
+        let mut coarse = fine.clone();
+        assert!(coarse.coarsen(&lattice));
+        assert_eq!(coarse.level(), 1);
+        assert_eq!(coarse.count, fine.count);
+        // 16³ cells of 4 bins at most, 8³ after: 20 000 records fill most of both.
+        assert!(fine.cells() > 4 * coarse.cells(), "{}", fine.cells());
+        // With more records a cell than any finest cell holds (1.2 on average), both caches
+        // read level 1 (9.8 on average) or coarser, and the coarsened records sum it in the order a cache does: bit for bit.
+        let (a, b) = (
+            RadianceCache::new(lattice, &fine, 12),
+            RadianceCache::new(lattice, &coarse, 12),
+        );
+        for r in scattered(&lattice, 500).cells.keys() {
+            let (_, c, bin) = Lattice::split_key(*r);
+            let p = (Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32) + 0.3) / 16.0;
+            let dir = [Vec3::X, -Vec3::Y, Vec3::Z, -Vec3::Z][bin as usize];
+            assert_eq!(a.lookup(p, dir), b.lookup(p, dir), "at {p}");
+            assert!(b.lookup(p, dir).is_some());
+        }
+        // Down to the coarsest level, and no further.
+        while coarse.coarsen(&lattice) {}
+        assert_eq!(coarse.level(), 4);
+        assert!(coarse.cells() <= 4);
+        assert!(RadianceCache::new(lattice, &coarse, 1)
+            .lookup(Vec3::splat(0.5), Vec3::Z)
+            .is_some());
+    }
+
+    #[test]
+    fn finer_records_merge_into_coarsened_ones() {
+        let lattice = Lattice::new(unit_box(), 3, 4, 1);
+        let mut all = Records::default();
+        all.add(&lattice, Vec3::splat(0.01), Vec3::Z, Rgb::splat(1.0));
+        assert!(all.coarsen(&lattice));
+        let mut later = Records::default();
+        later.add(&lattice, Vec3::splat(0.2), Vec3::Z, Rgb::splat(3.0));
+        all.merge(&later);
+        assert_eq!((all.level(), all.cells(), all.count), (1, 1, 2));
+        // And coarsened records merged into finer ones coarsen those first.
+        let mut fine = later.clone();
+        fine.merge(&all);
+        assert_eq!((fine.level(), fine.cells(), fine.count), (1, 1, 3));
+        let cache = RadianceCache::new(lattice, &fine, 3);
+        let mean = cache.lookup(Vec3::splat(0.125), Vec3::Z).unwrap();
+        assert!(
+            (mean - Rgb::splat(7.0 / 3.0)).abs().max_element() < 1e-6,
+            "{mean}"
+        );
     }
 }

@@ -21,6 +21,8 @@
 //!
 //! Records are kept per vertex number (`match_depth`): a lookup at a path's vertex d reads
 //! records made at training paths' vertex d, which are spread over a cell as the lookups are.
+//! The records' cells are bounded (`max_record_cells`): past the bound, the class with the most
+//! drops its finest level, so a render's memory stays flat however many blocks it reaches.
 //!
 //! RON: `RadianceCache(training_spp: 4, block_spp: 32, traced_bounces: 2)`
 
@@ -80,6 +82,14 @@ pub struct CacheSettings {
     pub direction_bins: u32,
     /// Records a cell must average before lookups use it.
     pub min_records: u32,
+    /// Cells (cell, direction bin, vertex-number class) the training records may fill: past
+    /// it, the class with the most cells is summed one level coarser (its finest level
+    /// dropped) until they fit, so that memory stays flat however many samples a render
+    /// takes, at the cost of coarser lookups in later blocks. The default, 2^19 (524,288), keeps
+    /// a 512² render of 100,000 strands about 120 MiB over the path tracer, under 256 MiB with
+    /// room for the allocator's run-to-run spread (the records and the caches built from them;
+    /// 2^20 measured 190–230 MiB); a 64² film of light hair reaches it only past 480 spp.
+    pub max_record_cells: u64,
     /// Scattering events of a path (training and rendering) before it ends.
     pub max_depth: u32,
     /// Bounces before Russian roulette starts.
@@ -98,6 +108,7 @@ impl Default for CacheSettings {
             levels: 8,
             direction_bins: 4,
             min_records: 16,
+            max_record_cells: 1 << 19,
             max_depth: 100,
             rr_depth: 5,
         }
@@ -152,6 +163,12 @@ impl CacheSettings {
                     self.min_records >= 1,
                     "must be at least 1",
                 ),
+                (
+                    "max_record_cells",
+                    self.max_record_cells as f64,
+                    self.max_record_cells >= 1,
+                    "must be at least 1",
+                ),
             ],
         )
     }
@@ -183,11 +200,15 @@ impl IntegratorKind for RadianceCacheIntegrator {
     }
 
     /// A coarse cache from one path per pixel, sample blocks of two (so that the tests' few
-    /// samples cross blocks), and paths deep enough for white furnaces.
+    /// samples cross blocks), a budget of record cells that the tests' small films exceed from
+    /// the first block (a 40² film of dark hair fills 160–660), so that they hold coarsened
+    /// caches to the same images for any threads, crop and pass, and paths deep enough for
+    /// white furnaces.
     fn test_settings() -> CacheSettings {
         CacheSettings {
             training_spp: 1,
             block_spp: 2,
+            max_record_cells: 128,
             max_depth: 10_000,
             ..Default::default()
         }
@@ -404,13 +425,21 @@ impl Trained {
         }
         let seconds = seconds_before + start.elapsed().as_secs_f64();
         let last = &caches.last().expect("at least one block").caches[0];
+        let first_read = settings.depth_class(settings.handoff(0)) as usize;
         let description = format!(
-            "{} caches for sample blocks {}..{} (the last {}), from {total} training paths, \
-             built in {seconds:.2} s",
+            "{} caches for sample blocks {}..{} (the last {}), from {total} training paths \
+             ({} record cells of at most {}, finest levels by vertex class {:?}), built in \
+             {seconds:.2} s",
             caches.len(),
             blocks.start,
             blocks.end,
             last.describe(),
+            records.iter().map(Records::cells).sum::<usize>(),
+            settings.max_record_cells,
+            records[first_read..]
+                .iter()
+                .map(Records::level)
+                .collect::<Vec<_>>(),
         );
         Some(Trained {
             settings: settings.clone(),
@@ -467,8 +496,26 @@ fn train(
             for (records, chunk) in records.iter_mut().zip(&chunk) {
                 records.merge(chunk);
             }
+            bound(records, &lattice, settings.max_record_cells);
         },
     )
+}
+
+/// Coarsens the records of the class with the most cells, a level at a time, until all
+/// classes together fill at most `max_cells` (or every class is at the coarsest level, whose
+/// cells are few). The class read most, the hand-off's, keeps its finest level longest where
+/// deeper ones, read only where it has too few records, fill more. Called after each chunk's
+/// merge, in the chunks' fixed order, so when the records are coarsened depends only on the
+/// scene, the film and the paths traced, never on threads.
+fn bound(records: &mut [Records], lattice: &Lattice, max_cells: u64) {
+    while records.iter().map(|r| r.cells() as u64).sum::<u64>() > max_cells {
+        let largest = records
+            .iter_mut()
+            .filter(|r| r.level() + 1 < lattice.levels())
+            .max_by_key(|r| r.cells());
+        let Some(records) = largest else { return };
+        records.coarsen(lattice);
+    }
 }
 
 /// A vertex of a training path with the radiance the rest of the path brought back from it.
@@ -608,5 +655,47 @@ mod tests {
         };
         assert_eq!(growing.handoff(3), growing.traced_bounces + 6);
         assert_eq!(growing.depth_class(20), 20);
+    }
+
+    #[test]
+    fn records_are_coarsened_to_their_budget_and_still_looked_up() {
+        let unit = tress_core::math::Aabb {
+            min: Vec3::ZERO,
+            max: Vec3::ONE,
+        };
+        let lattice = Lattice::new(unit, 5, 6, 2);
+        // Class 1 gets 4× the records of class 0, over the same fixed pseudo-random points.
+        let mut records = vec![Records::default(); 2];
+        let mut state = 7u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for i in 0..20_000 {
+            let p = Vec3::new(next(), next(), next());
+            let dir = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize();
+            records[usize::from(i % 5 != 0)].add(&lattice, p, dir, Rgb::splat(next()));
+        }
+        let cells = |r: &[Records]| r.iter().map(|r| r.cells() as u64).sum::<u64>();
+        let (before, budget) = (cells(&records), 15_000);
+        assert!(before > budget, "{before}");
+        bound(&mut records, &lattice, budget);
+        assert!(cells(&records) <= budget, "{}", cells(&records));
+        assert_eq!(records.iter().map(|r| r.count).sum::<u64>(), 20_000);
+        // The fuller class was coarsened, the other keeps its finest level.
+        assert_eq!((records[0].level(), records[1].level()), (0, 1));
+        for r in &records {
+            let cache = RadianceCache::new(lattice, r, 4);
+            for p in [Vec3::splat(0.1), Vec3::new(0.9, 0.5, 0.3)] {
+                let radiance = cache.lookup(p, Vec3::Z).expect("a cell with records");
+                assert!((0.0..1.0).contains(&radiance.x), "{radiance}");
+            }
+        }
+        // A budget below what the coarsest level holds coarsens every class to it, and stops.
+        bound(&mut records, &lattice, 1);
+        assert_eq!((records[0].level(), records[1].level()), (5, 5));
+        assert_eq!(cells(&records), 8);
     }
 }
