@@ -354,6 +354,8 @@ impl<'a> Parser<'a> {
         let Token::String(name) = name_token else {
             bail!("Expected prim name string, got {name_token:?}");
         };
+        // A name with `/`, `}` or a line break made a path the composition walked forever.
+        ensure!(sdf::Path::is_valid_identifier(name), "not a valid prim name: {}", sdf::quoted_start(name));
         parent_children.push(name.to_string());
         let prim_path = current_path.append_path(name)?;
 
@@ -476,6 +478,7 @@ impl<'a> Parser<'a> {
         self.fetch_next()?; // consume `variantSet`
 
         let name = self.fetch_str().context("Expected variant set name")?.to_string();
+        ensure!(sdf::Path::is_valid_identifier(&name), "not a valid variant set name: {}", sdf::quoted_start(&name));
         self.ensure_pun('=')?;
 
         // Create the variant set spec.
@@ -486,6 +489,8 @@ impl<'a> Parser<'a> {
         // Parse each variant: "VariantName" (...) { ... }
         self.parse_block('{', '}', |this| {
             let variant_name = this.fetch_str().context("Expected variant name")?.to_string();
+            // Checked as the selection of a path, which it becomes.
+            sdf::Path::parse(&format!("/P{{s={variant_name}}}")).context("not a valid variant name")?;
 
             variant_children.push(variant_name.clone());
 
@@ -686,7 +691,7 @@ impl<'a> Parser<'a> {
 
     /// Parses a single `<...>` path reference token into an `sdf::Path`.
     fn parse_path_reference(&mut self) -> Result<sdf::Path> {
-        sdf::Path::new(self.fetch_path_ref()?)
+        sdf::Path::parse(self.fetch_path_ref()?)
     }
 
     /// Parses a relocates dictionary: `{ <source>: <target>, ... }`.
@@ -697,8 +702,8 @@ impl<'a> Parser<'a> {
             this.ensure_pun(':')
                 .context("Expected ':' between relocate source and target")?;
             let tgt = this.fetch_path_ref().context("Expected relocate target path")?;
-            let src_path = sdf::Path::new(src)?;
-            let tgt_path = sdf::Path::from(tgt);
+            let src_path = sdf::Path::parse(src)?;
+            let tgt_path = sdf::Path::parse(tgt)?;
             reject_variant_selection_in_path(&src_path, "Relocate source")?;
             reject_variant_selection_in_path(&tgt_path, "Relocate target")?;
             pairs.push((src_path, tgt_path));
@@ -1343,12 +1348,12 @@ impl<'a> Parser<'a> {
             Token::AssetRef(asset_path) => {
                 reference.asset_path = asset_path.to_string();
                 if let Some(Ok(Token::PathRef(path))) = self.peek_next() {
-                    reference.prim_path = sdf::Path::new(path)?;
+                    reference.prim_path = sdf::Path::parse(path)?;
                     self.fetch_next()?;
                 }
             }
             Token::PathRef(path) => {
-                reference.prim_path = sdf::Path::new(path)?;
+                reference.prim_path = sdf::Path::parse(path)?;
             }
             token => {
                 bail!("Expected asset reference (@...@) or path reference (<...>), got {token:?}");
@@ -1409,12 +1414,12 @@ impl<'a> Parser<'a> {
             Token::AssetRef(asset_path) => {
                 payload.asset_path = asset_path.to_string();
                 if let Some(Ok(Token::PathRef(path))) = self.peek_next() {
-                    payload.prim_path = sdf::Path::new(path)?;
+                    payload.prim_path = sdf::Path::parse(path)?;
                     self.fetch_next()?;
                 }
             }
             Token::PathRef(path) => {
-                payload.prim_path = sdf::Path::new(path)?;
+                payload.prim_path = sdf::Path::parse(path)?;
             }
             token => {
                 bail!("Expected asset reference (@...@) or path reference (<...>), got {token:?}");
