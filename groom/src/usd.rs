@@ -1220,7 +1220,10 @@ def BasisCurves "Hair"
         };
         let named = |name: &str| LINEAR.replace("\"Hair\"", &format!("{name:?}"));
         for (text, expect) in [
-            (run_on, "not a valid path: \"/Proto\\n}\\n\\ndef"),
+            (
+                run_on,
+                "references: not a valid path: \"/Proto\\n    double3",
+            ),
             (arc("references = </A}>"), "not a valid path: \"/A}\""),
             (arc("references = </A/>"), "not a valid path"),
             (arc("references = </A//B>"), "not a valid path"),
@@ -1243,6 +1246,10 @@ def BasisCurves "Hair"
                     "(variantSets = \"v\")\n{\n variantSet \"v\" = { \"a}\" {} }",
                 ),
                 "not a valid variant name",
+            ),
+            (
+                LINEAR.replace("{", "(variants = { string v = \"a/b\" })\n{"),
+                "not a valid variant selection",
             ),
         ] {
             let e = read_in(dir.path(), &text, &Limits::default())

@@ -355,7 +355,11 @@ impl<'a> Parser<'a> {
             bail!("Expected prim name string, got {name_token:?}");
         };
         // A name with `/`, `}` or a line break made a path the composition walked forever.
-        ensure!(sdf::Path::is_valid_identifier(name), "not a valid prim name: {}", sdf::quoted_start(name));
+        ensure!(
+            sdf::Path::is_valid_identifier(name),
+            "not a valid prim name: {}",
+            sdf::quoted_start(name)
+        );
         parent_children.push(name.to_string());
         let prim_path = current_path.append_path(name)?;
 
@@ -478,7 +482,11 @@ impl<'a> Parser<'a> {
         self.fetch_next()?; // consume `variantSet`
 
         let name = self.fetch_str().context("Expected variant set name")?.to_string();
-        ensure!(sdf::Path::is_valid_identifier(&name), "not a valid variant set name: {}", sdf::quoted_start(&name));
+        ensure!(
+            sdf::Path::is_valid_identifier(&name),
+            "not a valid variant set name: {}",
+            sdf::quoted_start(&name)
+        );
         self.ensure_pun('=')?;
 
         // Create the variant set spec.
@@ -489,8 +497,7 @@ impl<'a> Parser<'a> {
         // Parse each variant: "VariantName" (...) { ... }
         self.parse_block('{', '}', |this| {
             let variant_name = this.fetch_str().context("Expected variant name")?.to_string();
-            // Checked as the selection of a path, which it becomes.
-            sdf::Path::parse(&format!("/P{{s={variant_name}}}")).context("not a valid variant name")?;
+            check_variant_selection(&name, &variant_name).context("not a valid variant name")?;
 
             variant_children.push(variant_name.clone());
 
@@ -1014,6 +1021,9 @@ impl<'a> Parser<'a> {
                         .into_iter()
                         .filter_map(|(k, v)| v.try_as_string().map(|s| (k, s.to_owned())))
                         .collect();
+                    for (set, selection) in &selections {
+                        check_variant_selection(set, selection).context("not a valid variant selection")?;
+                    }
                     spec.add(FieldKey::VariantSelection, sdf::Value::VariantSelectionMap(selections));
                 }
             }
@@ -1908,6 +1918,12 @@ fn push_unique(vec: &mut Vec<String>, name: &str) {
 /// not variant selections, so a `{set=sel}` element anywhere in the path is a
 /// parse error (C++ `Sdf_TextFileFormatParser` raises the same error, e.g.
 /// "Inherit paths cannot contain variant selections"). `arc` names the field.
+/// Refuses a variant set name and selection that do not make a `{set=selection}` path
+/// segment, which the composition makes of them.
+fn check_variant_selection(set: &str, selection: &str) -> Result<()> {
+    sdf::Path::parse(&format!("/P{{{set}={selection}}}")).map(drop)
+}
+
 fn reject_variant_selection_in_path(path: &sdf::Path, arc: &str) -> Result<()> {
     ensure!(
         !path.contains_prim_variant_selection(),
