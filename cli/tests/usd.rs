@@ -117,6 +117,16 @@ fn hostile_usd_text_is_refused_by_class() {
         (arc("payload = @missing.usda@</X>"), vec!["missing.usda"]),
         (arc("references = @other.usda@</Nope>"), vec!["</Nope>"]),
         (arc("references = </Nowhere>"), vec!["</Nowhere>"]),
+        // Paths and names outside SdfPath's grammar: a reference path running on over lines
+        // (a fuzzer's find) made the composition walk up its ancestors without end.
+        (
+            arc("references = </Proto\n)\n}\n\ndef \"B\" (\n references = </Proto>"),
+            vec!["line 2, column", "not a valid path"],
+        ),
+        (
+            GROOM.replace("\"Hair\"", "\"Ha}r\""),
+            vec!["not a valid prim name"],
+        ),
         (
             GROOM.replace("#usda 1.0", "#usda 1.0\n(subLayers = [@gone.usda@])"),
             vec!["gone.usda"],

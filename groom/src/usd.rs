@@ -1204,6 +1204,76 @@ def BasisCurves "Hair"
         assert_eq!(g.points[0], Vec3::new(-0.01, 0.0, 0.0));
     }
 
+    /// Paths and names outside SdfPath's grammar are parse errors where they stand: a
+    /// reference path running on over lines to the next `>` (a fuzzer's find) made the
+    /// composition walk up its ancestors without end.
+    #[test]
+    fn ill_formed_paths_and_names_are_refused_where_they_stand() {
+        let dir = tempfile::tempdir().unwrap();
+        let instanced = include_str!("../tests/data/usd_instanced.usda");
+        let run_on = instanced.replacen("</Proto>\n)\n{", "</Proto", 1);
+        let arc = |arc: &str| {
+            LINEAR.replace(
+                "def BasisCurves \"Hair\"",
+                &format!("def BasisCurves \"Hair\" ({arc})"),
+            )
+        };
+        let named = |name: &str| LINEAR.replace("\"Hair\"", &format!("{name:?}"));
+        for (text, expect) in [
+            (
+                run_on,
+                "references: not a valid path: \"/Proto\\n    double3",
+            ),
+            (arc("references = </A}>"), "not a valid path: \"/A}\""),
+            (arc("references = </A/>"), "not a valid path"),
+            (arc("references = </A//B>"), "not a valid path"),
+            (arc("inherits = </A B>"), "not a valid path"),
+            (arc("specializes = </A\nB>"), "not a valid path"),
+            (arc("payload = </A.b.c>"), "not a valid path"),
+            (named("A}"), "not a valid prim name: \"A}\""),
+            (named("A/B"), "not a valid prim name"),
+            (named("1A"), "not a valid prim name"),
+            (
+                LINEAR.replace(
+                    "{",
+                    "(variantSets = \"v\")\n{\n variantSet \"v}\" = { \"a\" {} }",
+                ),
+                "not a valid variant set name",
+            ),
+            (
+                LINEAR.replace(
+                    "{",
+                    "(variantSets = \"v\")\n{\n variantSet \"v\" = { \"a}\" {} }",
+                ),
+                "not a valid variant name",
+            ),
+            (
+                LINEAR.replace("{", "(variants = { string v = \"a/b\" })\n{"),
+                "not a valid variant selection",
+            ),
+        ] {
+            let e = read_in(dir.path(), &text, &Limits::default())
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("groom.usda") && e.contains(expect) && e.len() < 1000,
+                "{expect}: {e}"
+            );
+        }
+        // The grammar's other forms still read: a property, a target, a variant selection.
+        for arc in [
+            "rel r = </Hair.widths>",
+            "rel r = </Hair.r[/Hair].x>",
+            "rel r = </Hair{v=a-b|c}Child>",
+        ] {
+            let text = LINEAR.replace(
+                "uniform token type",
+                &format!("{arc}\n    uniform token type"),
+            );
+            read_in(dir.path(), &text, &Limits::default()).unwrap_or_else(|e| panic!("{arc}: {e}"));
+        }
+    }
+
     #[test]
     fn the_earliest_time_sample_is_read_whatever_the_order_written() {
         let dir = tempfile::tempdir().unwrap();

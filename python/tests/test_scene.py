@@ -257,6 +257,12 @@ def test_hostile_usd_grooms_raise_valueerror_naming_them(tmp_path, scene_dict):
             "Nope",
         ),
         ("sub.usda", USD_GROOM.replace("#usda 1.0", "#usda 1.0\n(subLayers = [@gone.usda@])"), "gone.usda"),
+        # A reference path running on over lines: its composition never ended.
+        (
+            "runon.usda",
+            USD_GROOM.replace('"Hair"', '"Hair" (references = </P\n)\n}\ndef "B" (references = </P>)', 1),
+            r"line 2, column \d+: .*not a valid path",
+        ),
     ]
     for i in range(0, len(usdc), 101):
         bytes_ = bytearray(usdc)

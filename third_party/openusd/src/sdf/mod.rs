@@ -42,6 +42,7 @@ pub use layer::{AuthoringError, EditError, Layer, LayerEdit, LayerSink, LayerSin
 pub use layer_registry::LayerRegistry;
 pub use ordering::{apply_ordering, element_cmp};
 pub use path::{path, Path, PathComponent, PathComponents, PathElement};
+pub(crate) use path::quoted_start;
 pub use path_table::PathTable;
 pub use schema::{ChildrenKey, FieldKey};
 pub use spec::{

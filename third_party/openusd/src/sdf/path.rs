@@ -58,6 +58,21 @@ impl Path {
         Path::from_str(path)
     }
 
+    /// The path `text` spells, refused unless it follows SdfPath's grammar (as C++
+    /// `SdfPath` refuses an ill-formed path): absolute or relative (`..` prefixes) prim
+    /// names, `{set=selection}` variant selections, then at most one property with an
+    /// optional `[target]` path and a property after it. The path algebra (`parent`,
+    /// `prim_path`, prefix mapping) assumes this form; text from a file must pass here.
+    pub fn parse(text: &str) -> Result<Path> {
+        let mut syntax = Syntax { rest: text };
+        ensure!(
+            text.is_empty() || (syntax.path(0) && syntax.rest.is_empty()),
+            "not a valid path: {}",
+            quoted_start(text)
+        );
+        Ok(Path::from_str_unchecked(text))
+    }
+
     #[inline]
     pub fn abs_root() -> Path {
         Path::from_str_unchecked("/")
@@ -384,9 +399,10 @@ impl Path {
         }
         // Drop a trailing `{set=sel}` variant selection.
         if self.is_prim_variant_selection_path() {
-            if let Some(open) = self.path.rfind('{') {
-                return Some(Path::from_str_unchecked(&self.path[..open]));
-            }
+            // A `}` closing nothing is ill-formed: the prim branch below would give the
+            // path itself, and walks up the ancestors never ended.
+            let open = self.path.rfind('{')?;
+            return Some(Path::from_str_unchecked(&self.path[..open]));
         }
         if self.is_property_path() {
             return Some(self.prim_path());
@@ -750,6 +766,131 @@ impl Path {
 
     pub fn is_valid_namespace_identifier(name: &str) -> bool {
         name.split(&[':', '.']).all(Self::is_valid_identifier)
+    }
+}
+
+/// How deep `[target]` paths may nest inside each other in [`Path::parse`]: each level
+/// recurses, and a relational attribute's target holds one more at most.
+const MAX_TARGET_DEPTH: usize = 4;
+
+/// The start of `text`, quoted with escapes, for a message: a path from a file can be long
+/// and span lines.
+pub(crate) fn quoted_start(text: &str) -> String {
+    const MOST: usize = 32;
+    match text.char_indices().nth(MOST) {
+        Some((end, _)) => format!("{:?}…", &text[..end]),
+        None => format!("{text:?}"),
+    }
+}
+
+/// A recursive-descent check of SdfPath's grammar for [`Path::parse`], each method
+/// consuming from `rest` what it accepts; linear in the text.
+struct Syntax<'a> {
+    rest: &'a str,
+}
+
+impl Syntax<'_> {
+    fn eat(&mut self, prefix: &str) -> bool {
+        match self.rest.strip_prefix(prefix) {
+            Some(rest) => {
+                self.rest = rest;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Consumes the longest prefix whose characters pass `ok` (the first also `first`),
+    /// and whether it was not empty.
+    fn run(&mut self, first: impl Fn(char) -> bool, ok: impl Fn(char) -> bool) -> bool {
+        let mut chars = self.rest.char_indices();
+        match chars.next() {
+            Some((_, c)) if first(c) => {}
+            _ => return false,
+        }
+        let end = chars.find(|&(_, c)| !ok(c)).map_or(self.rest.len(), |(i, _)| i);
+        self.rest = &self.rest[end..];
+        true
+    }
+
+    fn identifier(&mut self) -> bool {
+        self.run(|c| c == '_' || c.is_alphabetic(), |c| c == '_' || c.is_alphanumeric())
+    }
+
+    fn namespaced_identifier(&mut self) -> bool {
+        self.identifier() && (!self.eat(":") || self.namespaced_identifier())
+    }
+
+    /// `{set=selection}`; the selection may be empty, start with `.` and hold `|` and `-`.
+    fn variant_selection(&mut self) -> bool {
+        let selection = |c: char| c == '_' || c == '|' || c == '-' || c.is_alphanumeric();
+        self.eat("{") && self.identifier() && self.eat("=") && {
+            self.run(|c| c == '.' || selection(c), selection);
+            self.eat("}")
+        }
+    }
+
+    /// Prim names separated by `/`, each with any variant selections, a child of a
+    /// variant selection attaching directly (`A{v=s}B`).
+    fn prims(&mut self) -> bool {
+        loop {
+            if !self.identifier() {
+                return false;
+            }
+            while self.rest.starts_with('{') {
+                if !self.variant_selection() {
+                    return false;
+                }
+                if self.rest.starts_with(|c: char| c == '_' || c.is_alphabetic()) {
+                    self.identifier();
+                }
+            }
+            if !self.eat("/") {
+                return true;
+            }
+        }
+    }
+
+    /// `.name`, then optionally `[target]` and `.name`.
+    fn property(&mut self, depth: usize) -> bool {
+        if !(self.eat(".") && self.namespaced_identifier()) {
+            return false;
+        }
+        if !self.eat("[") {
+            return true;
+        }
+        let target = depth < MAX_TARGET_DEPTH && self.path(depth + 1) && self.eat("]");
+        target && (!self.rest.starts_with('.') || (self.eat(".") && self.namespaced_identifier()))
+    }
+
+    /// A non-empty path; what follows it is left in `rest`.
+    fn path(&mut self, depth: usize) -> bool {
+        if self.eat("/") {
+            // The absolute root, alone.
+            if self.rest.is_empty() || self.rest.starts_with(']') {
+                return true;
+            }
+            if !self.prims() {
+                return false;
+            }
+        } else if self.eat("..") {
+            while self.rest.starts_with("/..") {
+                self.eat("/..");
+            }
+            if self.eat("/") && !self.prims() {
+                return false;
+            }
+        } else if self.rest.starts_with('.') {
+            // `.` alone is the relative path to itself; else a relative property.
+            let after = &self.rest[1..];
+            if after.is_empty() || after.starts_with(']') {
+                self.eat(".");
+                return true;
+            }
+        } else if !self.prims() {
+            return false;
+        }
+        !self.rest.starts_with('.') || self.property(depth)
     }
 }
 

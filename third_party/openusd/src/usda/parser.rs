@@ -354,6 +354,12 @@ impl<'a> Parser<'a> {
         let Token::String(name) = name_token else {
             bail!("Expected prim name string, got {name_token:?}");
         };
+        // A name with `/`, `}` or a line break made a path the composition walked forever.
+        ensure!(
+            sdf::Path::is_valid_identifier(name),
+            "not a valid prim name: {}",
+            sdf::quoted_start(name)
+        );
         parent_children.push(name.to_string());
         let prim_path = current_path.append_path(name)?;
 
@@ -476,6 +482,11 @@ impl<'a> Parser<'a> {
         self.fetch_next()?; // consume `variantSet`
 
         let name = self.fetch_str().context("Expected variant set name")?.to_string();
+        ensure!(
+            sdf::Path::is_valid_identifier(&name),
+            "not a valid variant set name: {}",
+            sdf::quoted_start(&name)
+        );
         self.ensure_pun('=')?;
 
         // Create the variant set spec.
@@ -486,6 +497,7 @@ impl<'a> Parser<'a> {
         // Parse each variant: "VariantName" (...) { ... }
         self.parse_block('{', '}', |this| {
             let variant_name = this.fetch_str().context("Expected variant name")?.to_string();
+            check_variant_selection(&name, &variant_name).context("not a valid variant name")?;
 
             variant_children.push(variant_name.clone());
 
@@ -686,7 +698,7 @@ impl<'a> Parser<'a> {
 
     /// Parses a single `<...>` path reference token into an `sdf::Path`.
     fn parse_path_reference(&mut self) -> Result<sdf::Path> {
-        sdf::Path::new(self.fetch_path_ref()?)
+        sdf::Path::parse(self.fetch_path_ref()?)
     }
 
     /// Parses a relocates dictionary: `{ <source>: <target>, ... }`.
@@ -697,8 +709,8 @@ impl<'a> Parser<'a> {
             this.ensure_pun(':')
                 .context("Expected ':' between relocate source and target")?;
             let tgt = this.fetch_path_ref().context("Expected relocate target path")?;
-            let src_path = sdf::Path::new(src)?;
-            let tgt_path = sdf::Path::from(tgt);
+            let src_path = sdf::Path::parse(src)?;
+            let tgt_path = sdf::Path::parse(tgt)?;
             reject_variant_selection_in_path(&src_path, "Relocate source")?;
             reject_variant_selection_in_path(&tgt_path, "Relocate target")?;
             pairs.push((src_path, tgt_path));
@@ -1009,6 +1021,9 @@ impl<'a> Parser<'a> {
                         .into_iter()
                         .filter_map(|(k, v)| v.try_as_string().map(|s| (k, s.to_owned())))
                         .collect();
+                    for (set, selection) in &selections {
+                        check_variant_selection(set, selection).context("not a valid variant selection")?;
+                    }
                     spec.add(FieldKey::VariantSelection, sdf::Value::VariantSelectionMap(selections));
                 }
             }
@@ -1343,12 +1358,12 @@ impl<'a> Parser<'a> {
             Token::AssetRef(asset_path) => {
                 reference.asset_path = asset_path.to_string();
                 if let Some(Ok(Token::PathRef(path))) = self.peek_next() {
-                    reference.prim_path = sdf::Path::new(path)?;
+                    reference.prim_path = sdf::Path::parse(path)?;
                     self.fetch_next()?;
                 }
             }
             Token::PathRef(path) => {
-                reference.prim_path = sdf::Path::new(path)?;
+                reference.prim_path = sdf::Path::parse(path)?;
             }
             token => {
                 bail!("Expected asset reference (@...@) or path reference (<...>), got {token:?}");
@@ -1409,12 +1424,12 @@ impl<'a> Parser<'a> {
             Token::AssetRef(asset_path) => {
                 payload.asset_path = asset_path.to_string();
                 if let Some(Ok(Token::PathRef(path))) = self.peek_next() {
-                    payload.prim_path = sdf::Path::new(path)?;
+                    payload.prim_path = sdf::Path::parse(path)?;
                     self.fetch_next()?;
                 }
             }
             Token::PathRef(path) => {
-                payload.prim_path = sdf::Path::new(path)?;
+                payload.prim_path = sdf::Path::parse(path)?;
             }
             token => {
                 bail!("Expected asset reference (@...@) or path reference (<...>), got {token:?}");
@@ -1903,6 +1918,12 @@ fn push_unique(vec: &mut Vec<String>, name: &str) {
 /// not variant selections, so a `{set=sel}` element anywhere in the path is a
 /// parse error (C++ `Sdf_TextFileFormatParser` raises the same error, e.g.
 /// "Inherit paths cannot contain variant selections"). `arc` names the field.
+/// Refuses a variant set name and selection that do not make a `{set=selection}` path
+/// segment, which the composition makes of them.
+fn check_variant_selection(set: &str, selection: &str) -> Result<()> {
+    sdf::Path::parse(&format!("/P{{{set}={selection}}}")).map(drop)
+}
+
 fn reject_variant_selection_in_path(path: &sdf::Path, arc: &str) -> Result<()> {
     ensure!(
         !path.contains_prim_variant_selection(),

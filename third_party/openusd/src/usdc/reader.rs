@@ -447,6 +447,9 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                     } else {
                         parent_path.append_path(element_token)?
                     };
+                    // The composition's path algebra assumes well-formed paths (a name
+                    // ending in `}` made an ancestor walk endless).
+                    sdf::Path::parse(self.paths[path_index].as_str())?;
                     text += self.paths[path_index].as_str().len() as u64;
                     ensure!(
                         text <= most_text,
