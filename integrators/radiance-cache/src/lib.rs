@@ -58,7 +58,10 @@ pub struct CacheSettings {
     /// of the block before, so that the cache's error keeps falling as samples accumulate.
     pub block_spp: u32,
     /// Vertices traced exactly before the cache is read grow by this many with each block,
-    /// so that what the cache averages weighs less and less.
+    /// so that what the cache averages weighs less and less and the image converges to the
+    /// path tracer's. With 0 the cache's bias falls only as its cells get finer: 3.0–4.1 % in
+    /// a channel on light hair at 512–1024 spp, against 2.8 % at most with 1, which costs
+    /// 1.25–1.6× the time to equal error.
     pub handoff_growth: u32,
     /// Whether a lookup at a path's vertex number d reads only records made at training
     /// paths' vertex number d (the last class, 5, holds every deeper one; 23 with a growing
@@ -101,7 +104,7 @@ impl Default for CacheSettings {
         CacheSettings {
             training_spp: 4,
             block_spp: 32,
-            handoff_growth: 0,
+            handoff_growth: 1,
             match_depth: true,
             traced_bounces: 2,
             finest_cells_log2: 7,
@@ -639,12 +642,16 @@ mod tests {
 
     #[test]
     fn records_are_classed_by_vertex_number_when_matched() {
-        let matched = CacheSettings::default();
+        let matched = CacheSettings {
+            handoff_growth: 0,
+            ..Default::default()
+        };
         assert_eq!(matched.depth_class(0), 0);
         assert_eq!(matched.depth_class(3), 3);
         assert_eq!(matched.depth_class(1000), DEPTH_CLASSES - 1);
         let pooled = CacheSettings {
             match_depth: false,
+            handoff_growth: 0,
             ..Default::default()
         };
         assert_eq!(pooled.depth_class(7), 0);
