@@ -94,6 +94,9 @@ const NODES: [[f32; 2]; K] = [[0.25, 0.25], [0.75, 0.25], [0.25, 0.75], [0.75, 0
 /// microfacet terms divide by them.
 const COS_MIN: f32 = 1e-5;
 
+/// Nodes of the inner-reflectance table over the cosine to the mesonormal, [0, 1].
+const R_TABLE: usize = 257;
+
 /// Share of samples drawn uniformly whatever the lobes' energies, so that `f / pdf` stays bounded
 /// where the vMF lobes fall off faster than the exit transmission.
 const DEFENSIVE: f32 = 0.05;
@@ -186,6 +189,8 @@ pub struct Huang {
     /// Concentration of the vMF lobes that sample TT and TRT.
     kappa: f32,
     far_field: bool,
+    /// Reflectance from inside per cosine ([`Self::inner_reflectance`]).
+    inner_r: [f32; R_TABLE],
 }
 
 /// Light leaving through the exit interface after one quadrature node's path.
@@ -244,7 +249,7 @@ impl Huang {
         let sigma_a = p.pigment.sigma_a(p.roughness)?;
         let (sin_tilt, cos_tilt) = p.tilt.to_radians().sin_cos();
         let spread = ((p.eta - 1.0) * p.roughness).max(1e-3);
-        Ok(Huang {
+        let mut m = Huang {
             alpha: p.roughness,
             alpha2: p.roughness * p.roughness,
             sin_tilt,
@@ -254,7 +259,10 @@ impl Huang {
             sigma_a,
             kappa: 1.0 / (spread * spread),
             far_field: p.far_field,
-        })
+            inner_r: [0.0; R_TABLE],
+        };
+        m.inner_r = m.inner_reflectance_table();
+        Ok(m)
     }
 
     /// GGX normal distribution at cosine `c` to the mesonormal.
@@ -432,18 +440,34 @@ impl Huang {
     }
 
     /// The reflectance from inside of the rough wall of outward mesonormal `m` for light along
-    /// `d`: Fresnel averaged over the visible microfacets by the entry's quadrature. The rough
-    /// exit transmits the same visible microfacets' `(1 − F) G₂/G₁` exactly, so the light
+    /// `d`: Fresnel averaged over the visible microfacets (tabulated). The rough exit transmits
+    /// the same visible microfacets' `(1 − F) G₂/G₁` exactly, so the light
     /// reflected on (TRT, residual) and the light leaving never add up to more than arrived,
     /// also near total internal reflection, where the mesonormal's own Fresnel would be far off.
     fn inner_reflectance(&self, d: Vec3, m: Vec3) -> f32 {
-        let frame = Frame::from_z(-m);
-        let w = frame.to_local(-d);
-        NODES
-            .iter()
-            .map(|u| fresnel(w.dot(self.sample_vndf(w, *u)), 1.0 / self.eta))
-            .sum::<f32>()
-            / K as f32
+        // Tabulated over the cosine to the mesonormal (isotropic GGX depends on nothing else).
+        let x = d.dot(m).clamp(0.0, 1.0) * (R_TABLE - 1) as f32;
+        let i = (x as usize).min(R_TABLE - 2);
+        let t = x - i as f32;
+        self.inner_r[i] * (1.0 - t) + self.inner_r[i + 1] * t
+    }
+
+    /// The table of [`Self::inner_reflectance`]: per cosine, the mean Fresnel reflectance from
+    /// inside over a 16 × 16 stratified grid of GGX's visible normals.
+    fn inner_reflectance_table(&self) -> [f32; R_TABLE] {
+        const N: usize = 16;
+        std::array::from_fn(|i| {
+            let c = (i as f32 / (R_TABLE - 1) as f32).max(COS_MIN);
+            let w = Vec3::new(safe_sqrt(1.0 - c * c), 0.0, c);
+            let mut sum = 0.0;
+            for a in 0..N {
+                for b in 0..N {
+                    let u = [(a as f32 + 0.5) / N as f32, (b as f32 + 0.5) / N as f32];
+                    sum += fresnel(w.dot(self.sample_vndf(w, u)), 1.0 / self.eta);
+                }
+            }
+            sum / (N * N) as f32
+        })
     }
 
     /// Heitz 2018's sampling of GGX visible normals from `w` (in the mesonormal's frame, z up).
@@ -604,14 +628,19 @@ impl Bcsdf for Huang {
     }
 
     fn sample(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<BcsdfSample> {
-        let wi = if self.far_field {
+        let (f, pdf, wi) = if self.far_field {
             let (j, u3) = Self::far_node(u[3]);
-            self.draw(&self.geometry(wo, GL_X[j]), [u[0], u[1], u3])
+            let wi = self.draw(&self.geometry(wo, GL_X[j]), [u[0], u[1], u3]);
+            let wi = wi.try_normalize()?;
+            let (f, pdf) = self.eval_pdf(wo, wi, h);
+            (f, pdf, wi)
         } else {
-            self.draw(&self.geometry(wo, h), [u[0], u[1], u[2]])
-        }
-        .try_normalize()?;
-        let (f, pdf) = self.eval_pdf(wo, wi, h);
+            // The geometry drawn from is the one evaluated at the new direction.
+            let g = self.geometry(wo, h);
+            let wi = self.draw(&g, [u[0], u[1], u[2]]).try_normalize()?;
+            let (f, pdf) = self.eval_pdf_at(&g, wi);
+            (f, pdf, wi)
+        };
         (pdf > 0.0 && pdf.is_finite()).then_some(BcsdfSample { wi, f, pdf })
     }
 
