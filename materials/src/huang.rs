@@ -188,6 +188,11 @@ pub struct Huang {
     sigma_a: Rgb,
     /// Concentration of the vMF lobes that sample TT and TRT.
     kappa: f32,
+    /// Their density's normalisation, κ / (2π (1 − e^{−2κ})).
+    vmf_norm: f32,
+    /// The quadrature nodes in the polar form the visible-normal warp takes them:
+    /// (√u₀, sin 2πu₁, cos 2πu₁), computed once rather than per call.
+    nodes: [(f32, f32, f32); K],
     far_field: bool,
     /// Reflectance from inside per cosine ([`Self::inner_reflectance`]).
     inner_r: [f32; R_TABLE],
@@ -258,9 +263,15 @@ impl Huang {
             b: p.aspect_ratio,
             sigma_a,
             kappa: 1.0 / (spread * spread),
+            vmf_norm: 0.0,
+            nodes: NODES.map(|u| {
+                let (sin, cos) = (TAU * u[1]).sin_cos();
+                (u[0].sqrt(), sin, cos)
+            }),
             far_field: p.far_field,
             inner_r: [0.0; R_TABLE],
         };
+        m.vmf_norm = m.kappa / (TAU * -(-2.0 * m.kappa).exp_m1());
         m.inner_r = m.inner_reflectance_table();
         Ok(m)
     }
@@ -347,8 +358,8 @@ impl Huang {
         let mut e_lobes = [0.0f32; 2 * K];
         let frame = Frame::from_z(m_e);
         let wo_m = frame.to_local(wo);
-        for (k, u) in NODES.iter().enumerate() {
-            let wh = frame.to_world(self.sample_vndf(wo_m, *u));
+        for (k, &(r, sin, cos)) in self.nodes.iter().enumerate() {
+            let wh = frame.to_world(self.sample_vndf_polar(wo_m, r, sin, cos));
             let c = wo.dot(wh);
             if c <= 0.0 {
                 continue;
@@ -472,6 +483,12 @@ impl Huang {
 
     /// Heitz 2018's sampling of GGX visible normals from `w` (in the mesonormal's frame, z up).
     fn sample_vndf(&self, w: Vec3, u: [f32; 2]) -> Vec3 {
+        let (s, c) = (TAU * u[1]).sin_cos();
+        self.sample_vndf_polar(w, u[0].sqrt(), s, c)
+    }
+
+    /// [`Self::sample_vndf`] at the disc point of radius `r` and angle of sine `s`, cosine `c`.
+    fn sample_vndf_polar(&self, w: Vec3, r: f32, s: f32, c: f32) -> Vec3 {
         let v = Vec3::new(self.alpha * w.x, self.alpha * w.y, w.z).normalize();
         let t1 = if v.z < 0.9999 {
             Vec3::Z.cross(v).normalize()
@@ -479,8 +496,6 @@ impl Huang {
             Vec3::X
         };
         let t2 = v.cross(t1);
-        let r = u[0].sqrt();
-        let (s, c) = (TAU * u[1]).sin_cos();
         let p1 = r * c;
         let mix = 0.5 * (1.0 + v.z);
         let p2 = (1.0 - mix) * safe_sqrt(1.0 - p1 * p1) + mix * (r * s);
@@ -565,7 +580,7 @@ impl Huang {
         }
         for e in g.tt.iter().chain(&g.trt) {
             if let (Some(c), true) = (e.centre, e.prob > 0.0) {
-                pdf += e.prob * vmf_pdf(self.kappa, c.dot(wi));
+                pdf += e.prob * self.vmf_norm * (self.kappa * (c.dot(wi) - 1.0)).exp();
             }
         }
         pdf
@@ -624,7 +639,15 @@ impl Huang {
 
 impl Bcsdf for Huang {
     fn eval(&self, wo: Vec3, wi: Vec3, h: f32) -> Rgb {
-        self.eval_pdf(wo, wi, h).0
+        let sum = |g: &Geometry| {
+            let l = self.lobes(g, wi);
+            l[0] + l[1] + l[2] + l[3]
+        };
+        if self.far_field {
+            self.far_sum(wo, Rgb::ZERO, sum)
+        } else {
+            sum(&self.geometry(wo, h))
+        }
     }
 
     fn sample(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<BcsdfSample> {
@@ -645,7 +668,11 @@ impl Bcsdf for Huang {
     }
 
     fn pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> f32 {
-        self.eval_pdf(wo, wi, h).1
+        if self.far_field {
+            self.far_sum(wo, 0.0, |g| self.pdf_at(g, wi))
+        } else {
+            self.pdf_at(&self.geometry(wo, h), wi)
+        }
     }
 
     fn eval_pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> (Rgb, f32) {
@@ -765,11 +792,6 @@ fn geometric_tail(r: f32, a: f32) -> f32 {
     } else {
         (1.0 - r) * a / den
     }
-}
-
-/// The von Mises–Fisher density of concentration `kappa` at cosine `c` to its mean direction.
-fn vmf_pdf(kappa: f32, c: f32) -> f32 {
-    kappa / (TAU * -(-2.0 * kappa).exp_m1()) * (kappa * (c - 1.0)).exp()
 }
 
 /// A direction from the von Mises–Fisher lobe of concentration `kappa` about unit `mean`.
