@@ -1047,7 +1047,11 @@ mod tests {
         }
         let text = format!("#usda 1.0\n{}{}", prim("A", normals), prim("B", ""));
         std::fs::write(&path, text).unwrap();
-        assert!(UsdFile::new(&path).read(&Limits::default()).unwrap().orientations.is_none());
+        assert!(UsdFile::new(&path)
+            .read(&Limits::default())
+            .unwrap()
+            .orientations
+            .is_none());
     }
 
     const CURVES: &str = r#"#usda 1.0

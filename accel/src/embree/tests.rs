@@ -1,9 +1,9 @@
 use super::*;
+use crate::FiberOrientation;
 use tress_core::math::Frame;
 use tress_core::rng::Pcg32;
 use tress_groom::test_util::{hair, hair_file_bytes, line, rng_dir, HairArrays};
 use tress_groom::{HairAttribute, Rotation};
-use crate::FiberOrientation;
 
 fn with_basis(basis: CurveBasis) -> HairOptions {
     HairOptions {
