@@ -30,6 +30,11 @@ pub(crate) struct CurveData {
     /// segment. A linear segment's capsule is its two control points and their larger radius,
     /// computed when needed rather than stored (28 bytes a segment).
     pub(crate) capsules: Vec<Capsule>,
+    /// Per control point (aligned with `cps`), the fiber's orientation at the polyline point
+    /// it stands for ([`crate::FiberOrientation`]), interpolated along a segment at a hit.
+    /// Only kept when the scene asks for it ([`crate::SceneBuilder::with_fiber_orientation`]):
+    /// the models that read it are rare, and the other scenes should not pay 12 bytes a point.
+    pub(crate) orientations: Option<Vec<Vec3>>,
     /// Per strand slot: what hits and the filter need of a strand, in one record.
     pub(crate) strands: Vec<StrandRecord>,
 }
@@ -218,6 +223,11 @@ impl CurveData {
         let strand = &self.strands[self.strand_of[prim] as usize];
         let index = self.first_cp[prim] - strand.first_cp;
         let v = ((index as f32 + u) / strand.segments as f32).clamp(0.0, 1.0);
+        let orientation = self.orientations.as_ref().map_or(Vec3::ZERO, |o| {
+            // A cubic segment's first polyline point is its second control point.
+            let k = self.first_cp[prim] as usize + usize::from(self.basis != CurveBasis::Linear);
+            o[k].lerp(o[k + 1], u)
+        });
         (
             HitKind::Fiber {
                 tangent,
@@ -225,6 +235,7 @@ impl CurveData {
                 radius,
                 strand: strand.id,
                 v,
+                orientation,
             },
             t,
         )
@@ -299,6 +310,7 @@ impl CurveData {
             + self.strand_of.len() * 4
             + self.capsules.len() * std::mem::size_of::<Capsule>()
             + self.strands.len() * std::mem::size_of::<StrandRecord>()
+            + self.orientations.as_ref().map_or(0, |o| o.len() * 12)
     }
 }
 

@@ -101,6 +101,7 @@ mod error;
 mod fp_mode;
 pub mod mesh;
 mod options;
+mod orientation;
 
 pub use curve_data::HairSegment;
 pub use curves::{CurveBasis, CurveShape, Overlaps};
@@ -109,3 +110,4 @@ pub use embree::{AccelInfo, EmbreeAccel, ObjectInfo, ObjectKind, SceneBuilder};
 pub use error::{Error, Result};
 pub use mesh::TriangleMesh;
 pub use options::HairOptions;
+pub use orientation::FiberOrientation;

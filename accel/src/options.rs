@@ -40,6 +40,13 @@ pub struct HairOptions {
     /// Child strands grown around every strand (taken as a guide) before the subset is drawn
     /// (default none); see [`ChildStrands`].
     pub children: Option<ChildStrands>,
+    /// Where the fibers' orientation about their axes (an elliptical fiber's major axis) comes
+    /// from: `Groom` (the default: the file's, e.g. USD `normals`, else `ScalpNormal`),
+    /// `ScalpNormal` (a minimum-twist frame from the root, starting away from the centre of the
+    /// object's roots) or `Fixed(x, y, z)` (toward a world direction). Only hair models that
+    /// use it (Huang with an aspect ratio below 1) see it, and only scenes with such a model
+    /// store it.
+    pub orientation: crate::FiberOrientation,
 }
 
 impl Default for HairOptions {
@@ -54,6 +61,7 @@ impl Default for HairOptions {
             strand_fraction: 1.0,
             strand_seed: 0,
             children: None,
+            orientation: crate::FiberOrientation::Groom,
         }
     }
 }
@@ -70,6 +78,9 @@ impl HairOptions {
                 "radius_scale",
                 format!("must be finite and positive, got {}", self.radius_scale),
             ));
+        }
+        if let Some(reason) = self.orientation.invalid() {
+            return Err(bad("orientation", reason));
         }
         if !(self.tip_scale.is_finite() && self.tip_scale > 0.0) {
             return Err(bad(

@@ -21,6 +21,11 @@ pub enum HitKind {
         strand: u32,
         /// Parameter along the strand, 0 at the root and 1 at the tip.
         v: f32,
+        /// The fiber's orientation about its axis at the hit (world space, orthogonal to the
+        /// tangent up to interpolation): the major axis of an elliptical fiber. Only models
+        /// that [use it](crate::Bcsdf::uses_orientation) see it, and only scenes with such a
+        /// model keep it: elsewhere it is zero.
+        orientation: Vec3,
     },
     /// A surface (triangle mesh, sphere).
     Surface {

@@ -11,6 +11,10 @@
 //!   the fiber radius. With this sign, specular reflection (p = 0) leaves at
 //!   φ_i − φ_o = −2·asin(h), the convention of pbrt and Chiang et al. 2016.
 //!
+//! Models that [use the fiber's orientation](Bcsdf::uses_orientation) (an elliptical fiber's
+//! major axis) get directions in the *oriented* frame instead: x the tangent, z the orientation
+//! made orthogonal to it, y = z × x; `h` is still measured along the view-facing y above.
+//!
 //! # Value convention
 //! [`Bcsdf::eval`] returns `f(wo, wi) · cos θ_i` — the cosine to the fiber's normal plane is
 //! *included* — so the scattered radiance is `L_o(wo) = ∫_{S²} eval(wo, wi) L_i(wi) dω_i` and an
@@ -90,6 +94,16 @@ pub trait Bcsdf: Send + Sync + Debug {
             }
         }
     }
+
+    /// Whether the model depends on the fiber's orientation about its axis (an elliptical
+    /// cross-section). If so, the shading point hands it directions in the *oriented* frame
+    /// ([`FiberFrame::oriented`]: z the fiber's orientation, e.g. its major axis) instead of the
+    /// view-facing one; `h` keeps its meaning (measured along the view-facing frame's y, which
+    /// the model rebuilds from `wo`). By default false, and models that leave it so see exactly
+    /// the view-facing frame, whatever orientation the groom carries.
+    fn uses_orientation(&self) -> bool {
+        false
+    }
 }
 
 /// The local frame at a fiber hit (module docs): built from the tangent and the direction the hit
@@ -108,6 +122,23 @@ impl FiberFrame {
             // Looking straight along the fiber: any normal will do.
             Frame::from_z(x).x
         };
+        FiberFrame(Frame {
+            x,
+            y: z.cross(x),
+            z,
+        })
+    }
+
+    /// Frame with x = `tangent` and z = `orientation` made orthogonal to it: the frame of models
+    /// that [use the orientation](Bcsdf::uses_orientation). Falls back to the view-facing frame
+    /// toward `toward_viewer` where the orientation is (nearly) along the tangent.
+    pub fn oriented(tangent: Vec3, orientation: Vec3, toward_viewer: Vec3) -> Self {
+        let x = tangent.normalize();
+        let z_raw = orientation - x * orientation.dot(x);
+        if z_raw.length_squared() <= 1e-12 {
+            return Self::new(tangent, toward_viewer);
+        }
+        let z = z_raw.normalize();
         FiberFrame(Frame {
             x,
             y: z.cross(x),

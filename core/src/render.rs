@@ -1126,6 +1126,7 @@ mod tests {
                     radius: 0.01,
                     strand: 0,
                     v: 0.5,
+                    orientation: Vec3::Z,
                 }
             } else {
                 HitKind::Surface { normal: -ray.dir }

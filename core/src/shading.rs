@@ -61,9 +61,22 @@ impl<'a> ShadingPoint<'a> {
         let wo = -ray.dir;
         let material = materials.get(hit.material as usize);
         let scattering = match (hit.kind, material) {
-            (HitKind::Fiber { tangent, h, .. }, Some(Material::Hair(bcsdf))) => Scattering::Fiber {
+            (
+                HitKind::Fiber {
+                    tangent,
+                    h,
+                    orientation,
+                    ..
+                },
+                Some(Material::Hair(bcsdf)),
+            ) => Scattering::Fiber {
                 bcsdf: bcsdf.as_ref(),
-                frame: FiberFrame::new(tangent, wo),
+                // Round models see the view-facing frame, exactly as before orientation existed.
+                frame: if bcsdf.uses_orientation() {
+                    FiberFrame::oriented(tangent, orientation, wo)
+                } else {
+                    FiberFrame::new(tangent, wo)
+                },
                 h,
             },
             (HitKind::Surface { normal }, Some(Material::Diffuse { albedo })) => {
@@ -166,5 +179,70 @@ impl<'a> ShadingPoint<'a> {
     /// A ray leaving this point in direction `dir`.
     pub fn spawn(&self, dir: Vec3) -> Ray {
         Ray::leaving(self.p, dir, self.prim)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bcsdf::BcsdfSample;
+    use std::sync::Arc;
+
+    /// Returns the local `wo` it is handed, so a test sees the frame the shading point built.
+    #[derive(Debug)]
+    struct Probe {
+        oriented: bool,
+    }
+
+    impl Bcsdf for Probe {
+        fn eval(&self, wo: Vec3, _wi: Vec3, _h: f32) -> Rgb {
+            wo
+        }
+        fn sample(&self, _wo: Vec3, _h: f32, _u: [f32; 4]) -> Option<BcsdfSample> {
+            None
+        }
+        fn pdf(&self, _wo: Vec3, _wi: Vec3, _h: f32) -> f32 {
+            0.0
+        }
+        fn uses_orientation(&self) -> bool {
+            self.oriented
+        }
+    }
+
+    fn local_wo(oriented: bool, orientation: Vec3) -> Vec3 {
+        let materials = [Material::Hair(Arc::new(Probe { oriented }))];
+        let ray = Ray::new(
+            Vec3::new(0.0, 0.0, 5.0),
+            Vec3::new(0.1, 0.2, -1.0).normalize(),
+        );
+        let hit = Hit {
+            t: 5.0,
+            p: Vec3::ZERO,
+            prim: PrimId { geom: 0, prim: 0 },
+            material: 0,
+            kind: HitKind::Fiber {
+                tangent: Vec3::X,
+                h: 0.3,
+                radius: 0.01,
+                strand: 0,
+                v: 0.5,
+                orientation,
+            },
+        };
+        ShadingPoint::new(&hit, &ray, &materials).eval(Vec3::Y)
+    }
+
+    #[test]
+    fn only_models_that_use_the_orientation_see_it() {
+        // Round models: the view-facing frame, bit for bit, whatever the orientation.
+        let facing = local_wo(false, Vec3::Y);
+        assert_eq!(facing, local_wo(false, Vec3::Z));
+        assert!(facing.y.abs() < 1e-6 && facing.z > 0.0, "{facing}");
+        // Oriented models: z is the orientation, so wo's components follow it.
+        let wo = -Vec3::new(0.1, 0.2, -1.0).normalize();
+        let along_y = local_wo(true, Vec3::Y);
+        assert!((along_y.z - wo.y).abs() < 1e-6, "{along_y}");
+        let along_z = local_wo(true, Vec3::new(0.3, 0.0, 2.0));
+        assert!((along_z.z - wo.z).abs() < 1e-6 && (along_z.x - wo.x).abs() < 1e-6);
     }
 }

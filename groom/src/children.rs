@@ -218,6 +218,7 @@ impl ChildStrands {
             out.strand_offsets.push(out.points.len() as u32);
         }
         out.colors = guides.colors.as_ref().map(|c| inherit(c, guides, &parents));
+        out.orientations = (guides.orientations.as_ref()).map(|o| inherit(o, guides, &parents));
         out.transparency = guides
             .transparency
             .as_ref()

@@ -205,6 +205,7 @@ fn parse(bytes: &[u8], path: &Path) -> Result<HairGeometry> {
         strand_offsets,
         colors,
         transparency,
+        orientations: None,
     };
     hair.validate()?;
     Ok(hair)

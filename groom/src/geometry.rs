@@ -99,6 +99,9 @@ pub struct HairGeometry {
     pub colors: Option<HairAttribute<Rgb>>,
     /// Transparency (0 opaque … 1 invisible) stored in the file, if any.
     pub transparency: Option<HairAttribute<f32>>,
+    /// The fibers' orientation about their axes stored in the file (USD `normals`), if any:
+    /// a direction across the fiber, the major axis of an elliptical one.
+    pub orientations: Option<HairAttribute<Vec3>>,
 }
 
 impl HairGeometry {
@@ -111,6 +114,7 @@ impl HairGeometry {
             strand_offsets: vec![0],
             colors: None,
             transparency: None,
+            orientations: None,
         }
     }
 
@@ -225,6 +229,10 @@ impl HairGeometry {
             t.check_len("transparency", strands, self.points.len())
                 .map_err(fail)?;
         }
+        if let Some(o) = &self.orientations {
+            o.check_len("orientation", strands, self.points.len())
+                .map_err(fail)?;
+        }
         if self.segment_count() == 0 {
             return Err(fail("no strand has two or more points".into()));
         }
@@ -235,6 +243,14 @@ impl HairGeometry {
     pub fn z_up_to_y_up(&mut self) {
         for p in &mut self.points {
             *p = Vec3::new(p.x, p.z, -p.y);
+        }
+        let turn = |v: &mut Vec3| *v = Vec3::new(v.x, v.z, -v.y);
+        match &mut self.orientations {
+            None => {}
+            Some(HairAttribute::Uniform(v)) => turn(v),
+            Some(HairAttribute::PerStrand(v) | HairAttribute::PerPoint(v)) => {
+                v.iter_mut().for_each(turn)
+            }
         }
     }
 
@@ -261,6 +277,7 @@ impl HairGeometry {
             strand_offsets: vec![0],
             colors: self.colors.as_ref().map(|c| c.select(&order, self)),
             transparency: self.transparency.as_ref().map(|t| t.select(&order, self)),
+            orientations: self.orientations.as_ref().map(|o| o.select(&order, self)),
         };
         for &s in &order {
             let r = self.strand(s as usize);
@@ -393,6 +410,7 @@ mod tests {
             strand_offsets: vec![0, 2, 6, 9],
             colors: Some(HairAttribute::PerStrand(vec![Rgb::X, Rgb::Y, Rgb::Z])),
             transparency: Some(HairAttribute::PerPoint((0..9).map(|i| i as f32).collect())),
+            orientations: None,
         }
     }
 

@@ -188,6 +188,7 @@ impl ProceduralHair {
             strand_offsets: (0..=n).map(|i| (i * m) as u32).collect(),
             colors: None,
             transparency: None,
+            orientations: None,
         };
         hair.validate()?;
         Ok(hair)

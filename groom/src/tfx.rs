@@ -149,6 +149,7 @@ fn parse(bytes: &[u8], path: &Path, radius: f32) -> Result<HairGeometry> {
         strand_offsets: (0..=strands).map(|s| s * per_strand).collect(),
         colors,
         transparency: None,
+        orientations: None,
     };
     hair.validate()?;
     Ok(hair)

@@ -402,6 +402,7 @@ impl UsdFile {
         let mut reader = Reader {
             hair: HairGeometry::empty(path.display().to_string()),
             colors: Colors::None,
+            normals: Some(Vec::new()),
             scale: DMat4::from_scale(DVec3::splat(meters_per_unit)),
             limits: *limits,
         };
@@ -432,6 +433,10 @@ impl UsdFile {
             Colors::PerStrand(c) => Some(HairAttribute::PerStrand(c)),
             Colors::PerPoint(c) => Some(HairAttribute::PerPoint(c)),
         };
+        hair.orientations = reader
+            .normals
+            .filter(|n| !n.is_empty())
+            .map(HairAttribute::PerPoint);
         if z_up {
             hair.z_up_to_y_up();
         }
@@ -453,6 +458,9 @@ enum Colors {
 struct Reader {
     hair: HairGeometry,
     colors: Colors,
+    /// `normals` (the fibers' orientation) per point so far; `None` once a prim lacks them,
+    /// and then none are used, like colours.
+    normals: Option<Vec<tress_core::math::Vec3>>,
     /// `metersPerUnit` as a transform, applied after every prim's own.
     scale: DMat4,
     /// The memory limit the points made are checked against.
@@ -599,9 +607,17 @@ impl Reader {
                     .collect()
             }))
         })?;
+        let normals = Primvar::read(&curves.normals_attr(), |a| {
+            Ok(value::<Vec<openusd::gf::Vec3f>>(a)?.map(|c| {
+                c.iter()
+                    .map(|c| DVec3::new(c.x as f64, c.y as f64, c.z as f64))
+                    .collect()
+            }))
+        })?;
         for (what, primvar) in [
             ("widths", Some(&widths)),
             ("primvars:displayColor", colors.as_ref()),
+            ("normals", normals.as_ref()),
         ] {
             let Some(p) = primvar else { continue };
             let expected = p.expected(&counts, &segments);
@@ -616,6 +632,8 @@ impl Reader {
 
         let transform = self.scale * world_transform(stage, curves)?;
         let width_scale = DMat3::from_mat4(transform).determinant().abs().cbrt();
+        // Normals transform by the inverse transpose.
+        let normal_matrix = DMat3::from_mat4(transform).inverse().transpose();
         let mut varying_start = 0;
         for (i, (&start, &n)) in starts.iter().zip(&counts).enumerate() {
             let cp = &points[start..start + n];
@@ -642,6 +660,9 @@ impl Reader {
             };
             let width_segments = vertex_segments(&widths);
             let color_segments = colors.as_ref().map(vertex_segments).unwrap_or_default();
+            let normal_segments = normals.as_ref().map(vertex_segments).unwrap_or_default();
+            // The (segment, u) each point is made from, for the normals there.
+            let mut params = Vec::new();
             let push = |hair: &mut HairGeometry, point: DVec3, s: usize, u: f64| -> Option<Rgb> {
                 hair.points.push(point.as_vec3());
                 let width = at(&widths, &width_segments, s, u).x;
@@ -661,10 +682,12 @@ impl Reader {
                     self.check_points(pieces as usize)?;
                     if s == 0 {
                         point_colors.extend(push(&mut self.hair, b[0], 0, 0.0));
+                        params.push((0, 0.0));
                     }
                     for k in 1..=pieces {
                         let u = k as f64 / pieces as f64;
                         point_colors.extend(push(&mut self.hair, bezier(&b, u), s, u));
+                        params.push((s, u));
                     }
                 }
             } else {
@@ -673,9 +696,20 @@ impl Reader {
                     let (s, u) = if k + 1 < n { (k, 0.0) } else { (k - 1, 1.0) };
                     let color = push(&mut self.hair, transform.transform_point3(*p), s, u);
                     point_colors.extend(color);
+                    params.push((s, u));
                 }
             }
             self.hair.strand_offsets.push(self.hair.points.len() as u32);
+            // The normals at the points just added, at the (segment, u) each was made from.
+            match (&mut self.normals, &normals) {
+                (Some(all), Some(p)) => all.extend((params.iter()).map(|&(s, u)| {
+                    // Only the direction matters (models project it across the fiber).
+                    (normal_matrix * at(p, &normal_segments, s, u))
+                        .normalize_or_zero()
+                        .as_vec3()
+                })),
+                (normals, _) => *normals = None,
+            }
             varying_start += segments[i] + 1;
             self.add_colors(colors.as_ref(), point_colors);
         }
@@ -976,6 +1010,48 @@ mod tests {
             Ok(g) => panic!("{text}: read {} strands", g.strand_count()),
             Err(e) => e.to_string(),
         }
+    }
+
+    /// `normals` become the strands' orientations, per point and unit, through the prim's
+    /// transform (here `metersPerUnit` 0.01) and the Z-up turn; a stage where one prim lacks them has none.
+    #[test]
+    fn normals_are_the_fibers_orientation() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("normals.usda");
+        let prim = |name: &str, normals: &str| {
+            format!(
+                "def BasisCurves \"{name}\"\n{{\n    uniform token type = \"linear\"\n    \
+                 int[] curveVertexCounts = [3]\n    \
+                 point3f[] points = [(0, 0, 0), (0, 0, 1), (0, 0, 2)]\n    \
+                 float[] widths = [0.1, 0.1, 0.1]\n{normals}}}\n"
+            )
+        };
+        let normals = "    normal3f[] normals = [(1, 0, 0), (0, 1, 0), (1, 1, 0)]\n";
+        let text = format!(
+            "#usda 1.0\n(\n    upAxis = \"Z\"\n)\n{}",
+            prim("A", normals)
+        );
+        std::fs::write(&path, text).unwrap();
+        let hair = UsdFile::new(&path).read(&Limits::default()).unwrap();
+        let Some(HairAttribute::PerPoint(o)) = &hair.orientations else {
+            panic!("{:?}", hair.orientations)
+        };
+        // Z-up (x, y, z) → Y-up (x, z, −y).
+        let expect = [
+            Vec3::X,
+            Vec3::new(0.0, 0.0, -1.0),
+            Vec3::new(1.0, 0.0, -1.0).normalize(),
+        ];
+        for (v, e) in o.iter().zip(expect) {
+            assert!(close(*v, e), "{v} vs {e}");
+        }
+        let text = format!("#usda 1.0\n{}{}", prim("A", normals), prim("B", ""));
+        std::fs::write(&path, text).unwrap();
+        assert!(UsdFile::new(&path)
+            .read(&Limits::default())
+            .unwrap()
+            .orientations
+            .is_none());
     }
 
     const CURVES: &str = r#"#usda 1.0

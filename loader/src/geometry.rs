@@ -78,6 +78,11 @@ pub fn build_accel(
     mut builder: SceneBuilder,
 ) -> Result<(EmbreeAccel, String)> {
     let here = |i: usize, what: String| anyhow!("{}: objects[{i}]: {what}", scene_path.display());
+    // Hair keeps its fibers' orientation only for a model that reads it (variants of a model
+    // share its answer).
+    if (materials.iter()).any(|m| matches!(m, Material::Hair(b) if b.uses_orientation())) {
+        builder = builder.with_fiber_orientation();
+    }
     let mut notes = Vec::new();
     for (i, object) in objects.iter().enumerate() {
         let name = object.material();

@@ -21,6 +21,7 @@ pub mod dual_scattering;
 pub mod dual_scattering_sampling;
 pub mod fiber_medium;
 pub mod fur;
+pub mod huang;
 pub mod lambertian_fiber;
 pub mod marschner;
 pub mod model_params;
@@ -127,6 +128,7 @@ hair_models! {
     DEon => deon::DEon,
     Chiang => chiang::Chiang,
     Fur => fur::Fur,
+    Huang => huang::Huang,
 }
 
 #[cfg(test)]

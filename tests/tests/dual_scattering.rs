@@ -169,6 +169,7 @@ fn with_no_fibers_to_cross_and_no_back_scattering_dual_scattering_is_single_scat
         strand_offsets: vec![0, 2],
         colors: None,
         transparency: None,
+        orientations: None,
     };
     let model = HairModel::Chiang(Default::default()).build().unwrap();
     let sky = EnvironmentMap::builtin_sky(0.0, 1.0).unwrap();

@@ -259,6 +259,8 @@ pub struct SceneBuilder {
     /// Estimated bytes of the objects added so far (see [`OBJECT_BYTES`] and the rates it
     /// cites).
     planned_bytes: f64,
+    /// Whether hair objects keep their fibers' orientation ([`SceneBuilder::with_fiber_orientation`]).
+    orientation: bool,
 }
 
 /// What one object costs whatever its size, in bytes: Embree's geometry and BVH node overhead
@@ -271,6 +273,8 @@ const BYTES_PER_TRIANGLE: f64 = 96.0;
 const BYTES_PER_VERTEX: f64 = 32.0;
 /// What a sphere costs: its centre, radius and material, twice, and its share of the BVH.
 const BYTES_PER_SPHERE: f64 = 96.0;
+/// What a hair point's orientation costs where the scene keeps it: one vector.
+const ORIENTATION_BYTES_PER_POINT: f64 = 12.0;
 
 impl SceneBuilder {
     /// A new Embree device and empty scene, held to the default [`Limits`].
@@ -311,6 +315,7 @@ impl SceneBuilder {
             filters: true,
             limits: Limits::default(),
             planned_bytes: 0.0,
+            orientation: false,
         })
     }
 
@@ -350,6 +355,15 @@ impl SceneBuilder {
     pub fn without_filters(mut self) -> Self {
         self.scene.set_flags(SceneFlags::NONE);
         self.filters = false;
+        self
+    }
+
+    /// Hair objects added from now on keep their fibers' orientation about their axes
+    /// ([`HairOptions::orientation`]) and their hits carry it; without this they keep none
+    /// (12 bytes a point saved) and hits carry zero. For scenes with a hair model that
+    /// [uses it](tress_core::Bcsdf::uses_orientation).
+    pub fn with_fiber_orientation(mut self) -> Self {
+        self.orientation = true;
         self
     }
 
@@ -403,18 +417,27 @@ impl SceneBuilder {
     ) -> Result<Self> {
         let grown = strands_to_draw(hair, options, &self.limits())?;
         let (hair, ids) = (&grown.0, &grown.1);
+        let per_point = tress_groom::geometry::BYTES_PER_POINT
+            + if self.orientation {
+                ORIENTATION_BYTES_PER_POINT
+            } else {
+                0.0
+            };
         self.plan(
             &hair.name,
             &format!("its {} hair points", hair.point_count()),
-            hair.point_count() as f64 * tress_groom::geometry::BYTES_PER_POINT + OBJECT_BYTES,
+            hair.point_count() as f64 * per_point + OBJECT_BYTES,
         )?;
         let per_segment = matches!(materials, Materials::PerSegment(_));
-        let mut curves = Curves::new(hair, ids, options, per_segment)?;
+        let mut curves = Curves::new(hair, ids, options, per_segment, self.orientation)?;
         let material_span = curves.set_materials(materials, &hair.name)?;
         check_extent(&hair.name, &curves.bounds)?;
         let mut data = curves.data;
         data.cps.shrink_to_fit();
         data.first_cp.shrink_to_fit();
+        if let Some(kept) = &mut data.orientations {
+            kept.shrink_to_fit();
+        }
         let data = Arc::new(data);
         let geometry = shared_geometry(&self.device, &hair.name, options.curve, &data)?;
         let info = ObjectInfo {
@@ -725,12 +748,13 @@ struct Curves {
 impl Curves {
     /// Transforms, scales and tapers the strands `ids` of `hair` (in slot order) and cuts them
     /// into segments, skipping zero-length ones; `per_segment` also records what a per-segment
-    /// material choice sees.
+    /// material choice sees, `orientation` the fibers' orientation.
     fn new(
         hair: &HairGeometry,
         ids: &[u32],
         options: &HairOptions,
         per_segment: bool,
+        orientation: bool,
     ) -> Result<Curves> {
         let basis = options.basis;
         let order = basis.order();
@@ -746,11 +770,24 @@ impl Curves {
                 first_cp: Vec::new(),
                 strand_of: Vec::new(),
                 capsules: Vec::new(),
+                orientations: orientation.then(Vec::new),
                 strands: Vec::new(),
             },
             points: 0,
             bounds: Aabb::EMPTY,
             segments: Vec::new(),
+        };
+        // The centre of the roots, from which each root's outward direction estimates the
+        // scalp normal where the orientation has to be made up.
+        let root_centre = if orientation {
+            let (sum, roots) = (0..hair.strand_count())
+                .filter_map(|s| hair.strand(s).next())
+                .fold((Vec3::ZERO, 0u32), |(sum, n), at| {
+                    (sum + matrix.transform_point3(hair.points[at]), n + 1)
+                });
+            sum / roots.max(1) as f32
+        } else {
+            Vec3::ZERO
         };
         for (slot, &id) in ids.iter().enumerate() {
             let range = hair.strand(slot);
@@ -772,6 +809,29 @@ impl Curves {
             let strand = c.data.strands.len() as u32;
             let base = c.data.cps.len();
             c.data.cps.extend(basis.control_points(&pts));
+            if let Some(kept) = &mut c.data.orientations {
+                let centres: Vec<Vec3> = pts.iter().map(|p| p.truncate()).collect();
+                let file: Option<Vec<Vec3>> = hair.orientations.as_ref().map(|o| {
+                    (first_point..first_point + n)
+                        .map(|at| matrix.transform_vector3(o.at(slot, at)))
+                        .collect()
+                });
+                let o = crate::orientation::strand_orientations(
+                    &options.orientation,
+                    &centres,
+                    file.as_deref(),
+                    centres[0] - root_centre,
+                );
+                // Aligned with the control points: a cubic strand's phantom end points take
+                // their neighbours'.
+                if basis != CurveBasis::Linear {
+                    kept.push(o[0]);
+                }
+                kept.extend_from_slice(&o);
+                if basis != CurveBasis::Linear {
+                    kept.push(o[n - 1]);
+                }
+            }
             let before = c.data.first_cp.len();
             for j in 0..n - 1 {
                 // A zero-length segment has no area and no tangent.
@@ -803,6 +863,9 @@ impl Curves {
             }
             if c.data.first_cp.len() == before {
                 c.data.cps.truncate(base);
+                if let Some(kept) = &mut c.data.orientations {
+                    kept.truncate(base);
+                }
                 continue;
             }
             c.data.strands.push(StrandRecord {

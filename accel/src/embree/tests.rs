@@ -1,8 +1,9 @@
 use super::*;
+use crate::FiberOrientation;
 use tress_core::math::Frame;
 use tress_core::rng::Pcg32;
 use tress_groom::test_util::{hair, hair_file_bytes, line, rng_dir, HairArrays};
-use tress_groom::Rotation;
+use tress_groom::{HairAttribute, Rotation};
 
 fn with_basis(basis: CurveBasis) -> HairOptions {
     HairOptions {
@@ -38,6 +39,7 @@ fn fiber(hit: &Hit) -> (Vec3, f32, f32, u32, f32) {
             radius,
             strand,
             v,
+            ..
         } => (tangent, h, radius, strand, v),
         HitKind::Surface { .. } => panic!("expected a fiber hit, got {hit:?}"),
     }
@@ -857,4 +859,79 @@ fn rays_starting_inside_another_fiber_follow_the_overlap_convention() {
             assert!((b.t - 6.8 * r).abs() < 1e-3, "{options:?}: t = {}", b.t);
         }
     }
+}
+
+/// Hits carry the fibers' orientation: a fixed direction made orthogonal to the strand, the
+/// file's per-strand orientation, or by default the minimum-twist frame started away from the
+/// centre of the roots; in scenes that keep it (models using it), and zero in the others,
+/// which store none.
+#[test]
+fn hits_carry_the_orientation_the_options_state() {
+    // Two straight strands along x, rooted at x = −1, on either side of the roots' centre.
+    let strands = [
+        line(Vec3::new(-1.0, 0.5, 0.0), Vec3::new(1.0, 0.5, 0.0), 3),
+        line(Vec3::new(-1.0, -0.5, 0.0), Vec3::new(1.0, -0.5, 0.0), 3),
+    ];
+    let orientation_at = |hair: &HairGeometry, orientation: FiberOrientation, y: f32| {
+        let options = HairOptions {
+            orientation,
+            ..Default::default()
+        };
+        let accel = SceneBuilder::new()
+            .unwrap()
+            .with_fiber_orientation()
+            .add_hair(hair, &options, 0)
+            .unwrap()
+            .build()
+            .unwrap();
+        let ray = Ray::new(Vec3::new(0.3, y, 5.0), -Vec3::Z);
+        match accel.intersect(&ray).expect("hit").kind {
+            HitKind::Fiber { orientation, .. } => orientation,
+            HitKind::Surface { .. } => panic!("expected a fiber"),
+        }
+    };
+    let plain = hair(&strands, 0.1);
+    let fixed = FiberOrientation::Fixed((1.0, 0.0, 2.0));
+    assert!((orientation_at(&plain, fixed, 0.5) - Vec3::Z).length() < 1e-5);
+    // Away from the roots' centre (0, 0, 0): +y for the upper strand, −y for the lower.
+    for orientation in [FiberOrientation::Groom, FiberOrientation::ScalpNormal] {
+        let up = orientation_at(&plain, orientation.clone(), 0.5);
+        let down = orientation_at(&plain, orientation, -0.5);
+        assert!((up - Vec3::Y).length() < 1e-5 && (down + Vec3::Y).length() < 1e-5);
+    }
+    let mut from_file = plain.clone();
+    from_file.orientations = Some(HairAttribute::PerStrand(vec![Vec3::Z, Vec3::Z]));
+    let groom = orientation_at(&from_file, FiberOrientation::Groom, 0.5);
+    assert!((groom - Vec3::Z).length() < 1e-5, "{groom}");
+    let scalp = orientation_at(&from_file, FiberOrientation::ScalpNormal, 0.5);
+    assert!((scalp - Vec3::Y).length() < 1e-5, "{scalp}");
+
+    let plain_accel = |oriented: bool| {
+        let builder = SceneBuilder::new().unwrap();
+        let builder = if oriented {
+            builder.with_fiber_orientation()
+        } else {
+            builder
+        };
+        builder
+            .add_hair(&from_file, &with_basis(CurveBasis::CatmullRom), 0)
+            .unwrap()
+            .build()
+            .unwrap()
+    };
+    let (without, with) = (plain_accel(false), plain_accel(true));
+    let ray = Ray::new(Vec3::new(0.3, 0.5, 5.0), -Vec3::Z);
+    match without.intersect(&ray).expect("hit").kind {
+        HitKind::Fiber { orientation, .. } => assert_eq!(orientation, Vec3::ZERO),
+        HitKind::Surface { .. } => panic!("expected a fiber"),
+    }
+    match with.intersect(&ray).expect("hit").kind {
+        HitKind::Fiber { orientation, .. } => assert!((orientation - Vec3::Z).length() < 1e-5),
+        HitKind::Surface { .. } => panic!("expected a fiber"),
+    }
+    // 12 bytes for each of the 2 strands' 3 points and 2 phantom control points.
+    assert_eq!(
+        with.info().memory_bytes - without.info().memory_bytes,
+        2 * 5 * 12,
+    );
 }
