@@ -58,8 +58,8 @@ use tress_core::{
     luminance, Hit, Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint,
 };
 use tress_learned_light::{
-    block_of, block_segments, check_ranges, FilmKey, LastFilm, Lattice, OutOfRange, RadianceCache,
-    Records as RadianceRecords,
+    block_of, block_segments, blocks_of, check_ranges, FilmKey, LastFilm, Lattice, OutOfRange,
+    RadianceCache, Records as RadianceRecords,
 };
 use tress_path::{PathSettings, PathTracer};
 
@@ -269,9 +269,7 @@ impl Integrator for GuidedPathTracer {
         progress: &(dyn Fn(f64) + Sync),
     ) -> Option<FilmIntegrator> {
         let key = FilmKey::of(film);
-        let block_spp = self.settings.block_spp;
-        let blocks = block_of(block_spp, samples.start)
-            ..block_of(block_spp, samples.end.saturating_sub(1).max(samples.start)) + 1;
+        let blocks = blocks_of(self.settings.block_spp, samples);
         let t = self.trained.get_or_train(
             key,
             |t| t.covers(&blocks),
@@ -379,6 +377,133 @@ const CONTINUATION_BUDGET: u64 = 1 << 20;
 /// The smallest predicted gain for which training goes on.
 const MIN_GAIN: f64 = 1.1;
 
+/// What a film's training paths are traced and recorded with.
+struct Learning<'a> {
+    settings: &'a GuidedSettings,
+    scene: &'a Scene,
+    film: FilmKey,
+    lattice: Lattice,
+    radiance_lattice: Lattice,
+    bins: SphereBins,
+}
+
+impl<'a> Learning<'a> {
+    fn new(settings: &'a GuidedSettings, scene: &'a Scene, film: FilmKey) -> Self {
+        let lattice_with = |bins| {
+            Lattice::new(
+                scene.bounds(),
+                settings.finest_cells_log2,
+                settings.levels,
+                bins,
+            )
+        };
+        Learning {
+            settings,
+            scene,
+            film,
+            lattice: lattice_with(1),
+            radiance_lattice: lattice_with(RADIANCE_DIRECTION_BINS),
+            bins: SphereBins::new(settings.z_bins, settings.phi_bins),
+        }
+    }
+}
+
+impl Training {
+    /// Traces `n` more training paths per pixel, guided by the last guide, adds their records,
+    /// and builds the next guide from all the records so far (learning its cells'
+    /// probabilities from these paths' continuations). `progress` gets the paths done; `None`
+    /// when cancelled.
+    fn train(
+        &mut self,
+        learning: &Learning,
+        n: u64,
+        cancel: &AtomicBool,
+        progress: &(dyn Fn(u64) + Sync),
+    ) -> Option<()> {
+        let Learning {
+            settings,
+            scene,
+            film,
+            ..
+        } = *learning;
+        let paths = self.traced * film.pixels()..(self.traced + n) * film.pixels();
+        let current = self.learned.clone();
+        let mut continuations = Vec::new();
+        let stride = (paths.end - paths.start)
+            .saturating_mul(settings.guided_vertices as u64)
+            .div_ceil(CONTINUATION_BUDGET)
+            .max(1);
+        let mut seen = 0u64;
+        tress_learned_light::train(
+            scene,
+            film,
+            TRAINING_STREAM,
+            paths,
+            cancel,
+            progress,
+            |ray, sampler, chunk: &mut (ChunkRecords, RadianceRecords, Vec<Vertex>)| {
+                let (records, radiance_records, vertices) = chunk;
+                vertices.clear();
+                trace(
+                    settings,
+                    current.as_deref(),
+                    ray,
+                    scene,
+                    sampler,
+                    Some(vertices),
+                );
+                let radiance_records = settings.adjoint_roulette.then_some(radiance_records);
+                record(
+                    settings,
+                    (&learning.lattice, &learning.radiance_lattice),
+                    &learning.bins,
+                    vertices,
+                    records,
+                    radiance_records,
+                );
+            },
+            |(chunk, radiance_chunk, _)| {
+                self.records.merge(&chunk);
+                self.radiance_records.merge(&radiance_chunk);
+                // Every stride-th continuation, in path order: bounded memory.
+                for c in &chunk.continuations {
+                    if seen.is_multiple_of(stride) {
+                        continuations.push(*c);
+                    }
+                    seen += 1;
+                }
+            },
+        )?;
+        self.traced += n;
+        let mut guide = Guide::new(
+            learning.lattice,
+            &self.records,
+            settings.min_records,
+            settings.guide_probability,
+        );
+        if settings.learn_probability {
+            self.gain = guide.learn_probabilities(&continuations, settings.guide_probability);
+            self.stopped |= self.gain < MIN_GAIN;
+        }
+        // Training paths are neither rouletted nor split by the learned radiance, so only the
+        // render needs it.
+        let radiance = settings.adjoint_roulette.then(|| {
+            RadianceCache::new(
+                learning.radiance_lattice,
+                &self.radiance_records,
+                RADIANCE_MIN_RECORDS,
+            )
+        });
+        let guiding = radiance.is_some() || guide.probabilities().0 > 0.0;
+        self.learned = Some(Arc::new(Learned {
+            guide,
+            radiance,
+            guiding,
+        }));
+        Some(())
+    }
+}
+
 impl Trained {
     /// The guides of sample blocks `blocks`, going on from `before` (the training of earlier
     /// blocks of the same film) where it has trained for no block past the first of `blocks`;
@@ -394,19 +519,7 @@ impl Trained {
         progress: &(dyn Fn(f64) + Sync),
     ) -> Option<Self> {
         let start = Instant::now();
-        let lattice = Lattice::new(
-            scene.bounds(),
-            settings.finest_cells_log2,
-            settings.levels,
-            1,
-        );
-        let bins = SphereBins::new(settings.z_bins, settings.phi_bins);
-        let radiance_lattice = Lattice::new(
-            scene.bounds(),
-            settings.finest_cells_log2,
-            settings.levels,
-            RADIANCE_DIRECTION_BINS,
-        );
+        let learning = Learning::new(settings, scene, film);
         let went_on = before.and_then(|b| {
             let mut training = b.training.lock().unwrap_or_else(|e| e.into_inner());
             training.take_if(|t| t.block <= blocks.start)
@@ -415,118 +528,38 @@ impl Trained {
             block: 0,
             traced: 0,
             stopped: settings.training_spp == 0,
-            records: Records::new(bins),
+            records: Records::new(learning.bins),
             radiance_records: RadianceRecords::default(),
             learned: None,
             seconds: 0.0,
             gain: 1.0,
         });
         let seconds_before = t.seconds;
-        // Training paths per pixel still to trace for these blocks, for progress.
-        let total: u64 = {
-            let (mut traced, mut sum) = (t.traced, 0);
-            for block in t.block + 1..blocks.end {
-                let n = if t.stopped {
-                    0
-                } else {
-                    settings.training_before(block, traced)
-                };
-                traced += n;
-                sum += n;
-            }
-            sum.max(1)
-        };
-        let mut done = 0u64;
+        // Training paths per pixel of each block still to train for, unless training stops
+        // on the way: the same sums of `training_before` the blocks will make.
+        let mut planned = Vec::new();
+        let mut traced = t.traced;
+        for block in t.block + 1..blocks.end {
+            let n = if t.stopped {
+                0
+            } else {
+                settings.training_before(block, traced)
+            };
+            traced += n;
+            planned.push(n);
+        }
+        let total = film.pixels() * planned.iter().sum::<u64>().max(1);
+        let mut done = 0;
         let mut guides = Vec::new();
+        let mut planned = planned.into_iter();
         for block in 0..blocks.end {
             if block > t.block {
-                let n = if t.stopped {
-                    0
-                } else {
-                    settings.training_before(block, t.traced)
-                };
+                let n = planned.next().filter(|_| !t.stopped).unwrap_or(0);
                 if n > 0 {
-                    let paths = t.traced * film.pixels()..(t.traced + n) * film.pixels();
-                    let current = t.learned.clone();
-                    let mut continuations = Vec::new();
-                    let stride = (paths.end - paths.start)
-                        .saturating_mul(settings.guided_vertices as u64)
-                        .div_ceil(CONTINUATION_BUDGET)
-                        .max(1);
-                    let mut seen = 0u64;
-                    let done_before = done;
-                    tress_learned_light::train(
-                        scene,
-                        film,
-                        TRAINING_STREAM,
-                        paths.clone(),
-                        cancel,
-                        &|d| {
-                            let paths_done = done_before * film.pixels() + d;
-                            progress(paths_done as f64 / (total * film.pixels()) as f64)
-                        },
-                        |ray, sampler, chunk: &mut (ChunkRecords, RadianceRecords, Vec<Vertex>)| {
-                            let (records, radiance_records, vertices) = chunk;
-                            vertices.clear();
-                            trace(
-                                settings,
-                                current.as_deref(),
-                                ray,
-                                scene,
-                                sampler,
-                                Some(vertices),
-                            );
-                            let radiance_records =
-                                settings.adjoint_roulette.then_some(radiance_records);
-                            record(
-                                settings,
-                                (&lattice, &radiance_lattice),
-                                &bins,
-                                vertices,
-                                records,
-                                radiance_records,
-                            );
-                        },
-                        |(chunk, radiance_chunk, _)| {
-                            t.records.merge(&chunk);
-                            t.radiance_records.merge(&radiance_chunk);
-                            // Every stride-th continuation, in path order: bounded memory.
-                            for c in &chunk.continuations {
-                                if seen.is_multiple_of(stride) {
-                                    continuations.push(*c);
-                                }
-                                seen += 1;
-                            }
-                        },
-                    )?;
-                    done += n;
-                    t.traced += n;
-                    let mut guide = Guide::new(
-                        lattice,
-                        &t.records,
-                        settings.min_records,
-                        settings.guide_probability,
-                    );
-                    if settings.learn_probability {
-                        t.gain =
-                            guide.learn_probabilities(&continuations, settings.guide_probability);
-                        t.stopped |= t.gain < MIN_GAIN;
-                    }
-                    // Training paths are neither rouletted nor split by the learned radiance,
-                    // so only the render needs it.
-                    let radiance = settings.adjoint_roulette.then(|| {
-                        RadianceCache::new(
-                            radiance_lattice,
-                            &t.radiance_records,
-                            RADIANCE_MIN_RECORDS,
-                        )
-                    });
-                    let guiding = radiance.is_some() || guide.probabilities().0 > 0.0;
-                    t.learned = Some(Arc::new(Learned {
-                        guide,
-                        radiance,
-                        guiding,
-                    }));
+                    t.train(&learning, n, cancel, &|d| {
+                        progress((done + d) as f64 / total as f64)
+                    })?;
+                    done += n * film.pixels();
                 }
                 t.stopped |= t.traced >= settings.training_spp as u64;
                 t.block = block;

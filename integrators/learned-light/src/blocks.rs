@@ -16,6 +16,12 @@ pub fn block_of(block_spp: u32, sample: u64) -> u32 {
     (sample / block_spp as u64 + 1).ilog2()
 }
 
+/// The blocks that samples `samples` fall in (the first block's alone when it is empty).
+pub fn blocks_of(block_spp: u32, samples: Range<u64>) -> Range<u32> {
+    let last = samples.end.saturating_sub(1).max(samples.start);
+    block_of(block_spp, samples.start)..block_of(block_spp, last) + 1
+}
+
 /// `samples` cut at the starts of sample blocks.
 pub fn block_segments(block_spp: u32, samples: Range<u64>) -> Vec<Range<u64>> {
     let mut segments = Vec::new();
@@ -46,6 +52,14 @@ mod tests {
         }
         assert_eq!(block_of(1, 0), 0);
         assert_eq!(block_of(1, u64::MAX - 1), 63);
+    }
+
+    #[test]
+    fn sample_ranges_name_the_blocks_they_fall_in() {
+        assert_eq!(blocks_of(4, 0..4), 0..1);
+        assert_eq!(blocks_of(4, 0..5), 0..2);
+        assert_eq!(blocks_of(4, 11..13), 1..3);
+        assert_eq!(blocks_of(4, 7..7), 1..2);
     }
 
     #[test]

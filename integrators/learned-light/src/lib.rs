@@ -14,7 +14,7 @@ mod settings;
 mod test_util;
 mod training;
 
-pub use blocks::{block_of, block_segments, block_start};
+pub use blocks::{block_of, block_segments, block_start, blocks_of};
 pub use lattice::Lattice;
 pub use radiance::{RadianceCache, Records};
 pub use settings::{check_ranges, LastFilm, OutOfRange, RangeCheck};

@@ -41,8 +41,8 @@ use tress_core::math::Vec3;
 use tress_core::prepare::Preparation;
 use tress_core::{Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint};
 use tress_learned_light::{
-    block_of, block_segments, check_ranges, FilmKey, LastFilm, Lattice, OutOfRange, RadianceCache,
-    Records,
+    block_of, block_segments, blocks_of, check_ranges, FilmKey, LastFilm, Lattice, OutOfRange,
+    RadianceCache, Records,
 };
 
 /// Radiance-cache settings.
@@ -233,11 +233,7 @@ impl Integrator for RadianceCacheIntegrator {
         progress: &(dyn Fn(f64) + Sync),
     ) -> Option<FilmIntegrator> {
         let key = FilmKey::of(film);
-        let blocks = block_of(self.settings.block_spp, samples.start)
-            ..block_of(
-                self.settings.block_spp,
-                samples.end.saturating_sub(1).max(samples.start),
-            ) + 1;
+        let blocks = blocks_of(self.settings.block_spp, samples);
         let t = self.trained.get_or_train(
             key,
             |t| t.covers(&blocks),
