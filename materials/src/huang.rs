@@ -198,6 +198,20 @@ pub struct Huang {
     inner_r: [f32; R_TABLE],
 }
 
+/// Where a pass across the fiber's interior meets the far wall.
+struct Wall {
+    /// Transmittance of the pass.
+    absorbed: Rgb,
+    /// The point on the wall (cross-section coordinates).
+    at: Vec2,
+    /// Outward mesonormal there.
+    m: Vec3,
+    /// Cosine between the direction of travel and `m`.
+    cos: f32,
+    /// Reflectance of the wall from inside, for that direction.
+    reflectance: f32,
+}
+
 /// Light leaving through the exit interface after one quadrature node's path.
 #[derive(Clone, Copy, Debug)]
 struct Exit {
@@ -312,6 +326,27 @@ impl Huang {
         (a > 1e-12 && t > 0.0 && t.is_finite()).then_some(t)
     }
 
+    /// The pass of light travelling along `d` from wall point `p` across the interior to the
+    /// far wall; `None` if `d` does not point into the fiber or meets the far wall too
+    /// grazingly to leave or reflect there.
+    #[inline]
+    fn cross(&self, p: Vec2, d: Vec3) -> Option<Wall> {
+        let t = self.chord(p, d)?;
+        let at = p + Vec2::new(d.y, d.z) * t;
+        let m = self.mesonormal(self.ellipse_normal(at));
+        let cos = d.dot(m);
+        if cos <= COS_MIN {
+            return None;
+        }
+        Some(Wall {
+            absorbed: absorption(self.sigma_a, t),
+            at,
+            m,
+            cos,
+            reflectance: self.inner_reflectance(d, m),
+        })
+    }
+
     /// The entry point of the ray seen from `wo` at offset `h`, as (2D point, outward normal).
     fn entry(&self, wo: Vec3, h: f32) -> (Vec2, Vec2) {
         // The view-facing frame: z_v the direction back to the viewer in the cross-section,
@@ -376,17 +411,16 @@ impl Huang {
             let w1 = (1.0 - fresnel(c, self.eta)) * (1.0 + g.lambda_o)
                 / (1.0 + g.lambda_o + lambda_d)
                 / K as f32;
-            let Some(t1) = self.chord(p_e, d) else {
+            let Some(Wall {
+                absorbed: a1,
+                at: p_x,
+                m: m_x,
+                cos: cos_x,
+                reflectance: r_x,
+            }) = self.cross(p_e, d)
+            else {
                 continue;
             };
-            let a1 = absorption(self.sigma_a, t1);
-            let p_x = p_e + Vec2::new(d.y, d.z) * t1;
-            let m_x = self.mesonormal(self.ellipse_normal(p_x));
-            let cos_x = d.dot(m_x);
-            if cos_x <= COS_MIN {
-                continue;
-            }
-            let r_x = self.inner_reflectance(d, m_x);
             let thr_tt = a1 * w1;
             g.tt[k] = Exit {
                 throughput: thr_tt,
@@ -398,17 +432,15 @@ impl Huang {
             e_lobes[k] = luminance(thr_tt) * (1.0 - r_x);
             // TRT: the inner reflection at the mesonormal.
             let d2 = d - m_x * (2.0 * cos_x);
-            let Some(t2) = self.chord(p_x, d2) else {
+            let Some(Wall {
+                absorbed: a2,
+                m: m_3,
+                reflectance: r_3,
+                ..
+            }) = self.cross(p_x, d2)
+            else {
                 continue;
             };
-            let a2 = absorption(self.sigma_a, t2);
-            let p_3 = p_x + Vec2::new(d2.y, d2.z) * t2;
-            let m_3 = self.mesonormal(self.ellipse_normal(p_3));
-            let cos_3 = d2.dot(m_3);
-            if cos_3 <= COS_MIN {
-                continue;
-            }
-            let r_3 = self.inner_reflectance(d2, m_3);
             let thr_trt = thr_tt * a2 * r_x;
             g.trt[k] = Exit {
                 throughput: thr_trt,
