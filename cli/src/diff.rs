@@ -432,16 +432,6 @@ mod tests {
     use super::*;
     use glam::Vec3;
 
-    fn image(w: u32, h: u32, f: impl Fn(u32, u32) -> Vec3) -> Image {
-        let mut img = Image::new(w, h);
-        for y in 0..h {
-            for x in 0..w {
-                img.set(x, y, f(x, y));
-            }
-        }
-        img
-    }
-
     /// Display values in [0, 1] from integer patterns, so that the scikit-image script that
     /// produced the reference values below builds exactly the same planes.
     fn ssim_planes() -> (Vec<f32>, Vec<f32>, usize, usize) {
@@ -515,7 +505,7 @@ mod tests {
 
     /// A smooth test picture: radiance from 0 to about 1 with some structure.
     fn picture(w: u32, h: u32) -> Image {
-        image(w, h, |x, y| {
+        Image::from_fn(w, h, |x, y| {
             let (u, v) = (x as f32 / w as f32, y as f32 / h as f32);
             Vec3::new(
                 0.9 * u,

@@ -455,10 +455,7 @@ fn bad_scenes_give_clear_errors() {
 
 /// Writes an RGB EXR of `w`×`h` (ZIP compression) for the environment-map cases.
 fn write_env_exr(path: &Path, w: u32, h: u32) {
-    let mut img = tress_core::Image::new(w, h);
-    img.pixels
-        .iter_mut()
-        .for_each(|p| *p = tress_core::Rgb::splat(0.5));
+    let img = tress_core::Image::from_fn(w, h, |_, _| tress_core::Rgb::splat(0.5));
     to_file(path, |o| tress_core::image_io::write_exr(o, &img, &[])).unwrap();
 }
 

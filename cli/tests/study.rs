@@ -492,11 +492,7 @@ fn exr_reference_and_mismatches() {
 }
 
 fn constant_image(w: u32, h: u32, c: [f32; 3]) -> Image {
-    let mut img = Image::new(w, h);
-    for p in &mut img.pixels {
-        *p = glam::Vec3::from(c);
-    }
-    img
+    Image::from_fn(w, h, |_, _| glam::Vec3::from(c))
 }
 
 /// The numbers of the `all` row of `tress diff`: MSE, relMSE, PSNR, mean(A−B), mean(A), mean(B).

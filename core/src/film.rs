@@ -287,6 +287,17 @@ pub struct Image {
 }
 
 impl Image {
+    /// An image of the whole `width`×`height` film with pixel (x, y) set to `f(x, y)`, called
+    /// row by row.
+    pub fn from_fn(width: u32, height: u32, mut f: impl FnMut(u32, u32) -> Rgb) -> Self {
+        let mut image = Image::new(width, height);
+        let coordinates = (0..height).flat_map(|y| (0..width).map(move |x| (x, y)));
+        for (pixel, (x, y)) in image.pixels.iter_mut().zip(coordinates) {
+            *pixel = f(x, y);
+        }
+        image
+    }
+
     /// A black image of the whole `width`×`height` film.
     pub fn new(width: u32, height: u32) -> Self {
         Image {

@@ -272,20 +272,10 @@ mod tests {
     use super::*;
     use glam::Vec3;
 
-    fn image(w: u32, h: u32, f: impl Fn(u32, u32) -> Vec3) -> Image {
-        let mut img = Image::new(w, h);
-        for y in 0..h {
-            for x in 0..w {
-                img.set(x, y, f(x, y));
-            }
-        }
-        img
-    }
-
     #[test]
     fn hand_computed_metrics() {
-        let b = image(2, 1, |x, _| Vec3::splat(x as f32 + 1.0)); // 1, 2
-        let a = image(2, 1, |x, _| Vec3::new(x as f32 + 1.5, x as f32 + 1.0, 0.0)); // +0.5, 0, −B
+        let b = Image::from_fn(2, 1, |x, _| Vec3::splat(x as f32 + 1.0)); // 1, 2
+        let a = Image::from_fn(2, 1, |x, _| Vec3::new(x as f32 + 1.5, x as f32 + 1.0, 0.0)); // +0.5, 0, −B
         let m = metrics(&a, &b, Rect::window_of(&a));
         assert_eq!(m.mse[0], 0.25);
         assert_eq!(m.mse[1], 0.0);
