@@ -49,7 +49,8 @@ pub struct RenderArgs {
     #[arg(long)]
     pub seed: Option<u64>,
     /// Render only the pixel window x0,y0,x1,y1 (x1, y1 exclusive). The image equals the same
-    /// window of the full render bit for bit.
+    /// window of the full render bit for bit, except with integrators that learn from the
+    /// film's paths (radiance-cache, guided): they learn from the window's pixels alone.
     #[arg(long, value_parser = parse_crop)]
     pub crop: Option<[u32; 4]>,
     /// Output EXR path; a PNG preview is written beside it. Default: <scene name>.exr in the

@@ -666,6 +666,59 @@ fn training_counts_toward_the_time_limit_and_stops_on_a_signal() {
     assert!(!d.join("never.exr").exists());
 }
 
+/// A crop learns from its own pixels: a 4×4 window of a 4096² film trains as 16 pixels do
+/// (the whole film's training, 2^24 pixels × 256 paths for each integrator, would take days).
+/// The deadline turns a whole-film training into a failure, not a hang.
+#[test]
+fn a_crop_trains_on_its_own_pixels() {
+    use std::process::{Command, Stdio};
+    let (dir, _) = scene_dir(SCENE);
+    let d = dir.path();
+    for (integrator, out) in [
+        ("RadianceCache(training_spp: 256)", "cache.exr"),
+        ("Guided(training_spp: 256)", "guided.exr"),
+    ] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_tress"))
+            .args([
+                "render",
+                "scene.ron",
+                "--quiet",
+                "--out",
+                out,
+                "--spp",
+                "16",
+            ])
+            .args([
+                "--width",
+                "4096",
+                "--height",
+                "4096",
+                "--crop",
+                "2046,2046,2050,2050",
+            ])
+            .args(["--integrator", integrator])
+            .current_dir(d)
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let started = Instant::now();
+        let status = loop {
+            if let Some(s) = child.try_wait().unwrap() {
+                break s;
+            }
+            if started.elapsed() > Duration::from_secs(120) {
+                child.kill().unwrap();
+                panic!("{integrator}: a 4x4 crop still training after 120 s");
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        assert!(status.success(), "{integrator}: {status}");
+        let image = pixels(&d.join(out));
+        assert_eq!(image.data_window, ([2046, 2046], [4, 4]), "{integrator}");
+        assert_eq!(image.display, [4096, 4096], "{integrator}");
+    }
+}
+
 #[test]
 fn waves_and_partial_images_do_not_change_the_image() {
     let (dir, scene) = scene_dir(SCENE);

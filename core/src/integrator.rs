@@ -45,9 +45,10 @@ pub trait Integrator: Send + Sync + std::fmt::Debug {
     /// render loop calls it before its first sample, so its cost is render time, and renders
     /// with what it returns; `None` renders with `self`, and so does a precomputation stopped
     /// by `cancel` (the render loop then stops before its first sample). What it builds may
-    /// depend on the film's size and seed and on the sample indices `samples` to be rendered,
-    /// never on the film's crop: the tiles and passes of one image must render each sample
-    /// alike.
+    /// depend on the film's size, seed and crop window (a crop learns from its own pixels, at a
+    /// cost in proportion to them) and on the sample indices `samples` to be rendered, never on
+    /// threads or on how the render loop cuts the window into tiles and waves: the passes of
+    /// one image must render each sample alike.
     fn for_film(
         &self,
         scene: &Scene,

@@ -58,16 +58,45 @@ def test_integrator_override_by_name_and_by_ron(scene):
     assert single.mean() < 0.9 * multiple.mean()
 
 
+# The integrators that learn from the film's own paths: they learn from a crop's pixels alone.
+LEARNING = {"radiance-cache", "guided"}
+
+
 def test_every_registered_integrator_renders_threads_and_crops_alike(scene):
-    # The radiance cache trains on the whole film whatever the crop, so a window is still the
-    # same window of the full image.
     for name in tress.INTEGRATORS:
         full = scene.render(integrator=name, threads=2)
         assert np.isfinite(full).all() and full.mean() > 0, name
         np.testing.assert_array_equal(full, scene.render(integrator=name, threads=1), name)
+        window = scene.render(integrator=name, crop=(3, 5, 11, 14), threads=2)
         np.testing.assert_array_equal(
-            scene.render(integrator=name, crop=(3, 5, 11, 14)), full[5:14, 3:11], name
+            window, scene.render(integrator=name, crop=(3, 5, 11, 14), threads=1), name
         )
+        if name not in LEARNING:
+            np.testing.assert_array_equal(window, full[5:14, 3:11], name)
+
+
+def test_a_learning_integrator_trains_on_the_crop_alone(scene):
+    # Training the whole 4096² film, 2^24 pixels × 256 paths, would take days; the 4×4 window's
+    # 16 pixels take a moment. The alarm turns a whole-film training into a failure, not a hang.
+    def too_slow(signum, frame):
+        raise TimeoutError("a 4x4 crop trained for more than 120 s")
+
+    previous = signal.signal(signal.SIGALRM, too_slow)
+    signal.alarm(120)
+    try:
+        for name in sorted(LEARNING):
+            integrator = {"radiance-cache": "RadianceCache", "guided": "Guided"}[name]
+            image = scene.render(
+                integrator=f"{integrator}(training_spp: 256)",
+                width=4096,
+                height=4096,
+                crop=(2046, 2046, 2050, 2050),
+                spp=16,
+            )
+            assert image.shape == (4, 4, 3) and np.isfinite(image).all(), name
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def test_from_ron_and_to_ron_round_trip(scene):

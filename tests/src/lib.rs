@@ -52,6 +52,20 @@ pub fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
         .install(f)
 }
 
+/// Whether `integrator` learns from the pixels of `film` (it prepares for the film,
+/// [`tress_core::Integrator::for_film`]): its crops learn from their own pixels, so a crop is
+/// not bit for bit the same window of the full render.
+pub fn learns_from_film(
+    integrator: &dyn tress_core::Integrator,
+    scene: &Scene,
+    film: &FilmSettings,
+) -> bool {
+    let never = std::sync::atomic::AtomicBool::new(false);
+    integrator
+        .for_film(scene, film, 0..film.spp as u64, &never, &|_| {})
+        .is_some()
+}
+
 /// A constant white environment of radiance 1.
 pub fn white_environment() -> Vec<Light> {
     vec![Light::Constant { radiance: Rgb::ONE }]

@@ -1,5 +1,5 @@
 //! Same scene + seed ⇒ the bit-identical image, whatever the integrator, the thread count, the
-//! crop window or the run.
+//! crop window (except for integrators that learn from the crop's pixels) or the run.
 
 use std::ops::Range;
 use std::sync::atomic::AtomicBool;
@@ -10,7 +10,7 @@ use tress_core::Scene;
 use tress_loader::integrators::IntegratorDesc;
 use tress_materials::pigment::Pigment;
 use tress_materials::HairModel;
-use tress_tests::{assert_bit_identical, film, hair_ball_scene, on_threads};
+use tress_tests::{assert_bit_identical, film, hair_ball_scene, learns_from_film, on_threads};
 
 /// Dark hair under a sky so dim (scale 1e-36) that most radiance values are denormal floats, so
 /// any thread computing in another floating-point mode (flush-to-zero) shows in the bits.
@@ -67,8 +67,15 @@ fn image_is_identical_for_any_thread_count_and_run() {
     }
 }
 
+/// A crop renders each of its pixels as the whole film does, bit for bit — except for an
+/// integrator that learns from the film's pixels (it prepares per film, [`Integrator::for_film`]):
+/// that one learns from the crop's pixels alone, so its crop is the same for any threads but not
+/// the full render's window (it agrees in expectation: its convergence tests render crops).
+///
+/// [`Integrator::for_film`]: tress_core::Integrator::for_film
 #[test]
 fn crop_window_equals_the_same_window_of_the_full_render() {
+    let (mut plain, mut learning) = (0, 0);
     for integrator in &integrators() {
         let name = integrator.name();
         let full = render_with(2, integrator, &film(40, 40, 4, 5));
@@ -76,6 +83,19 @@ fn crop_window_equals_the_same_window_of_the_full_render() {
         cropped_film.crop = Some([7, 13, 29, 31]);
         let crop = render_with(3, integrator, &cropped_film);
         assert_eq!((crop.x0, crop.y0, crop.width, crop.height), (7, 13, 22, 18));
+        let learns = on_threads(1, || {
+            let scene = scene();
+            let built = integrator.build(&scene, &Default::default()).unwrap();
+            learns_from_film(built.as_ref(), &scene, &cropped_film)
+        });
+        if learns {
+            learning += 1;
+            let again = render_with(1, integrator, &cropped_film);
+            assert_bit_identical(&crop, &again, &format!("{name}: crop, 1 and 3 threads"));
+            assert!(crop.mean() > 0.0, "{name}: black crop");
+            continue;
+        }
+        plain += 1;
         for y in 0..crop.height {
             for x in 0..crop.width {
                 let a = crop.get(x, y);
@@ -88,6 +108,10 @@ fn crop_window_equals_the_same_window_of_the_full_render() {
             }
         }
     }
+    assert!(
+        plain > 0 && learning > 0,
+        "{plain} plain, {learning} learning integrators"
+    );
 }
 
 #[test]

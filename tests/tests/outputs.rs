@@ -1,5 +1,6 @@
 //! Alpha and the AOVs over real geometry and every registered integrator: they leave the
-//! radiance bit for bit unchanged, are bit-identical for any thread count and crop, and hold
+//! radiance bit for bit unchanged, are bit-identical for any thread count and crop (a crop of
+//! an integrator that learns from its pixels equals that crop rendered alone), and hold
 //! plausible values; and what recording them costs.
 
 use std::sync::atomic::AtomicBool;
@@ -11,7 +12,7 @@ use tress_core::render::{camera_sample, render, render_outputs, SampleSums};
 use tress_core::Scene;
 use tress_loader::integrators::IntegratorDesc;
 use tress_materials::HairModel;
-use tress_tests::{film, hair_ball_scene, on_threads, shared_data};
+use tress_tests::{film, hair_ball_scene, learns_from_film, on_threads, shared_data};
 
 fn scene() -> Scene {
     let model = HairModel::Chiang(Default::default()).build().unwrap();
@@ -83,6 +84,18 @@ fn outputs_leave_the_radiance_alone_and_are_identical_for_any_threads_and_crop()
         let mut cropped = f.clone();
         cropped.crop = Some([5, 9, 27, 30]);
         let crop = render_with(2, integrator, &cropped).channels();
+        // An integrator that learns from the crop's own pixels renders the crop as the crop
+        // alone, for any threads; the others render the full render's window.
+        let learns = on_threads(1, || {
+            let scene = scene();
+            let built = integrator.build(&scene, &Default::default()).unwrap();
+            learns_from_film(built.as_ref(), &scene, &cropped)
+        });
+        if learns {
+            let alone = render_with(1, integrator, &cropped).channels();
+            assert_eq!(bits(&crop), bits(&alone), "{name}: crop, 1 and 2 threads");
+            continue;
+        }
         for ((channel, c), (_, full)) in crop.iter().zip(&channels) {
             for y in 9..30usize {
                 for x in 5..27usize {

@@ -174,3 +174,45 @@ fn the_caches_error_falls_as_samples_accumulate() {
         "relMSE at 16 spp {e16:.3e}, at 64 spp {e64:.3e}"
     );
 }
+
+/// The cache learns from the crop window alone, at a cost in proportion to its pixels: a 4×4
+/// crop of a 1024² film traces 16 pixels' training paths, and a crop of sky (the film's corner,
+/// where no path meets hair) records nothing, where one over the hair ball does.
+#[test]
+fn training_covers_the_crop_window_alone() {
+    let sky = EnvironmentMap::builtin_sky(30.0, 1.0).unwrap();
+    let scene = hair_ball_scene(chiang(0.3, 0.3), 1500, vec![Light::Environment(sky)]);
+    let settings = CacheSettings {
+        training_spp: 4,
+        block_spp: 1,
+        ..Default::default()
+    };
+    let integrator =
+        RadianceCacheIntegrator::build(&settings, &scene, &Default::default()).unwrap();
+    let note_of = |crop: [u32; 4]| {
+        let mut f = film(1024, 1024, 2, 1);
+        f.crop = Some(crop);
+        render(&scene, integrator.as_ref(), &f, &|_| {})
+            .stats
+            .precompute_note
+            .expect("a cache was trained")
+    };
+    // Samples 0..2 fall in the blocks 0..1 and 1..3; the note is the second's, whose cache is
+    // trained on twice the first's 4 paths per pixel: 16 pixels × 8.
+    let figure = |note: &str, after: &str| -> u64 {
+        let rest = &note[note
+            .find(after)
+            .unwrap_or_else(|| panic!("{after:?} in {note}"))..];
+        rest[after.len()..]
+            .split(|c: char| !c.is_ascii_digit())
+            .next()
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("a number after {after:?} in {note}"))
+    };
+    let sky_corner = note_of([0, 0, 4, 4]);
+    assert_eq!(figure(&sky_corner, "from "), 16 * 8, "{sky_corner}");
+    assert_eq!(figure(&sky_corner, "paths ("), 0, "{sky_corner}");
+    let centre = note_of([510, 510, 514, 514]);
+    assert_eq!(figure(&centre, "from "), 16 * 8, "{centre}");
+    assert!(figure(&centre, "paths (") > 0, "{centre}");
+}

@@ -1,15 +1,15 @@
 //! Path tracing guided by the light learned from the film's own training paths.
 //!
-//! A film's samples come in blocks that double in length (`block_spp`, then twice, four
-//! times as many, …, as the radiance cache's). The first block is the path tracer's: nothing
-//! has been learned yet, and short renders pay for no training. Before each later block,
-//! training paths through the whole film's pixels (`training_fraction` of the block's samples
-//! per pixel, `training_spp` per pixel in all) record, at every vertex, the light that arrived
-//! along the direction the path continued in and along the direction next-event estimation
-//! looked in, each divided by the density it was drawn with ([`guide`]); each block's paths
-//! are guided by what the blocks before learned, and its guide is built from all the records
-//! so far. What a sample sees depends only on its block, so passes, crops and tiles of one
-//! image render each sample alike.
+//! A film's samples come in blocks that double in length (`block_spp`, then twice, four times as
+//! many, …, as the radiance cache's). The first block is the path tracer's: nothing has been
+//! learned yet, and short renders pay for no training. Before each later block, training paths
+//! through the pixels of the film's window (its crop, or the whole film; `training_fraction` of the
+//! block's samples per pixel, `training_spp` per pixel in all) record, at every vertex, the light
+//! that arrived along the direction the path continued in and along the direction next-event
+//! estimation looked in, each divided by the density it was drawn with ([`guide`]); each block's
+//! paths are guided by what the blocks before learned, and its guide is built from all the records
+//! so far. What a sample sees depends only on its block and the window, so the passes of one image
+//! render each sample alike; a crop learns from its own pixels, at a cost in proportion to them.
 //!
 //! A block's samples draw each continuation from a mixture: with a probability learned per cell
 //! from the guide's density of that cell, otherwise from the fiber's own sampling routine. The

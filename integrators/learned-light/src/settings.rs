@@ -96,6 +96,7 @@ mod tests {
             width: 4,
             height: 4,
             seed,
+            window: [0, 0, 4, 4],
         };
         let trained = Cell::new(0);
         let learned: LastFilm<u32> = LastFilm::default();

@@ -7,8 +7,11 @@ use tress_core::film::FilmSettings;
 use tress_core::rng::hash_words;
 use tress_core::{Ray, Sampler, Scene};
 
-/// What training depends on besides the scene: the film's size and seed (never its crop, spp
-/// or sample range, so that every tile and pass of one image learns the same).
+/// What training depends on besides the scene: the film's size, seed and crop window (never
+/// its spp or sample range, so that every pass of one image learns the same). Training paths
+/// start through the window's pixels alone, so that a crop — a preview, a farm's tile — costs
+/// training in proportion to its own pixels; a crop's image therefore equals the same window of
+/// the whole film's in expectation, not bit for bit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct FilmKey {
     /// Film width, in pixels.
@@ -17,6 +20,8 @@ pub struct FilmKey {
     pub height: u32,
     /// The film's seed.
     pub seed: u64,
+    /// The pixels rendered, `[x0, y0, x1, y1)`: the crop, or the whole film.
+    pub window: [u32; 4],
 }
 
 impl FilmKey {
@@ -26,12 +31,14 @@ impl FilmKey {
             width: film.width,
             height: film.height,
             seed: film.seed,
+            window: film.window(),
         }
     }
 
-    /// Pixels of the whole film.
+    /// Pixels of the window that training paths start through.
     pub fn pixels(&self) -> u64 {
-        self.width as u64 * self.height as u64
+        let [x0, y0, x1, y1] = self.window;
+        (x1 - x0) as u64 * (y1 - y0) as u64
     }
 }
 
@@ -43,7 +50,7 @@ const CHUNK: u64 = 256;
 const BATCH: u64 = 64;
 
 /// Traces the training paths numbered `paths`: path `i` starts through pixel `i mod pixels`
-/// of the whole film at a uniformly jittered position, with random numbers seeded by the film's
+/// of the film's window at a uniformly jittered position, with random numbers seeded by the film's
 /// seed, `stream` and `i` alone. `trace` follows one path and records what it learns into its
 /// chunk's records `R`; the chunks' records are handed to `merge` in index order, so the result
 /// does not depend on how threads shared the work. `progress` gets the number of paths done.
@@ -60,6 +67,8 @@ pub fn train<R: Default + Send>(
     mut merge: impl FnMut(R),
 ) -> Option<()> {
     let pixels = film.pixels();
+    let [x0, y0, x1, _] = film.window;
+    let window_width = (x1 - x0) as u64;
     let done = AtomicU64::new(0);
     let chunks = (paths.end - paths.start).div_ceil(CHUNK);
     for batch in (0..chunks).step_by(BATCH as usize) {
@@ -75,7 +84,8 @@ pub fn train<R: Default + Send>(
                 let n = range.end - range.start;
                 for i in range {
                     let pixel = i % pixels;
-                    let (x, y) = (pixel % film.width as u64, pixel / film.width as u64);
+                    let x = x0 as u64 + pixel % window_width;
+                    let y = y0 as u64 + pixel / window_width;
                     let mut sampler = Sampler::from_seed(hash_words(&[film.seed, stream, i]));
                     let jitter = sampler.next_2d();
                     let lens = sampler.next_2d();

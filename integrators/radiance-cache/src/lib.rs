@@ -49,7 +49,7 @@ use tress_learned_light::{
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct CacheSettings {
-    /// Training paths per pixel of the film (over the whole film, whatever its crop), each
+    /// Training paths per pixel of the film's window (its crop, or the whole film), each
     /// traced to its end, for the first block of samples; each later block's cache is trained
     /// on twice as many.
     pub training_spp: u32,
@@ -205,7 +205,7 @@ impl IntegratorKind for RadianceCacheIntegrator {
     /// A coarse cache from one path per pixel, sample blocks of two (so that the tests' few
     /// samples cross blocks), a budget of record cells that the tests' small films exceed from
     /// the first block (a 40² film of dark hair fills 160–660), so that they hold coarsened
-    /// caches to the same images for any threads, crop and pass, and paths deep enough for
+    /// caches to the same images for any threads and pass, and paths deep enough for
     /// white furnaces.
     fn test_settings() -> CacheSettings {
         CacheSettings {
