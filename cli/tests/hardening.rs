@@ -1888,7 +1888,7 @@ fn memory_limit_holds_for_the_whole_scene() {
         &[
             "objects[1]",
             "inst.pbrt (line",
-            "ObjectInstance \"tuft\"",
+            "instances of \"tuft\"",
             "objects before it",
         ],
     );

@@ -27,7 +27,7 @@ pub fn check_point_memory(
         .map_err(|reason| Error::InvalidOption {
             object: object.to_owned(),
             field,
-            reason: format!("{how} makes {points:.3e} hair points, {reason}"),
+            reason: format!("{how}: {points:.3e} hair points, {reason}"),
         })
 }
 

@@ -839,8 +839,8 @@ impl CurveReader {
                 &format!("{} (line {})", u.path.display(), u.pos.line),
                 "ObjectInstance",
                 &format!(
-                    "ObjectInstance \"{}\": the strands and instances up to here (is the \
-                     object instanced more often than meant?)",
+                    "the strands and the instances of \"{}\" up to this one (is it instanced \
+                     more often than meant?)",
                     u.name
                 ),
                 total as f64,
@@ -1616,7 +1616,9 @@ mod tests {
             let line = 3 + instances;
             assert!(
                 e.contains(&format!("scene.pbrt (line {line})"))
-                    && e.contains("ObjectInstance \"tuft\"")
+                    && e.contains(
+                        "invalid `ObjectInstance`: the strands and the instances of \"tuft\""
+                    )
                     && e.contains("1 GiB limit for the whole scene"),
                 "{e}"
             );

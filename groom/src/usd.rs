@@ -1437,6 +1437,41 @@ def BasisCurves "Hair"
         );
     }
 
+    /// A binary groom builds its paths from its token table: a prim name changed in place to
+    /// one outside the grammar (`Bezier` → `Bez}er`, `Bez er`) or to two names (`Bez/er`) is
+    /// refused naming it, as the text reader refuses it, and the unchanged file reads.
+    #[test]
+    fn ill_formed_prim_names_of_a_usdc_are_refused() {
+        let original =
+            std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/usd_cubic.usdc"))
+                .unwrap();
+        let at = original
+            .windows(6)
+            .position(|w| w == b"Bezier")
+            .expect("the prim name is stored as it is");
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("groom.usdc");
+        std::fs::write(&path, &original).unwrap();
+        assert!(UsdFile::new(&path).read(&Limits::default()).is_ok());
+        for bad in [b'}', b'/', b' '] {
+            let mut bytes = original.clone();
+            bytes[at + 3] = bad;
+            std::fs::write(&path, &bytes).unwrap();
+            let e = UsdFile::new(&path)
+                .read(&Limits::default())
+                .unwrap_err()
+                .to_string();
+            let name = format!("Bez{}er", bad as char);
+            let why = if bad == b'/' {
+                format!("not a valid path element: {name:?} under /Groom")
+            } else {
+                format!("not a valid path: \"/Groom/{name}\"")
+            };
+            assert!(e.contains("groom.usdc") && e.contains(&why), "{name}: {e}");
+            assert!(!e.contains("USD library failed"), "{name}: {e}");
+        }
+    }
+
     /// Every one-byte change of a binary groom is read or refused, never a panic inside the
     /// USD library (the reader would contain it and say so) or an abort.
     #[test]

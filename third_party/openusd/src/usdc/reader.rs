@@ -448,8 +448,15 @@ impl<R: io::Read + io::Seek> CrateFile<R> {
                         parent_path.append_path(element_token)?
                     };
                     // The composition's path algebra assumes well-formed paths (a name
-                    // ending in `}` made an ancestor walk endless).
-                    sdf::Path::parse(self.paths[path_index].as_str())?;
+                    // ending in `}` made an ancestor walk endless), each one element below
+                    // its parent: a token `a/b` is well-formed text but two prim names.
+                    let path = sdf::Path::parse(self.paths[path_index].as_str())?;
+                    ensure!(
+                        path.parent().as_ref() == Some(&parent_path),
+                        "not a valid path element: {} under {}",
+                        sdf::quoted_start(element_token),
+                        parent_path
+                    );
                     text += self.paths[path_index].as_str().len() as u64;
                     ensure!(
                         text <= most_text,
