@@ -132,7 +132,10 @@ impl PrototypeRegistry {
         if let Some(root) = self.by_key.get(&key) {
             let root = root.clone();
             let prototype = self.by_root.get_mut(&root).expect("key index points to a prototype");
-            if !prototype.instances.contains(instance) {
+            // An instance always composes to the same key, so it is in this prototype's list
+            // exactly when the index says so: a lookup, where scanning the list made
+            // registering N instances take N² comparisons.
+            if self.by_instance.get(instance) != Some(&root) {
                 prototype.instances.push(instance.clone());
                 self.by_instance.insert(instance.clone(), root.clone());
             }
