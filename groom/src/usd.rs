@@ -1472,6 +1472,23 @@ def BasisCurves "Hair"
         }
     }
 
+    /// A fuzzer's `.usdc` (kept as it was found) whose `primChildren` named a child that
+    /// appends to the root itself: the walk over the stage went round forever. A child must
+    /// be one prim name below its parent.
+    #[test]
+    fn a_child_that_is_not_one_name_below_its_parent_is_refused() {
+        let path =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/usd_child_names_root.usdc");
+        let e = UsdFile::new(&path)
+            .read(&Limits::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("usd_child_names_root.usdc") && e.contains("is not one prim name"),
+            "{e}"
+        );
+    }
+
     /// Every one-byte change of a binary groom is read or refused, never a panic inside the
     /// USD library (the reader would contain it and say so) or an abort.
     #[test]

@@ -42,7 +42,7 @@ use std::collections::{HashMap, HashSet};
 use std::mem;
 use std::rc::{Rc, Weak};
 
-use anyhow::{Context, Result};
+use anyhow::{ensure, Context, Result};
 use bitflags::bitflags;
 
 use crate::tf::Token;
@@ -3168,9 +3168,16 @@ impl Stage {
 
             let names = self.masked(&path, |g, cache| cache.prim_children(g, &path))?;
             let children = self.filter_child_names(&path, names);
-            // Push in reverse so first child is visited first.
+            // Push in reverse so first child is visited first. A child must lie one name
+            // below its parent: a `primChildren` entry is any token of the file, and one that
+            // appended to the root itself (`/`) was walked forever.
             for name in children.iter().rev() {
                 if let Ok(child) = path.append_path(name.as_str()) {
+                    ensure!(
+                        child.parent().as_ref() == Some(&path),
+                        "<{path}>: a child named {} is not one prim name",
+                        sdf::quoted_start(name.as_str())
+                    );
                     stack.push(child);
                 }
             }
