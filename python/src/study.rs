@@ -33,7 +33,7 @@ pub fn run_study<'py>(
     };
     let outputs = py
         .detach(|| study::run(&settings, &NotesOnStderr, None))
-        .map_err(to_py_err)?;
+        .map_err(|e| to_py_err(e.into()))?;
     let dict = PyDict::new(py);
     dict.set_item("folder", outputs.folder)?;
     dict.set_item("report", outputs.report)?;
