@@ -9,8 +9,9 @@ pub enum Error {
     /// The hair handed to the builder (or its child strands) is invalid.
     #[error(transparent)]
     Groom(#[from] tress_groom::Error),
-    /// The file could not be opened or read.
-    #[error("{}: {source}", .path.display())]
+    /// The file could not be opened or read. The message leaves the cause to the source, so
+    /// that a chain printed whole (`{:#}`) names it once.
+    #[error("{}", .path.display())]
     Io {
         /// The file concerned.
         path: PathBuf,

@@ -5,8 +5,9 @@ use std::path::PathBuf;
 /// Errors from reading groom files, generating hair and validating strand geometry.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// The file could not be opened or read.
-    #[error("{}: {source}", .path.display())]
+    /// The file could not be opened or read. The message leaves the cause to the source, so
+    /// that a chain printed whole (`{:#}`) names it once.
+    #[error("{}", .path.display())]
     Io {
         /// The file concerned.
         path: PathBuf,
