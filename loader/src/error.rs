@@ -85,7 +85,7 @@ pub enum Error {
         name: String,
         /// What is wrong with its parameters.
         #[source]
-        source: tress_materials::ParamError,
+        source: ParamError,
     },
     /// A diffuse material's albedo lies outside [0, 1].
     #[error("{}: material '{name}': albedo {albedo} must lie in [0, 1]", scene.display())]
