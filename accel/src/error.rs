@@ -9,8 +9,9 @@ pub enum Error {
     /// The hair handed to the builder (or its child strands) is invalid.
     #[error(transparent)]
     Groom(#[from] tress_groom::Error),
-    /// The file could not be opened or read.
-    #[error("{}: {source}", .path.display())]
+    /// The file could not be opened or read. The message leaves the cause to the source, so
+    /// that a chain printed whole (`{:#}`) names it once.
+    #[error("{}", .path.display())]
     Io {
         /// The file concerned.
         path: PathBuf,
@@ -38,23 +39,11 @@ pub enum Error {
         reason: String,
     },
     /// The geometry of an object (a file's contents or a generated object) is unusable.
-    #[error("{object}: {reason}")]
-    InvalidGeometry {
-        /// Name of the object: its file or generator description.
-        object: String,
-        /// What makes it unusable.
-        reason: String,
-    },
+    #[error(transparent)]
+    InvalidGeometry(#[from] tress_groom::InvalidGeometry),
     /// An option of an object is out of range.
-    #[error("{object}: invalid `{field}`: {reason}")]
-    InvalidOption {
-        /// Name of the object: its file, generator description or `sphere #n`.
-        object: String,
-        /// The option at fault, e.g. `radius_scale`.
-        field: &'static str,
-        /// The allowed range and the value given.
-        reason: String,
-    },
+    #[error(transparent)]
+    InvalidOption(#[from] tress_groom::InvalidOption),
     /// Embree reported an error.
     #[error("Embree: {0}")]
     Embree(String),

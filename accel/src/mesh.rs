@@ -68,14 +68,14 @@ impl TriangleMesh {
             );
             for t in m.indices.chunks_exact(3) {
                 if let Some(&bad) = t.iter().find(|&&i| i >= count) {
-                    return Err(Error::InvalidGeometry {
+                    return Err(Error::InvalidGeometry(tress_groom::InvalidGeometry {
                         object: mesh.name,
                         reason: format!(
                             "object '{}' refers to vertex {} but has {count}",
                             model.name,
                             bad + 1
                         ),
-                    });
+                    }));
                 }
                 mesh.triangles.push([base + t[0], base + t[1], base + t[2]]);
             }
@@ -86,9 +86,11 @@ impl TriangleMesh {
 
     /// Checks for at least one triangle, indices in range and finite coordinates.
     pub fn validate(&self) -> Result<()> {
-        let fail = |reason: String| Error::InvalidGeometry {
-            object: self.name.clone(),
-            reason,
+        let fail = |reason: String| {
+            Error::InvalidGeometry(tress_groom::InvalidGeometry {
+                object: self.name.clone(),
+                reason,
+            })
         };
         if self.triangles.is_empty() {
             return Err(fail("has no triangles".into()));

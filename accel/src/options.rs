@@ -68,10 +68,12 @@ impl Default for HairOptions {
 
 impl HairOptions {
     pub(crate) fn validate(&self, object: &str) -> Result<()> {
-        let bad = |field: &'static str, reason: String| crate::Error::InvalidOption {
-            object: object.to_owned(),
-            field,
-            reason,
+        let bad = |field: &'static str, reason: String| {
+            crate::Error::InvalidOption(tress_groom::InvalidOption {
+                object: object.to_owned(),
+                field,
+                reason,
+            })
         };
         if !(self.radius_scale.is_finite() && self.radius_scale > 0.0) {
             return Err(bad(

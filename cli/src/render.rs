@@ -346,13 +346,7 @@ fn build_integrator(
     let t_integrator = Instant::now();
     let integrator = pool
         .install(|| desc.integrator.build(scene, prep))
-        .map_err(|e| {
-            anyhow::anyhow!(
-                "{}: integrator {}: {e:#}",
-                args.scene.display(),
-                desc.integrator.name()
-            )
-        })?;
+        .with_context(|| args.scene.display().to_string())?;
     let setup = t_integrator.elapsed();
     if verbose {
         prep.take_notes()

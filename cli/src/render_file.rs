@@ -110,15 +110,13 @@ pub fn write_render(
         }
     }
     let all: Vec<(&str, Attribute)> = own.into_iter().chain(attributes.iter().cloned()).collect();
-    // The message already names the cause; anyhow would print its source a second time.
-    image_io::write_exr_channels(
+    Ok(image_io::write_exr_channels(
         out,
         sums.window,
         (sums.full_width, sums.full_height),
         channels,
         &all,
-    )
-    .map_err(|e| anyhow!("{e}"))
+    )?)
 }
 
 /// A render EXR's header: what merging checks before reading any pixels.
@@ -159,10 +157,8 @@ pub fn read_piece(path: &Path) -> Result<Piece> {
             meta.headers.len()
         );
     };
-    let attributes: BTreeMap<String, Attribute> = image_io::read_exr_attributes(path)
-        .map_err(|e| anyhow!("{e}"))?
-        .into_iter()
-        .collect();
+    let attributes: BTreeMap<String, Attribute> =
+        image_io::read_exr_attributes(path)?.into_iter().collect();
     let sums_format = attributes.get("tress:sums").map(|a| a.to_string());
     match sums_format.as_deref() {
         Some(SUMS_FORMAT | SUMS_FORMAT_RADIANCE_ONLY) => {}
@@ -447,8 +443,12 @@ impl PreviewArgs {
         batch.add(exr, write_exr)?;
         if !self.no_preview {
             batch.add(&exr.with_extension("png"), |out| {
-                image_io::write_png_tonemapped(out, image, self.exposure, self.tonemap)
-                    .map_err(|e| anyhow!("{e}"))
+                Ok::<_, anyhow::Error>(image_io::write_png_tonemapped(
+                    out,
+                    image,
+                    self.exposure,
+                    self.tonemap,
+                )?)
             })?;
         }
         Ok(batch.commit()?)

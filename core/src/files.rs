@@ -5,18 +5,25 @@ use std::fs::{File, OpenOptions};
 use std::io::{Error, ErrorKind, Read};
 use std::path::Path;
 
-fn not_regular() -> Error {
-    Error::new(
-        ErrorKind::InvalidInput,
-        "not a regular file (a directory, device or pipe)",
-    )
+/// The error for a path that is no regular file; a directory has its own kind, so that callers
+/// can tell it apart (Python raises `IsADirectoryError`).
+fn not_regular(metadata: &std::fs::Metadata) -> Error {
+    if metadata.is_dir() {
+        Error::new(ErrorKind::IsADirectory, "a directory, not a regular file")
+    } else {
+        Error::new(
+            ErrorKind::InvalidInput,
+            "not a regular file (a device or pipe)",
+        )
+    }
 }
 
 /// `path` opened for reading if it is a regular file. Devices, FIFOs and directories are
 /// refused without blocking: opening a FIFO waits for a writer, which may never come.
 pub fn open_regular(path: &Path) -> std::io::Result<File> {
-    if !std::fs::metadata(path)?.is_file() {
-        return Err(not_regular());
+    let metadata = std::fs::metadata(path)?;
+    if !metadata.is_file() {
+        return Err(not_regular(&metadata));
     }
     let mut options = OpenOptions::new();
     options.read(true);
@@ -25,8 +32,9 @@ pub fn open_regular(path: &Path) -> std::io::Result<File> {
     #[cfg(unix)]
     std::os::unix::fs::OpenOptionsExt::custom_flags(&mut options, libc::O_NONBLOCK);
     let file = options.open(path)?;
-    if !file.metadata()?.is_file() {
-        return Err(not_regular());
+    let metadata = file.metadata()?;
+    if !metadata.is_file() {
+        return Err(not_regular(&metadata));
     }
     Ok(file)
 }
@@ -59,6 +67,7 @@ mod tests {
         assert_eq!(read_regular_text(&file).unwrap(), "hair");
         let err = read_regular(dir.path()).unwrap_err();
         assert!(err.to_string().contains("not a regular file"), "{err}");
+        assert_eq!(err.kind(), ErrorKind::IsADirectory);
         #[cfg(unix)]
         {
             let link = dir.path().join("zero.hair");

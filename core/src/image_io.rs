@@ -32,8 +32,9 @@ pub enum ImageError {
         /// The missing file.
         path: PathBuf,
     },
-    /// Opening, reading, writing, syncing or renaming the file failed.
-    #[error("{}: cannot {action}: {source}", path.display())]
+    /// Opening, reading, writing, syncing or renaming the file failed. The message leaves the
+    /// cause to the source, so that a chain printed whole (`{:#}`) names it once.
+    #[error("{}: cannot {action}", path.display())]
     Io {
         /// The file read or written.
         path: PathBuf,

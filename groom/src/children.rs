@@ -80,10 +80,12 @@ fn one() -> u32 {
 impl ChildStrands {
     /// Checks the ranges; errors name `object` and the field.
     pub fn validate(&self, object: &str) -> Result<()> {
-        let bad = |field: &'static str, reason: String| Error::InvalidOption {
-            object: object.to_owned(),
-            field,
-            reason,
+        let bad = |field: &'static str, reason: String| {
+            Error::InvalidOption(crate::InvalidOption {
+                object: object.to_owned(),
+                field,
+                reason,
+            })
         };
         if self.per_guide == 0 {
             return Err(bad("children.per_guide", "must be at least 1".into()));
@@ -128,13 +130,13 @@ impl ChildStrands {
             .collect();
         let total = guides.point_count() as u64 * (1 + self.per_guide as u64);
         if total > u32::MAX as u64 {
-            return Err(Error::InvalidGeometry {
+            return Err(Error::InvalidGeometry(crate::InvalidGeometry {
                 object: guides.name.clone(),
                 reason: format!(
                     "{} children per guide would make {total} points, more than 2^32",
                     self.per_guide
                 ),
-            });
+            }));
         }
         crate::geometry::check_point_memory(
             &guides.name,

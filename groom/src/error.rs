@@ -5,8 +5,9 @@ use std::path::PathBuf;
 /// Errors from reading groom files, generating hair and validating strand geometry.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// The file could not be opened or read.
-    #[error("{}: {source}", .path.display())]
+    /// The file could not be opened or read. The message leaves the cause to the source, so
+    /// that a chain printed whole (`{:#}`) names it once.
+    #[error("{}", .path.display())]
     Io {
         /// The file concerned.
         path: PathBuf,
@@ -23,23 +24,35 @@ pub enum Error {
         reason: String,
     },
     /// The geometry of an object (a file's contents or a generated object) is unusable.
-    #[error("{object}: {reason}")]
-    InvalidGeometry {
-        /// Name of the object: its file or generator description.
-        object: String,
-        /// What makes it unusable.
-        reason: String,
-    },
+    #[error(transparent)]
+    InvalidGeometry(#[from] InvalidGeometry),
     /// An option of an object is out of range.
-    #[error("{object}: invalid `{field}`: {reason}")]
-    InvalidOption {
-        /// Name of the object: its file or generator description.
-        object: String,
-        /// The option at fault, e.g. `radius`.
-        field: &'static str,
-        /// The allowed range and the value given.
-        reason: String,
-    },
+    #[error(transparent)]
+    InvalidOption(#[from] InvalidOption),
+}
+
+/// The geometry of an object (a file's contents or a generated object) is unusable. Shared with
+/// `tress-accel`, whose meshes and spheres are refused the same way.
+#[derive(Debug, thiserror::Error)]
+#[error("{object}: {reason}")]
+pub struct InvalidGeometry {
+    /// Name of the object: its file, generator description or `sphere #n`.
+    pub object: String,
+    /// What makes it unusable.
+    pub reason: String,
+}
+
+/// An option of an object is out of range. Shared with `tress-accel`, whose meshes and spheres
+/// are refused the same way.
+#[derive(Debug, thiserror::Error)]
+#[error("{object}: invalid `{field}`: {reason}")]
+pub struct InvalidOption {
+    /// Name of the object: its file, generator description or `sphere #n`.
+    pub object: String,
+    /// The option at fault, e.g. `radius`.
+    pub field: &'static str,
+    /// The allowed range and the value given.
+    pub reason: String,
 }
 
 /// `Result` with [`Error`].

@@ -22,13 +22,13 @@ pub fn check_point_memory(
     limits: &Limits,
 ) -> Result<()> {
     let need_gib = points * BYTES_PER_POINT / (1u64 << 30) as f64;
-    limits
-        .check_scene_memory(need_gib)
-        .map_err(|reason| Error::InvalidOption {
+    limits.check_scene_memory(need_gib).map_err(|reason| {
+        Error::InvalidOption(crate::InvalidOption {
             object: object.to_owned(),
             field,
             reason: format!("{how}: {points:.3e} hair points, {reason}"),
         })
+    })
 }
 
 /// A per-hair-object attribute that a file may store once, per strand or per point.
@@ -178,9 +178,11 @@ impl HairGeometry {
     /// Checks the layout and values: at least one strand, consistent offsets and array lengths,
     /// finite coordinates, and finite positive radii.
     pub fn validate(&self) -> Result<()> {
-        let fail = |reason: String| Error::InvalidGeometry {
-            object: self.name.clone(),
-            reason,
+        let fail = |reason: String| {
+            Error::InvalidGeometry(crate::InvalidGeometry {
+                object: self.name.clone(),
+                reason,
+            })
         };
         let strands = self.strand_count();
         if strands == 0 {
@@ -340,10 +342,12 @@ impl Default for Transform {
 impl Transform {
     /// Checks that every number is finite, the scale positive and the rotation axis non-zero.
     pub fn validate(&self, object: &str) -> Result<()> {
-        let bad = |reason: String| Error::InvalidOption {
-            object: object.to_owned(),
-            field: "transform",
-            reason,
+        let bad = |reason: String| {
+            Error::InvalidOption(crate::InvalidOption {
+                object: object.to_owned(),
+                field: "transform",
+                reason,
+            })
         };
         if !(self.scale.is_finite() && self.scale > 0.0) {
             return Err(bad(format!(

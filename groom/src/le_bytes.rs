@@ -8,11 +8,11 @@ use tress_core::math::Vec3;
 /// option the reader supplies instead.
 pub(crate) fn read_with_radius(path: &Path, radius: f32) -> crate::Result<Vec<u8>> {
     if !(radius.is_finite() && radius > 0.0) {
-        return Err(crate::Error::InvalidOption {
+        return Err(crate::Error::InvalidOption(crate::InvalidOption {
             object: path.display().to_string(),
             field: "radius",
             reason: format!("must be finite and positive, got {radius}"),
-        });
+        }));
     }
     tress_core::files::read_regular(path).map_err(|source| crate::Error::Io {
         path: path.to_owned(),

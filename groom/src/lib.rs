@@ -38,7 +38,7 @@ pub mod usd;
 
 pub use children::ChildStrands;
 pub use cyhair::HairFile;
-pub use error::{Error, Result};
+pub use error::{Error, InvalidGeometry, InvalidOption, Result};
 pub use geometry::{HairAttribute, HairGeometry, Rotation, Transform};
 pub use pbrt::PbrtFile;
 pub use ply::PlyFile;

@@ -87,22 +87,22 @@ impl PlyFile {
     pub fn read(&self) -> Result<HairGeometry> {
         if let Some(r) = self.radius {
             if !(r.is_finite() && r > 0.0) {
-                return Err(crate::Error::InvalidOption {
+                return Err(crate::Error::InvalidOption(crate::InvalidOption {
                     object: self.path.display().to_string(),
                     field: "radius",
                     reason: format!("must be finite and positive, got {r}"),
-                });
+                }));
             }
         }
         if self.points_per_strand.is_some_and(|n| n < 2) {
-            return Err(crate::Error::InvalidOption {
+            return Err(crate::Error::InvalidOption(crate::InvalidOption {
                 object: self.path.display().to_string(),
                 field: "points_per_strand",
                 reason: format!(
                     "a strand needs at least 2 points, got {}",
                     self.points_per_strand.unwrap_or(0)
                 ),
-            });
+            }));
         }
         let bytes =
             tress_core::files::read_regular(&self.path).map_err(|source| crate::Error::Io {

@@ -105,10 +105,12 @@ impl ProceduralHair {
     }
 
     fn validate(&self, limits: &Limits) -> Result<()> {
-        let bad = |field: &'static str, reason: String| Error::InvalidOption {
-            object: self.name(),
-            field,
-            reason,
+        let bad = |field: &'static str, reason: String| {
+            Error::InvalidOption(crate::InvalidOption {
+                object: self.name(),
+                field,
+                reason,
+            })
         };
         let positive = |field: &'static str, v: f32| {
             if v.is_finite() && v > 0.0 {

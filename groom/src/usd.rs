@@ -275,12 +275,7 @@ impl UsdFile {
             path: path.to_owned(),
             source,
         };
-        if !std::fs::metadata(path).map_err(io)?.is_file() {
-            return Err(io(std::io::Error::new(
-                std::io::ErrorKind::InvalidInput,
-                "not a regular file (a directory, device or pipe)",
-            )));
-        }
+        tress_core::files::open_regular(path).map_err(io)?;
         let fail = |reason: String| format_error(path, reason);
         let name = path
             .to_str()

@@ -1,8 +1,8 @@
 //! Scene objects (hair, meshes, spheres) and building the Embree accelerator from them.
 
+use crate::error::{Error, ObjectError, Result, VariationError};
 use crate::materials::MaterialDesc;
 use crate::paths::resolve;
-use anyhow::{anyhow, Result};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -77,7 +77,11 @@ pub fn build_accel(
     materials: &mut Vec<Material>,
     mut builder: SceneBuilder,
 ) -> Result<(EmbreeAccel, String)> {
-    let here = |i: usize, what: String| anyhow!("{}: objects[{i}]: {what}", scene_path.display());
+    let here = |index: usize, source: ObjectError| Error::Object {
+        scene: scene_path.to_owned(),
+        index,
+        source: Box::new(source),
+    };
     // Hair keeps its fibers' orientation only for a model that reads it (variants of a model
     // share its answer).
     if (materials.iter()).any(|m| matches!(m, Material::Hair(b) if b.uses_orientation())) {
@@ -87,10 +91,12 @@ pub fn build_accel(
     for (i, object) in objects.iter().enumerate() {
         let name = object.material();
         let &material = material_index.get(name).ok_or_else(|| {
-            let known: Vec<&str> = material_index.keys().map(String::as_str).collect();
             here(
                 i,
-                format!("unknown material '{name}' (defined: {})", known.join(", ")),
+                ObjectError::UnknownMaterial {
+                    name: name.to_owned(),
+                    defined: material_index.keys().cloned().collect(),
+                },
             )
         })?;
         let is_hair_material = matches!(materials[material as usize], Material::Hair(_));
@@ -106,7 +112,9 @@ pub fn build_accel(
                     _ => {
                         return Err(here(
                             i,
-                            format!("hair needs a Hair(...) material, but '{name}' is not one"),
+                            ObjectError::NotHairMaterial {
+                                name: name.to_owned(),
+                            },
                         ))
                     }
                 };
@@ -117,15 +125,23 @@ pub fn build_accel(
                 // Loaded within what the objects before it leave of the memory limit.
                 let hair = source
                     .load(&builder.limits())
-                    .map_err(|e| here(i, e.to_string()))?;
+                    .map_err(|e| here(i, e.into()))?;
                 match variation {
                     None => builder
                         .add_hair(&hair, options, material)
-                        .map_err(|e| here(i, e.to_string()))?,
+                        .map_err(|e| here(i, e.into()))?,
                     Some(variation) => {
                         let (builder, note) =
                             add_varied_hair(builder, &hair, options, variation, model, materials)
-                                .map_err(|e| here(i, format!("material '{name}': {e}")))?;
+                                .map_err(|source| {
+                                here(
+                                    i,
+                                    ObjectError::Variation {
+                                        material: name.to_owned(),
+                                        source,
+                                    },
+                                )
+                            })?;
                         notes.push(format!("objects[{i}]: {note}"));
                         builder
                     }
@@ -137,35 +153,38 @@ pub fn build_accel(
                 if is_hair_material {
                     return Err(here(
                         i,
-                        format!(
-                            "meshes need a Diffuse(...) material, but '{name}' is a hair model"
-                        ),
+                        ObjectError::NotSurfaceMaterial {
+                            kind: "meshes",
+                            name: name.to_owned(),
+                        },
                     ));
                 }
                 let mesh = TriangleMesh::load_obj(&resolve(scene_path, file))
-                    .map_err(|e| here(i, e.to_string()))?;
+                    .map_err(|e| here(i, e.into()))?;
                 builder
                     .add_mesh(&mesh, transform, material)
-                    .map_err(|e| here(i, e.to_string()))?
+                    .map_err(|e| here(i, e.into()))?
             }
             ObjectDesc::Sphere { center, radius, .. } => {
                 if is_hair_material {
                     return Err(here(
                         i,
-                        format!(
-                            "spheres need a Diffuse(...) material, but '{name}' is a hair model"
-                        ),
+                        ObjectError::NotSurfaceMaterial {
+                            kind: "spheres",
+                            name: name.to_owned(),
+                        },
                     ));
                 }
                 builder
                     .add_sphere(*center, *radius, material)
-                    .map_err(|e| here(i, e.to_string()))?
+                    .map_err(|e| here(i, e.into()))?
             }
         };
     }
-    let accel = builder
-        .build()
-        .map_err(|e| anyhow!("{}: {e}", scene_path.display()))?;
+    let accel = builder.build().map_err(|source| Error::Accel {
+        scene: scene_path.to_owned(),
+        source,
+    })?;
     let mut summary = accel.info().to_string();
     for note in notes {
         summary.push('\n');
@@ -185,17 +204,22 @@ fn add_varied_hair(
     variation: &StrandVariation,
     model: &tress_materials::HairModel,
     materials: &mut Vec<Material>,
-) -> Result<(SceneBuilder, String)> {
+) -> Result<(SceneBuilder, String), VariationError> {
     let varied = variation.for_model(model)?;
     if varied.uses_file_colors() {
         match &hair.colors {
             Some(HairAttribute::PerStrand(_) | HairAttribute::PerPoint(_)) => {}
-            Some(HairAttribute::Uniform(c)) => anyhow::bail!(
-                "variation.file_colors: {} stores no colour per strand or per point, only the \
-                 default colour {c} for all",
-                hair.name
-            ),
-            None => anyhow::bail!("variation.file_colors: {} stores no colours", hair.name),
+            Some(HairAttribute::Uniform(color)) => {
+                return Err(VariationError::UniformFileColor {
+                    hair: hair.name.clone(),
+                    color: *color,
+                })
+            }
+            None => {
+                return Err(VariationError::NoFileColors {
+                    hair: hair.name.clone(),
+                })
+            }
         }
     }
     let first = materials.len() as u32;
@@ -222,13 +246,12 @@ fn add_varied_hair(
         let sigma = v.sigma_a;
         let variant = model
             .with_pigment(Pigment::SigmaA((sigma.x, sigma.y, sigma.z)))
-            .ok_or_else(|| anyhow!("variation: the model has no pigment"))?
+            .ok_or(VariationError::NoPigment)?
             .with_roughness_scale(v.roughness);
-        let bcsdf = variant.build().map_err(|e| {
-            anyhow!(
-                "variation: variant σ_a = {sigma}, roughness × {}: {e}",
-                v.roughness
-            )
+        let bcsdf = variant.build().map_err(|source| VariationError::Variant {
+            sigma_a: sigma,
+            roughness: v.roughness,
+            source,
         })?;
         materials.push(Material::Hair(bcsdf));
     }

@@ -5,6 +5,7 @@
 //! cross-crate tests iterate, so a new integrator is covered everywhere without other edits.
 
 use serde::{Deserialize, Serialize};
+use tress_core::integrator::BuildError;
 use tress_core::prepare::Preparation;
 use tress_core::{Integrator, IntegratorKind, Scene};
 
@@ -54,15 +55,26 @@ macro_rules! integrators {
                 &self,
                 scene: &Scene,
                 prep: &Preparation,
-            ) -> anyhow::Result<Box<dyn Integrator>> {
+            ) -> Result<Box<dyn Integrator>, IntegratorError> {
                 let built = match self {
                     $(IntegratorDesc::$variant(s) =>
                         <$kind as IntegratorKind>::build(s, scene, prep),)+
                 };
-                built.map_err(|e| anyhow::anyhow!(e))
+                built.map_err(|source| IntegratorError { name: self.name(), source })
             }
         }
     };
+}
+
+/// Why an integrator could not be built for a scene.
+#[derive(Debug, thiserror::Error)]
+#[error("integrator {name}")]
+pub struct IntegratorError {
+    /// The integrator's name.
+    pub name: &'static str,
+    /// The integrator's own error.
+    #[source]
+    pub source: BuildError,
 }
 
 impl Default for IntegratorDesc {

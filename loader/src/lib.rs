@@ -9,6 +9,7 @@
 #![cfg_attr(test, allow(clippy::disallowed_methods))]
 #![warn(missing_docs)]
 
+pub mod error;
 pub mod geometry;
 pub mod integrators;
 pub mod lights;
@@ -20,5 +21,6 @@ pub mod ron_format;
 pub mod scene_desc;
 pub mod threads;
 
+pub use error::{Error, Result};
 pub use ron_format::options as ron_options;
 pub use threads::check_threads;

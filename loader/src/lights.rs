@@ -1,7 +1,7 @@
 //! Light sources as scene files write them, and building them.
 
+use crate::error::{Error, Result};
 use crate::paths::resolve;
-use anyhow::Result;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -65,30 +65,39 @@ fn one() -> f32 {
     1.0
 }
 
-/// Builds a light; relative paths resolve against the folder of `scene_path`.
-pub fn build_light(l: &LightDesc, scene_path: &Path) -> Result<Light> {
-    Ok(match l {
+/// Builds light `lights[index]` of the scene at `scene_path`; relative paths resolve against
+/// its folder.
+pub fn build_light(index: usize, l: &LightDesc, scene_path: &Path) -> Result<Light> {
+    let map_error = |source| Error::EnvironmentMap {
+        scene: scene_path.to_owned(),
+        index,
+        source,
+    };
+    let light_error = |source| Error::Light {
+        scene: scene_path.to_owned(),
+        index,
+        source,
+    };
+    match l {
         LightDesc::Environment {
             file,
             rotation,
             scale,
-        } => Light::Environment(EnvironmentMap::from_file(
-            resolve(scene_path, file),
-            *rotation,
-            *scale,
-        )?),
-        LightDesc::Sky { rotation, scale } => {
-            Light::Environment(EnvironmentMap::builtin_sky(*rotation, *scale)?)
-        }
-        LightDesc::Constant { radiance } => Light::constant(*radiance)?,
+        } => EnvironmentMap::from_file(resolve(scene_path, file), *rotation, *scale)
+            .map(Light::Environment)
+            .map_err(map_error),
+        LightDesc::Sky { rotation, scale } => EnvironmentMap::builtin_sky(*rotation, *scale)
+            .map(Light::Environment)
+            .map_err(map_error),
+        LightDesc::Constant { radiance } => Light::constant(*radiance).map_err(light_error),
         LightDesc::Distant {
             direction,
             irradiance,
             angular_radius,
-        } => Light::distant(*direction, *irradiance, *angular_radius)?,
+        } => Light::distant(*direction, *irradiance, *angular_radius).map_err(light_error),
         LightDesc::Point {
             position,
             intensity,
-        } => Light::point(*position, *intensity)?,
-    })
+        } => Light::point(*position, *intensity).map_err(light_error),
+    }
 }

@@ -1,6 +1,6 @@
 //! Placeholders in scene files: `${name}` and `${name:-default}`, filled by `-D name=value`.
 
-use anyhow::{bail, Result};
+use crate::error::{Error, Result};
 use std::collections::BTreeMap;
 
 /// Values for a scene file's `${name}` placeholders, from `-D name=value` on the command line.
@@ -12,7 +12,11 @@ pub fn defines(args: &[(String, String)]) -> Result<Defines> {
     let mut defines = Defines::new();
     for (name, value) in args {
         if let Some(first) = defines.insert(name.clone(), value.clone()) {
-            bail!("-D {name} is given twice ({name}={first} and {name}={value}): give it once");
+            return Err(Error::DefinedTwice {
+                name: name.clone(),
+                first,
+                second: value.clone(),
+            });
         }
     }
     Ok(defines)

@@ -4,13 +4,14 @@
 //! All enums are externally tagged (RON's native `Variant(...)` syntax), every struct denies
 //! unknown fields, and relative paths resolve against the scene file's folder.
 
+use crate::error::{Error, Result};
 use crate::geometry::{self, ObjectDesc};
 use crate::integrators::IntegratorDesc;
 use crate::lights::{build_light, LightDesc};
 use crate::materials::MaterialDesc;
 use crate::paths::resolve;
 use crate::placeholders::{substitute, Defines};
-use anyhow::{anyhow, bail, Context, Result};
+use crate::ron_format::SyntaxError;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -54,11 +55,10 @@ impl SceneDesc {
                     if let Some(p) = source.path_mut() {
                         *p = resolve(scene_path, p);
                     }
-                    files.extend(
-                        source
-                            .files()
-                            .map_err(|e| anyhow!("{}: {e}", scene_path.display()))?,
-                    );
+                    files.extend(source.files().map_err(|source| Error::HairFiles {
+                        scene: scene_path.to_owned(),
+                        source,
+                    })?);
                 }
                 ObjectDesc::Mesh { file, .. } => {
                     files.push(resolve(scene_path, file));
@@ -90,8 +90,11 @@ impl SceneDesc {
     pub fn files_hash(&self, scene_path: &Path) -> Result<u64> {
         let mut h: u64 = 0xcbf2_9ce4_8422_2325;
         for f in self.referenced_files(scene_path)? {
-            let bytes = tress_core::files::read_regular(&f)
-                .map_err(|e| anyhow!("{}: {}: {e}", scene_path.display(), f.display()))?;
+            let bytes = tress_core::files::read_regular(&f).map_err(|source| Error::Input {
+                scene: scene_path.to_owned(),
+                file: f.clone(),
+                source,
+            })?;
             for b in bytes.iter().chain(b"|") {
                 h = (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3);
             }
@@ -180,53 +183,26 @@ pub fn load(path: &Path) -> Result<SceneDesc> {
 /// Reads a scene file, replaces its placeholders with `defines` ([`substitute`]) and parses it;
 /// errors name the file, line and column.
 pub fn load_with(path: &Path, defines: &Defines) -> Result<SceneDesc> {
-    let text = tress_core::files::read_regular_text(path)
-        .with_context(|| format!("cannot read scene file {}", path.display()))?;
-    let text = substitute(&text, defines).map_err(|e| anyhow!("{}:{e}", path.display()))?;
-    parse(&text).map_err(|e| anyhow!("{}:{e}", path.display()))
+    let text = tress_core::files::read_regular_text(path).map_err(|source| Error::Read {
+        path: path.to_owned(),
+        source,
+    })?;
+    let text = substitute(&text, defines).map_err(|message| Error::Placeholder {
+        path: path.to_owned(),
+        message,
+    })?;
+    parse(&text).map_err(|error| Error::Syntax {
+        path: path.to_owned(),
+        error: Box::new(error),
+    })
 }
 
-/// Parses scene text; the error is `line:column: message`, followed by the offending line with a
-/// caret under the column.
-pub fn parse(text: &str) -> std::result::Result<SceneDesc, String> {
+/// Parses scene text; the error says where (line and column) and shows the offending line.
+pub fn parse(text: &str) -> std::result::Result<SceneDesc, SyntaxError> {
     crate::ron_format::options()
         .from_str::<SceneDesc>(text)
-        .map_err(|e| {
-            let p = e.span.start;
-            let mut msg = format!("{}:{}: {}", p.line, p.col, e.code);
-            if let Some(line) = text.lines().nth(p.line.saturating_sub(1)) {
-                let (shown, caret) = excerpt(line, p.col.saturating_sub(1));
-                msg.push_str(&format!("\n    {shown}\n    {}^", " ".repeat(caret)));
-            }
-            msg
-        })
+        .map_err(|e| SyntaxError::new(text, e))
 }
-
-/// At most [`EXCERPT_CHARS`] characters of `line` around character `col`, with `…` where it
-/// is cut, and the caret's column in that excerpt: a one-line file of 400 KB printed whole.
-fn excerpt(line: &str, col: usize) -> (String, usize) {
-    let chars: Vec<char> = line.chars().collect();
-    if chars.len() <= EXCERPT_CHARS {
-        return (line.to_owned(), col.min(chars.len()));
-    }
-    let col = col.min(chars.len());
-    let start = col.saturating_sub(EXCERPT_CHARS / 2);
-    let end = (start + EXCERPT_CHARS).min(chars.len());
-    let start = end.saturating_sub(EXCERPT_CHARS);
-    let mut shown: String = chars[start..end].iter().collect();
-    let mut caret = col - start;
-    if start > 0 {
-        shown.insert(0, '…');
-        caret += 1;
-    }
-    if end < chars.len() {
-        shown.push('…');
-    }
-    (shown, caret)
-}
-
-/// Longest excerpt of a scene line shown under a parse error.
-const EXCERPT_CHARS: usize = 120;
 
 /// Builds the renderable scene, its hair within `limits`.
 pub fn build(desc: &SceneDesc, scene_path: &Path, limits: &Limits) -> Result<BuiltScene> {
@@ -242,7 +218,9 @@ pub fn build_plain_accel(
     limits: &Limits,
 ) -> Result<EmbreeAccel> {
     let (mut materials, material_index) = build_materials(desc, scene_path)?;
-    let builder = SceneBuilder::new()?.with_limits(*limits).without_filters();
+    let builder = new_builder(scene_path)?
+        .with_limits(*limits)
+        .without_filters();
     let (accel, _) = geometry::build_accel(
         &desc.objects,
         scene_path,
@@ -260,24 +238,24 @@ fn build_materials(
     desc: &SceneDesc,
     scene_path: &Path,
 ) -> Result<(Vec<Material>, BTreeMap<String, u32>)> {
-    let here = |what: &str| format!("{}: {what}", scene_path.display());
     let mut material_index = BTreeMap::new();
     let mut materials = Vec::new();
     for (name, m) in &desc.materials {
         let built = match m {
-            MaterialDesc::Hair(model) => Material::Hair(
-                model
-                    .build()
-                    .map_err(|e| anyhow!("{}", here(&format!("material '{name}': {e}"))))?,
-            ),
+            MaterialDesc::Hair(model) => {
+                Material::Hair(model.build().map_err(|source| Error::HairMaterial {
+                    scene: scene_path.to_owned(),
+                    name: name.clone(),
+                    source,
+                })?)
+            }
             MaterialDesc::Diffuse { albedo } => {
                 if !(albedo.min_element() >= 0.0 && albedo.max_element() <= 1.0) {
-                    bail!(
-                        "{}",
-                        here(&format!(
-                            "material '{name}': albedo {albedo} must lie in [0, 1]"
-                        ))
-                    );
+                    return Err(Error::Albedo {
+                        scene: scene_path.to_owned(),
+                        name: name.clone(),
+                        albedo: *albedo,
+                    });
                 }
                 Material::Diffuse { albedo: *albedo }
             }
@@ -296,7 +274,6 @@ pub fn build_wrapped(
     limits: &Limits,
     wrap: impl FnOnce(EmbreeAccel) -> Box<dyn Accel>,
 ) -> Result<BuiltScene> {
-    let here = |what: &str| format!("{}: {what}", scene_path.display());
     let c = &desc.camera;
     let camera = Camera::new(
         c.look_from,
@@ -306,7 +283,10 @@ pub fn build_wrapped(
         c.lens_radius,
         c.focus_distance,
     )
-    .map_err(|e| anyhow!("{}", here(&e.to_string())))?;
+    .map_err(|source| Error::Camera {
+        scene: scene_path.to_owned(),
+        source,
+    })?;
 
     let t0 = Instant::now();
     let (mut materials, material_index) = build_materials(desc, scene_path)?;
@@ -316,10 +296,7 @@ pub fn build_wrapped(
         .lights
         .iter()
         .enumerate()
-        .map(|(i, l)| {
-            build_light(l, scene_path)
-                .map_err(|e| anyhow!("{}", here(&format!("lights[{i}]: {e:#}"))))
-        })
+        .map(|(index, l)| build_light(index, l, scene_path))
         .collect::<Result<Vec<_>>>()?;
 
     let t1 = Instant::now();
@@ -329,7 +306,7 @@ pub fn build_wrapped(
         &desc.materials,
         &material_index,
         &mut materials,
-        SceneBuilder::new()?.with_limits(*limits),
+        new_builder(scene_path)?.with_limits(*limits),
     )?;
     let geometry_time = t1.elapsed();
     let summary = format!(
@@ -342,5 +319,13 @@ pub fn build_wrapped(
     Ok(BuiltScene {
         scene: Scene::new(camera, wrap(accel), materials, lights.into()),
         summary,
+    })
+}
+
+/// A new Embree scene builder for the scene at `scene_path`.
+fn new_builder(scene_path: &Path) -> Result<SceneBuilder> {
+    SceneBuilder::new().map_err(|source| Error::Accel {
+        scene: scene_path.to_owned(),
+        source,
     })
 }

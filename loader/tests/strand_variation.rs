@@ -2,6 +2,7 @@
 //! object adds its variants to the scene's materials, bad variations are errors naming the
 //! object and the field.
 
+use std::error::Error;
 use std::path::Path;
 use tress_core::Material;
 use tress_loader::scene_desc::{build, parse, BuiltScene};
@@ -20,12 +21,17 @@ fn scene(model: &str, variation: &str) -> String {
     )
 }
 
-fn build_text(text: &str) -> anyhow::Result<BuiltScene> {
-    build(
-        &parse(text).map_err(|e| anyhow::anyhow!("{e}"))?,
-        Path::new("v.ron"),
-        &Default::default(),
-    )
+/// The scene `text` built as if read from `v.ron`; the error is its chain of causes as the
+/// command line prints it.
+fn build_text(text: &str) -> Result<BuiltScene, String> {
+    let desc = parse(text).map_err(|e| e.to_string())?;
+    build(&desc, Path::new("v.ron"), &Default::default()).map_err(|e| {
+        let causes = std::iter::successors(Some(&e as &dyn Error), |&e| e.source());
+        causes
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(": ")
+    })
 }
 
 #[test]
@@ -149,8 +155,7 @@ fn bad_variations_are_errors_naming_the_object_and_field() {
     for (model, variation, expect) in cases {
         let e = build_text(&scene(model, variation))
             .err()
-            .unwrap_or_else(|| panic!("{variation}: accepted"))
-            .to_string();
+            .unwrap_or_else(|| panic!("{variation}: accepted"));
         assert!(
             e.starts_with("v.ron: objects[0]: material 'hair': ") && e.contains(expect),
             "{variation}: {e}"
@@ -172,7 +177,9 @@ fn bad_variations_are_errors_naming_the_object_and_field() {
             "lenght",
         ),
     ] {
-        let e = parse(&scene("Chiang()", typo)).expect_err("a parse error");
+        let e = parse(&scene("Chiang()", typo))
+            .expect_err("a parse error")
+            .to_string();
         assert!(e.starts_with("6:") && e.contains(name), "{typo}: {e}");
     }
 }

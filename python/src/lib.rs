@@ -11,39 +11,69 @@ mod hair_model;
 mod scene;
 mod study;
 
-use pyo3::exceptions::{PyOSError, PyValueError};
+use pyo3::exceptions::{
+    PyFileNotFoundError, PyIsADirectoryError, PyOSError, PyPermissionError, PyValueError,
+};
 use pyo3::prelude::*;
+use pyo3::PyTypeInfo;
+use std::error::Error;
+use std::io::ErrorKind;
+use tress_core::image_io::ImageError;
 use tress_core::output_file::OutputError;
 
-/// A Rust error as a Python exception, with the message the command line would print: an
-/// `OSError` when a file could not be read or written (with the OS error code, so Python raises
-/// `FileNotFoundError`, `PermissionError`, …) or an output was refused (a folder, an input of
-/// the study, a FIFO nobody reads), else a `ValueError` (bad input: a scene, a parameter, a
-/// setting).
-fn to_py_err(e: anyhow::Error) -> PyErr {
-    let message = format!("{e:#}");
-    let io = e
-        .chain()
-        .find_map(|cause| cause.downcast_ref::<std::io::Error>());
-    let refused = e.chain().any(|cause| cause.is::<OutputError>());
-    match (io.and_then(std::io::Error::raw_os_error), io) {
-        (Some(code), _) => PyOSError::new_err((code, message)),
-        (None, Some(_)) => PyOSError::new_err(message),
-        (None, None) if refused => PyOSError::new_err(message),
-        (None, None) => match os_error_code(&message) {
-            Some(code) => PyOSError::new_err((code, message)),
-            None => PyValueError::new_err(message),
-        },
+/// A Rust error as a Python exception, with the message the command line would print (the
+/// error and its causes, `scene.ron: objects[0]: head.obj: No such file or directory (os
+/// error 2)`). The exception's type is chosen by the first cause that says what kind of
+/// failure it is, never by the message: an operating system's error by its kind
+/// (`FileNotFoundError`, `PermissionError`, `IsADirectoryError`, else `OSError`, with its
+/// code), a missing image (`FileNotFoundError`), a folder in an output's place
+/// (`IsADirectoryError`) or another output refused (`OSError`); with none, the input was bad
+/// (`ValueError`: a scene, a parameter, a setting).
+fn to_py_err(error: &(dyn Error + 'static)) -> PyErr {
+    let causes = || std::iter::successors(Some(error), |&e| e.source());
+    let message = causes()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join(": ");
+    let kind = causes().find_map(failure_kind);
+    let code = causes()
+        .find_map(|e| e.downcast_ref::<std::io::Error>())
+        .and_then(std::io::Error::raw_os_error);
+    match kind {
+        None => PyValueError::new_err(message),
+        Some(ErrorKind::NotFound) => os_error::<PyFileNotFoundError>(code, message),
+        Some(ErrorKind::PermissionDenied) => os_error::<PyPermissionError>(code, message),
+        Some(ErrorKind::IsADirectory) => os_error::<PyIsADirectoryError>(code, message),
+        Some(_) => os_error::<PyOSError>(code, message),
     }
 }
 
-/// The code in the `(os error N)` that ends an OS error's message. Building a scene reports the
-/// causes of a failed object as text (`objects[0]: head.obj: No such file or directory (os
-/// error 2)`), so a missing file is recognised there.
-fn os_error_code(message: &str) -> Option<i32> {
-    let start = message.rfind("(os error ")? + "(os error ".len();
-    let end = start + message[start..].find(')')?;
-    message[start..end].parse().ok()
+/// An `OSError` of type `T`; with the operating system's error code, Python sets its `errno`
+/// and `strerror`.
+fn os_error<T: PyTypeInfo>(code: Option<i32>, message: String) -> PyErr {
+    match code {
+        Some(code) => PyErr::new::<T, _>((code, message)),
+        None => PyErr::new::<T, _>(message),
+    }
+}
+
+/// The kind of failure `cause` is, if it is one of the file system's: `None` for an error that
+/// leaves that to its source, or is about the input's contents.
+fn failure_kind(cause: &(dyn Error + 'static)) -> Option<ErrorKind> {
+    if let Some(io) = cause.downcast_ref::<std::io::Error>() {
+        // Bytes that are not text are a bad input, not a failure to read it.
+        return (io.kind() != ErrorKind::InvalidData).then(|| io.kind());
+    }
+    match cause.downcast_ref::<ImageError>() {
+        Some(ImageError::NotFound { .. }) => return Some(ErrorKind::NotFound),
+        Some(_) => return None,
+        None => {}
+    }
+    match cause.downcast_ref::<OutputError>()? {
+        OutputError::Io { .. } => None,
+        OutputError::Directory { .. } => Some(ErrorKind::IsADirectory),
+        _ => Some(ErrorKind::Other),
+    }
 }
 
 #[pymodule]

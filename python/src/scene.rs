@@ -39,7 +39,7 @@ pub struct Scene {
 /// file that cannot be read.
 #[pyfunction]
 pub fn load_scene(py: Python<'_>, path: PathBuf) -> PyResult<Scene> {
-    let desc = scene_desc::load(&path).map_err(to_py_err)?;
+    let desc = scene_desc::load(&path).map_err(|e| to_py_err(&e))?;
     Scene::build(py, desc, path)
 }
 
@@ -48,7 +48,7 @@ impl Scene {
         let limits = crate::limits_from_env();
         let built = py
             .detach(|| scene_desc::build(&desc, &path, &limits))
-            .map_err(to_py_err)?;
+            .map_err(|e| to_py_err(&e))?;
         Ok(Scene {
             desc,
             path,
@@ -218,7 +218,10 @@ impl Scene {
         let integrator = py
             .detach(|| pool.install(|| integrator_desc.build(scene, &self.prep)))
             .map_err(|e| {
-                to_py_err(e.context(format!("{here}: integrator {}", integrator_desc.name())))
+                to_py_err(&tress_loader::Error::Integrator {
+                    scene: self.path.clone(),
+                    source: e,
+                })
             })?;
 
         let cancel = AtomicBool::new(false);

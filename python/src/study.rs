@@ -33,7 +33,13 @@ pub fn run_study<'py>(
     };
     let outputs = py
         .detach(|| study::run(&settings, &NotesOnStderr, None))
-        .map_err(to_py_err)?;
+        .map_err(|e| match &e {
+            // A transparent variant starts its chain past the error it wraps, whose type
+            // decides the exception.
+            study::Error::Output(output) => to_py_err(output),
+            study::Error::Image(image) => to_py_err(image),
+            other => to_py_err(other),
+        })?;
     let dict = PyDict::new(py);
     dict.set_item("folder", outputs.folder)?;
     dict.set_item("report", outputs.report)?;

@@ -1,6 +1,8 @@
 """Scenes from dicts, RON text and files; renders to NumPy arrays; errors as exceptions."""
 
 import _thread
+import copy
+import errno
 import signal
 import threading
 import time
@@ -155,6 +157,39 @@ def test_missing_files_raise_oserror(tmp_path):
     with pytest.raises(FileNotFoundError, match="nothing.ron"):
         tress.load_scene(tmp_path / "nothing.ron")
     assert issubclass(FileNotFoundError, OSError)
+
+
+def test_exceptions_follow_the_kind_of_error_not_its_text(tmp_path, scene, scene_dict):
+    # A missing scene file: FileNotFoundError, with the operating system's errno.
+    with pytest.raises(FileNotFoundError, match="nothing.ron") as missing:
+        tress.load_scene(tmp_path / "nothing.ron")
+    assert missing.value.errno == errno.ENOENT
+    # A folder where a file should be: the scene itself, or a hair file it reads.
+    (tmp_path / "folder.ron").mkdir()
+    with pytest.raises(IsADirectoryError, match="folder.ron"):
+        tress.load_scene(tmp_path / "folder.ron")
+    (tmp_path / "strands.hair").mkdir()
+    hair = scene_dict["objects"][0]["Hair"]
+    hair["source"] = {"File": "strands.hair"}
+    with pytest.raises(IsADirectoryError, match=r"objects\[0\]: .*strands\.hair"):
+        tress.Scene.from_dict(scene_dict, base_dir=tmp_path)
+    # A missing environment map, which the image reader reports without an OS error.
+    with_map = mesh_scene(copy.deepcopy(scene_dict))
+    (tmp_path / "triangle.obj").write_text(TRIANGLE_OBJ)
+    with_map["lights"] = [{"Environment": {"file": "nowhere.exr"}}]
+    with pytest.raises(FileNotFoundError, match=r"lights\[0\]: .*nowhere\.exr"):
+        tress.Scene.from_dict(with_map, base_dir=tmp_path)
+    # Malformed RON: ValueError naming the file and the line.
+    text = scene.to_ron().replace("fov:", "fov: @")
+    line = 1 + next(i for i, l in enumerate(text.splitlines()) if "fov: @" in l)
+    (tmp_path / "broken.ron").write_text(text)
+    with pytest.raises(ValueError, match=rf"broken\.ron:{line}:\d+: "):
+        tress.load_scene(tmp_path / "broken.ron")
+    # Text that reads like an OS error is still a bad input (the type was once parsed from it).
+    hair["source"] = {"Procedural": {"style": "Ball"}}
+    hair["material"] = "lost (os error 2)"
+    with pytest.raises(ValueError, match=r"unknown material 'lost \(os error 2\)'"):
+        tress.Scene.from_dict(scene_dict)
 
 
 def test_malformed_scene_files_name_file_line_and_column(tmp_path, scene):

@@ -87,6 +87,18 @@ def test_study_errors(tmp_path, study_file):
         tress.study(typo, out=tmp_path / "typo")
 
 
+def test_study_exceptions_follow_the_kind_of_error(tmp_path, study_file):
+    (tmp_path / "folder.ron").mkdir()
+    with pytest.raises(IsADirectoryError, match="folder.ron"):
+        tress.study(tmp_path / "folder.ron")
+    # A folder in the place of a table: refused by name before any render.
+    out = tmp_path / "blocked"
+    (out / "summary.csv").mkdir(parents=True)
+    with pytest.raises(IsADirectoryError, match="summary.csv: is a directory"):
+        tress.study(study_file, out=out, quick=True)
+    assert not (out / "renders").exists()
+
+
 @pytest.mark.parametrize("link", [os.symlink, os.link], ids=["symlink", "hard link"])
 def test_study_tables_never_replace_an_input(study_file, tmp_path, link):
     out = tmp_path / "guarded"

@@ -1,5 +1,6 @@
 //! Running the study: every job rendered (or read back), measured against the references.
 
+use crate::error::{Error, Result};
 use crate::metrics::{self, Rect};
 use crate::picture::Picture;
 use crate::plan::{
@@ -9,7 +10,6 @@ use crate::plan::{
 use crate::progress::Progress;
 use crate::render::{Job, SceneRunner};
 use crate::results::{sheet_regions, Errors, RefKind, Results, Row, SceneFigures};
-use anyhow::{bail, Context, Result};
 use std::collections::HashMap;
 use tress_core::image_io;
 use tress_core::Image;
@@ -131,35 +131,30 @@ fn common_reference(plan: &Plan, scene: &PlanScene, runner: &mut SceneRunner) ->
         PlanReference::Exr(template) => template,
     };
     let file = plan.reference_exr(template, scene);
-    let (img, _) = image_io::read_exr(&file).with_context(|| {
-        format!(
-            "{}: reference of scene '{}'",
-            plan.study_path.display(),
-            scene.name
-        )
+    let (img, _) = image_io::read_exr(&file).map_err(|source| Error::ReadReference {
+        study: plan.study_path.clone(),
+        scene: scene.name.clone(),
+        source,
     })?;
     let film = &scene.desc.film;
     if (img.full_width, img.full_height, img.width, img.height)
         != (film.width, film.height, film.width, film.height)
     {
-        bail!(
-            "reference {} is a window {} of a {}x{} film, but scene '{}' ({}) renders a full {}x{} film",
-            file.display(),
-            Rect::window_of(&img),
-            img.full_width,
-            img.full_height,
-            scene.name,
-            scene.source,
-            film.width,
-            film.height
-        );
+        return Err(Error::ReferenceWindow {
+            path: file,
+            window: Rect::window_of(&img),
+            full_width: img.full_width,
+            full_height: img.full_height,
+            scene: scene.name.clone(),
+            source_file: scene.source.clone(),
+            width: film.width,
+            height: film.height,
+        });
     }
-    metrics::check_finite(&img, &file).with_context(|| {
-        format!(
-            "{}: reference of scene '{}'",
-            plan.study_path.display(),
-            scene.name
-        )
+    metrics::check_finite(&img, &file).map_err(|source| Error::NotFiniteReference {
+        study: plan.study_path.clone(),
+        scene: scene.name.clone(),
+        source,
     })?;
     Ok(img)
 }

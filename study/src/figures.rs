@@ -1,15 +1,20 @@
 //! The figures of a study's report, drawn by whoever can draw.
 
+use crate::error::FiguresError;
 use crate::plan::Plan;
 use crate::results::Results;
-use anyhow::Result;
 
 /// Draws a study's figures — convergence plots, error heat maps, crop sheets — for its report.
 /// This library draws none (it has no plotting); `tress study` passes its plotters drawing.
 pub trait Figures {
     /// Writes the figures of scene `scene` (an index into `plan.scenes`) under `plan.out`, and
     /// says which files the report links to.
-    fn draw(&self, plan: &Plan, results: &Results, scene: usize) -> Result<FigureFiles>;
+    fn draw(
+        &self,
+        plan: &Plan,
+        results: &Results,
+        scene: usize,
+    ) -> Result<FigureFiles, FiguresError>;
 }
 
 /// The figure files of one scene, relative to the output folder.

@@ -1,10 +1,10 @@
 //! Study files: what a study compares (see the module documentation of [`crate::study`]).
 
-use anyhow::{anyhow, Context, Result};
+use crate::error::{Error, Result};
 use serde::Deserialize;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use tress_loader::integrators::IntegratorDesc;
+use tress_loader::ron_format::SyntaxError;
 use tress_loader::scene_desc::SceneDesc;
 
 /// A study file.
@@ -114,18 +114,15 @@ pub struct Quick {
 
 /// Reads and parses a study file; errors name the file, line and column.
 pub fn load(path: &Path) -> Result<Study> {
-    let text = tress_core::files::read_regular_text(path)
-        .with_context(|| format!("cannot read study file {}", path.display()))?;
+    let text = tress_core::files::read_regular_text(path).map_err(|source| Error::Read {
+        path: path.to_owned(),
+        source,
+    })?;
     tress_loader::ron_format::options()
         .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
         .from_str::<Study>(&text)
-        .map_err(|e| {
-            let p = e.span.start;
-            let mut msg = format!("{}:{}:{}: {}", path.display(), p.line, p.col, e.code);
-            if let Some(line) = text.lines().nth(p.line.saturating_sub(1)) {
-                let caret = " ".repeat(line.chars().take(p.col.saturating_sub(1)).count());
-                let _ = write!(msg, "\n    {line}\n    {caret}^");
-            }
-            anyhow!(msg)
+        .map_err(|e| Error::Syntax {
+            path: path.to_owned(),
+            error: Box::new(SyntaxError::new(&text, e)),
         })
 }

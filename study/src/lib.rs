@@ -37,6 +37,7 @@
 #![warn(missing_docs)]
 
 pub mod cost;
+mod error;
 mod execute;
 mod figures;
 mod file;
@@ -55,7 +56,7 @@ pub use progress::{NotesOnStderr, Progress};
 pub use results::{sheet_regions, RefKind, Results, SceneFigures};
 pub use stats::{curve, Point, Stat};
 
-use anyhow::{Context, Result};
+pub use error::{Error, FiguresError, Result, SceneError};
 use std::path::PathBuf;
 
 /// What a study wrote, and how much of it this run rendered.
@@ -90,13 +91,15 @@ pub fn run(
 ) -> Result<StudyOutputs> {
     let study = file::load(&settings.study)?;
     let plan = Plan::new(study, settings)?;
-    std::fs::create_dir_all(&plan.out)
-        .with_context(|| format!("creating output folder {}", plan.out.display()))?;
+    std::fs::create_dir_all(&plan.out).map_err(|source| Error::CreateFolder {
+        path: plan.out.clone(),
+        source,
+    })?;
     tables::check_outputs(&plan)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(settings.threads.unwrap_or(0))
         .build()
-        .context("creating the thread pool")?;
+        .map_err(Error::ThreadPool)?;
     progress.start(plan.total_samples());
     let res = execute::execute(&plan, &pool, progress, settings);
     progress.finish();
@@ -107,7 +110,7 @@ pub fn run(
     let drawn = match figures {
         Some(figures) => Some(
             (0..plan.scenes.len())
-                .map(|si| figures.draw(&plan, &res, si))
+                .map(|si| figures.draw(&plan, &res, si).map_err(Error::Figures))
                 .collect::<Result<Vec<_>>>()?,
         ),
         None => None,

@@ -9,8 +9,7 @@
 //!   channels (1 when B is black there), the same peak for every channel;
 //! - `mean difference = mean (A − B)`: the bias when A averages independent renders.
 
-use anyhow::{bail, Result};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use tress_core::Image;
 
 /// ε of the relative MSE.
@@ -256,15 +255,25 @@ pub fn error_map(a: &Image, b: &Image, rect: Rect, kind: MapKind) -> Vec<f32> {
 /// Refuses an image (read from `path`) holding NaN or infinite pixels, to be compared with
 /// another: one NaN makes every metric NaN, which `diff` printed, and a study wrote into its
 /// summary, with success.
-pub fn check_finite(image: &Image, path: &Path) -> Result<()> {
-    let bad = image.pixels.iter().filter(|p| !p.is_finite()).count();
-    if bad > 0 {
-        bail!(
-            "{}: {bad} pixels are NaN or infinite; the error metrics would be NaN",
-            path.display()
-        );
+pub fn check_finite(image: &Image, path: &Path) -> Result<(), NotFinite> {
+    let pixels = image.pixels.iter().filter(|p| !p.is_finite()).count();
+    if pixels > 0 {
+        return Err(NotFinite {
+            path: path.to_owned(),
+            pixels,
+        });
     }
     Ok(())
+}
+
+/// An image holding NaN or infinite pixels ([`check_finite`]).
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {pixels} pixels are NaN or infinite; the error metrics would be NaN", path.display())]
+pub struct NotFinite {
+    /// The image's file.
+    pub path: PathBuf,
+    /// How many of its pixels are NaN or infinite.
+    pub pixels: usize,
 }
 
 #[cfg(test)]

@@ -1,9 +1,9 @@
 //! The plan: the study resolved against its file, `--quick` and the caller's settings; seeds
 //! and hashes.
 
+use crate::error::{Error, Result, SceneError};
 use crate::file::{FilmOverride, Reference, References, RegionDesc, SceneRef, Study};
 use crate::metrics::Rect;
-use anyhow::{anyhow, Context, Result};
 use std::path::{Path, PathBuf};
 use tress_core::output_file::Inputs;
 use tress_core::rng::hash_words;
@@ -176,8 +176,20 @@ pub(super) fn middle_spp(spp: &[u32]) -> u32 {
 }
 
 /// An error about the study file `path`.
-fn error_at(path: &Path, what: String) -> anyhow::Error {
-    anyhow!("{}: {what}", path.display())
+fn error_at(path: &Path, message: String) -> Error {
+    Error::Invalid {
+        path: path.to_owned(),
+        message,
+    }
+}
+
+/// An error of the study's scene at `place` (`scenes[i]`, `scene 'name'`).
+fn scene_error(path: &Path, place: String, source: SceneError) -> Error {
+    Error::Scene {
+        path: path.to_owned(),
+        place,
+        source: Box::new(source),
+    }
 }
 
 /// Refuses an spp list that is empty, or not positive and strictly increasing.
@@ -401,7 +413,7 @@ fn scene_source(i: usize, scene: SceneRef, path: &Path) -> Result<SceneSource> {
         SceneRef::File(p) => {
             let file = resolve(path, &p);
             let desc = scene_desc::load(&file)
-                .with_context(|| format!("{}: scenes[{i}]", path.display()))?;
+                .map_err(|e| scene_error(path, format!("scenes[{i}]"), e.into()))?;
             let name: String = file
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
@@ -456,7 +468,7 @@ impl FilmPlan {
         film.spp = 1;
         film.seed = 0;
         film.validate()
-            .map_err(|e| error_at(path, format!("scene '{name}': film: {e}")))?;
+            .map_err(|e| scene_error(path, format!("scene '{name}'"), SceneError::Film(e)))?;
         let (w0, h0) = (film.width, film.height);
         if let Some((quick_film, exr_reference)) = self.quick {
             match quick_film {
@@ -471,8 +483,10 @@ impl FilmPlan {
                 }
                 None => {}
             }
-            film.validate()
-                .map_err(|e| error_at(path, format!("quick.film: {e}")))?;
+            film.validate().map_err(|source| Error::QuickFilm {
+                path: path.to_owned(),
+                source,
+            })?;
         }
         Ok((w0, h0))
     }
@@ -519,7 +533,7 @@ fn content_hash(desc: &SceneDesc, base: &Path, name: &str, path: &Path) -> Resul
     keyed.integrator = IntegratorDesc::default();
     let files = desc
         .files_hash(base)
-        .map_err(|e| error_at(path, format!("scene '{name}': {e}")))?;
+        .map_err(|e| scene_error(path, format!("scene '{name}'"), e.into()))?;
     Ok(str_hash(&format!(
         "{}|{}|{files:016x}|tress {}",
         ron::to_string(&keyed).unwrap_or_else(|_| format!("{keyed:?}")),

@@ -1,9 +1,9 @@
 //! Rendering the jobs, with the cache of EXRs in the output folder.
 
 use crate::cost::timed;
+use crate::error::{Error, Result};
 use crate::plan::{pixels_hash, str_hash, PlanIntegrator, PlanScene};
 use crate::progress::Progress;
-use anyhow::{Context, Result};
 use std::collections::hash_map::Entry;
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -162,8 +162,10 @@ impl SceneRunner<'_> {
                             built_now.iter().for_each(|line| self.progress.note(line));
                         }
                     })
-                    .with_context(|| {
-                        format!("{}: integrator {}", scene.source, job.integrator.ron)
+                    .map_err(|e| Error::Integrator {
+                        scene: scene.source.clone(),
+                        integrator: job.integrator.ron.clone(),
+                        source: e.source,
                     })?,
             ),
         };
@@ -200,16 +202,18 @@ impl SceneRunner<'_> {
             ("tress:pixels_hash", pixels_hash(&output.image)),
         ];
         if let Some(dir) = job.exr.parent() {
-            std::fs::create_dir_all(dir)
-                .with_context(|| format!("creating output folder {}", dir.display()))?;
+            std::fs::create_dir_all(dir).map_err(|source| Error::CreateFolder {
+                path: dir.to_owned(),
+                source,
+            })?;
         }
         // Both or neither: a cached EXR is read back on the next run, its PNG is not.
         let mut files = Batch::new(self.inputs);
         files.add(&job.exr, |out| {
-            Ok::<_, anyhow::Error>(image_io::write_exr(out, &output.image, &attributes)?)
+            Ok::<_, Error>(image_io::write_exr(out, &output.image, &attributes)?)
         })?;
         files.add(&job.exr.with_extension("png"), |out| {
-            Ok::<_, anyhow::Error>(image_io::write_png(out, &output.image, 0.0)?)
+            Ok::<_, Error>(image_io::write_png(out, &output.image, 0.0)?)
         })?;
         files.commit()?;
         self.rendered += 1;

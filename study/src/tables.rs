@@ -1,11 +1,11 @@
 //! Outputs: `results.csv`, `summary.csv` and `report.md`.
 
+use crate::error::Result;
 use crate::figures::FigureFiles;
 use crate::metrics::REL_EPSILON;
 use crate::plan::{Plan, PlanReference};
 use crate::results::{RefKind, Results};
 use crate::stats::{curve, extrapolated_reach, loglog_at, reach, verdict, Point, Reach, Stat};
-use anyhow::Result;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use tress_core::output_file;

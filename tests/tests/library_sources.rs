@@ -25,10 +25,6 @@ use crate::workspace;
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::path::{Path, PathBuf};
 
-/// The workspace members that are front ends (may read the environment); every other member
-/// is a library crate.
-const FRONT_ENDS: [&str; 2] = ["cli", "python"];
-
 // ---------------------------------------------------------------------------------------------
 // Lexing: identifiers, `::` and punctuation with their lines; comments, literals and
 // lifetimes cannot be mistaken for paths.
@@ -599,15 +595,6 @@ struct Crate {
     index: HashMap<Vec<String>, usize>,
 }
 
-/// The library members of the workspace at `root`: those its `Cargo.toml` lists, bar the
-/// front ends.
-fn library_members(root: &Path) -> Result<Vec<String>, String> {
-    Ok(workspace::members(root)?
-        .into_iter()
-        .filter(|m| !FRONT_ENDS.contains(&m.as_str()))
-        .collect())
-}
-
 fn rs_files(dir: &Path, out: &mut Vec<PathBuf>) -> Result<(), String> {
     let entries = std::fs::read_dir(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     for entry in entries {
@@ -881,7 +868,7 @@ impl Crate {
 
 /// Runs `rule` over every library crate of the workspace at `root`; the problems found.
 fn check_workspace(root: &Path, rule: impl Fn(&Crate) -> Vec<String>) -> Vec<String> {
-    let members = match library_members(root) {
+    let members = match workspace::library_members(root) {
         Ok(m) => m,
         Err(e) => return vec![e],
     };
@@ -1104,7 +1091,10 @@ fn mutable_statics_are_found_and_constant_ones_pass() {
 #[test]
 fn the_library_members_come_from_the_root_manifest() {
     let ws = workspace(&["core", "scene", "cli", "python"], &[]);
-    assert_eq!(library_members(ws.path()).unwrap(), ["core", "scene"]);
+    assert_eq!(
+        workspace::library_members(ws.path()).unwrap(),
+        ["core", "scene"]
+    );
     // A member whose sources cannot be read is a failure, not a pass.
     let found = check_workspace(ws.path(), Crate::cycles);
     assert_eq!(found.len(), 2, "{found:?}");

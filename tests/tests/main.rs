@@ -11,6 +11,7 @@ mod dual_scattering;
 mod furnace;
 mod groom_inputs;
 mod guided;
+mod library_dependencies;
 mod library_sources;
 mod outputs;
 mod radiance_cache;

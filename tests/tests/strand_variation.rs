@@ -169,7 +169,8 @@ fn hair_file_colours_reach_the_shaded_material() {
         let desc = parse(&text.replace("coloured.hair", file)).unwrap();
         match build(&desc, &dir.join("scene.ron"), &Default::default()) {
             Ok(_) => panic!("{file}: the scene built"),
-            Err(e) => e.to_string(),
+            // The message the command line prints: the error and its causes.
+            Err(e) => format!("{:#}", anyhow::Error::new(e)),
         }
     };
     let e = error_with("black.hair");

@@ -1,5 +1,6 @@
 //! The workspace these tests check: its root folder and its members, read from the root
-//! `Cargo.toml`, for the tests that read the sources (library_sources, test_files, docs_links).
+//! `Cargo.toml`, for the tests that read the sources and manifests (library_sources,
+//! library_dependencies, test_files, docs_links).
 
 use std::path::{Path, PathBuf};
 
@@ -36,4 +37,17 @@ pub fn members(root: &Path) -> Result<Vec<String>, String> {
         return Err(format!("{}: `members` is empty", manifest.display()));
     }
     Ok(members)
+}
+
+/// The workspace members that are front ends (may read the environment, may use anyhow);
+/// every other member is a library crate.
+const FRONT_ENDS: [&str; 2] = ["cli", "python"];
+
+/// The library members of the workspace at `root`: those its `Cargo.toml` lists, bar the
+/// front ends.
+pub fn library_members(root: &Path) -> Result<Vec<String>, String> {
+    Ok(members(root)?
+        .into_iter()
+        .filter(|m| !FRONT_ENDS.contains(&m.as_str()))
+        .collect())
 }

@@ -53,14 +53,14 @@ pub const MAX_EXTENT: f32 = 1e18;
 fn check_extent(object: &str, bounds: &Aabb) -> Result<()> {
     let reach = bounds.min.abs().max(bounds.max.abs()).max_element();
     if reach.is_nan() || reach > MAX_EXTENT {
-        return Err(Error::InvalidGeometry {
+        return Err(Error::InvalidGeometry(tress_groom::InvalidGeometry {
             object: object.to_owned(),
             reason: format!(
                 "reaches {reach:e} from the origin (bounds {} to {}), beyond the {MAX_EXTENT:e} \
                  that f32 ray tests can square: scale the scene down",
                 bounds.min, bounds.max
             ),
-        });
+        }));
     }
     Ok(())
 }
@@ -341,9 +341,11 @@ impl SceneBuilder {
     fn plan(&mut self, object: &str, what: &str, bytes: f64) -> Result<()> {
         self.limits()
             .check_scene_memory(bytes / GIB)
-            .map_err(|reason| Error::InvalidGeometry {
-                object: object.to_owned(),
-                reason: format!("{what} need {reason}"),
+            .map_err(|reason| {
+                Error::InvalidGeometry(tress_groom::InvalidGeometry {
+                    object: object.to_owned(),
+                    reason: format!("{what} need {reason}"),
+                })
             })?;
         self.planned_bytes += bytes;
         Ok(())
@@ -528,18 +530,18 @@ impl SceneBuilder {
     pub fn add_sphere(mut self, center: Vec3, radius: f32, material: u32) -> Result<Self> {
         let name = format!("sphere #{}", self.spheres.len());
         if !center.is_finite() {
-            return Err(Error::InvalidOption {
+            return Err(Error::InvalidOption(tress_groom::InvalidOption {
                 object: name,
                 field: "center",
                 reason: format!("must be finite, got {center:?}"),
-            });
+            }));
         }
         if !(radius.is_finite() && radius > 0.0) {
-            return Err(Error::InvalidOption {
+            return Err(Error::InvalidOption(tress_groom::InvalidOption {
                 object: name,
                 field: "radius",
                 reason: format!("must be finite and positive, got {radius}"),
-            });
+            }));
         }
         let bounds = Aabb {
             min: center - Vec3::splat(radius),
@@ -878,16 +880,16 @@ impl Curves {
             c.points += n;
         }
         if c.data.first_cp.is_empty() {
-            return Err(Error::InvalidGeometry {
+            return Err(Error::InvalidGeometry(tress_groom::InvalidGeometry {
                 object: hair.name.clone(),
                 reason: "no strand has a segment of non-zero length".into(),
-            });
+            }));
         }
         if c.data.cps.len() > u32::MAX as usize {
-            return Err(Error::InvalidGeometry {
+            return Err(Error::InvalidGeometry(tress_groom::InvalidGeometry {
                 object: hair.name.clone(),
                 reason: "too many control points for one Embree geometry".into(),
-            });
+            }));
         }
         Ok(c)
     }
@@ -901,9 +903,11 @@ impl Curves {
                 m..m + 1
             }
             Materials::PerSegment(choose) => {
-                let fail = |reason: String| Error::InvalidGeometry {
-                    object: object.to_owned(),
-                    reason,
+                let fail = |reason: String| {
+                    Error::InvalidGeometry(tress_groom::InvalidGeometry {
+                        object: object.to_owned(),
+                        reason,
+                    })
                 };
                 let chosen = choose(&segments).map_err(fail)?;
                 if chosen.len() != segments.len() {

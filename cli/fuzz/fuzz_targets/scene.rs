@@ -20,6 +20,6 @@ fuzz_target!(|data: &[u8]| {
                 }
             }
         }
-        Err(message) => assert!(!message.is_empty()),
+        Err(error) => assert!(!error.to_string().is_empty()),
     }
 });

@@ -596,9 +596,7 @@ fn bench_model(
         .iter()
         .filter(|d| spec.all_integrators || d.name() == "path")
     {
-        let integrator = desc
-            .build(&scene, prep)
-            .map_err(|e| anyhow!("integrator {}: {e:#}", desc.name()))?;
+        let integrator = desc.build(&scene, prep)?;
         renders.bench(desc, integrator.as_ref(), table, per_sample);
     }
     if let Some(peak) = peak_rss() {

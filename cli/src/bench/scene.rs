@@ -7,7 +7,7 @@
 
 use super::renders::CountingAccel;
 use super::{Accels, ModelRenders, Plan, Table, Timing};
-use anyhow::{anyhow, Result};
+use anyhow::{Context, Result};
 use rayon::ThreadPool;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
@@ -55,7 +55,7 @@ pub(super) fn bench_scene(
     let prep = Preparation::with_limits(limits);
     let integrator = big_pool
         .install(|| desc.integrator.build(&built.scene, &prep))
-        .map_err(|e| anyhow!("{}: integrator: {e:#}", path.display()))?;
+        .with_context(|| path.display().to_string())?;
     // A per-film precomputation (a radiance cache) is made once, untimed: the rows measure
     // the render that follows it.
     let never = std::sync::atomic::AtomicBool::new(false);

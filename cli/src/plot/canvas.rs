@@ -77,8 +77,7 @@ pub(super) fn draw_bitmap(
         root.present()
             .map_err(|e| anyhow!("drawing {}: {e}", out.path().display()))?;
     }
-    // The message names the file and its cause: anyhow would print the cause a second time.
-    image_io::write_srgb_png(out, w, h, &rgb).map_err(|e| anyhow!("{e}"))
+    Ok(image_io::write_srgb_png(out, w, h, &rgb)?)
 }
 
 /// Draws `pic` with its top left corner at `pos`.

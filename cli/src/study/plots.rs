@@ -5,14 +5,19 @@ use anyhow::Result;
 use tress_study::metrics::MapKind;
 use tress_study::picture::Picture;
 use tress_study::{
-    curve, sheet_regions, FigureFiles, Figures, Plan, Point, RefKind, Results, Stat,
+    curve, sheet_regions, FigureFiles, Figures, FiguresError, Plan, Point, RefKind, Results, Stat,
 };
 
 /// Draws the figures with plotters.
 pub(super) struct Plots;
 
 impl Figures for Plots {
-    fn draw(&self, plan: &Plan, results: &Results, scene: usize) -> Result<FigureFiles> {
+    fn draw(
+        &self,
+        plan: &Plan,
+        results: &Results,
+        scene: usize,
+    ) -> Result<FigureFiles, FiguresError> {
         let plots = write_plots(plan, results, scene)?;
         let (heat_map, scale, sheets) = write_figures(plan, results, scene)?;
         Ok(FigureFiles {
