@@ -913,17 +913,32 @@ impl Huang {
         unreachable!("the loop returns at its last node")
     }
 
-    /// `f` over every far-field node, weighted by the rule.
+    /// `f` over every far-field node, weighted by the rule; `known` is a node's geometry the
+    /// caller has already computed (with `needs`).
     fn far_sum<T: std::ops::Add<Output = T> + std::ops::Mul<f32, Output = T>>(
         &self,
         wo: Vec3,
         needs: Needs,
+        known: Option<(usize, &Geometry)>,
         zero: T,
         f: impl Fn(&Geometry) -> T,
     ) -> T {
-        GL_X.iter().zip(GL_W).fold(zero, |acc, (&h, w)| {
-            acc + f(&self.geometry(wo, h, needs)) * (0.5 * w)
+        (0..GL_X.len()).fold(zero, |acc, i| {
+            let v = match known {
+                Some((j, g)) if j == i => f(g),
+                _ => f(&self.geometry(wo, GL_X[i], needs)),
+            };
+            acc + v * (0.5 * GL_W[i])
         })
+    }
+
+    /// `(eval, pdf)` of the far field at `wi`.
+    fn far_eval_pdf(&self, wo: Vec3, wi: Vec3, known: Option<(usize, &Geometry)>) -> (Rgb, f32) {
+        let Pair(f, pdf) = self.far_sum(wo, BOTH, known, Pair(Rgb::ZERO, 0.0), |g| {
+            let (f, p) = self.eval_pdf_at(g, wi);
+            Pair(f, p)
+        });
+        (f, pdf)
     }
 }
 
@@ -934,7 +949,7 @@ impl Bcsdf for Huang {
             l[0] + l[1] + l[2] + l[3]
         };
         if self.far_field {
-            self.far_sum(wo, EVAL, Rgb::ZERO, sum)
+            self.far_sum(wo, EVAL, None, Rgb::ZERO, sum)
         } else {
             sum(&self.geometry(wo, h, EVAL))
         }
@@ -942,10 +957,11 @@ impl Bcsdf for Huang {
 
     fn sample(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<BcsdfSample> {
         let (f, pdf, wi) = if self.far_field {
+            // The node drawn from is one of the rule's nodes evaluated at the new direction.
             let (j, u3) = Self::far_node(u[3]);
-            let wi = self.draw(&self.geometry(wo, GL_X[j], SAMPLING), [u[0], u[1], u3]);
-            let wi = wi.try_normalize()?;
-            let (f, pdf) = self.eval_pdf(wo, wi, h);
+            let g = self.geometry(wo, GL_X[j], BOTH);
+            let wi = self.draw(&g, [u[0], u[1], u3]).try_normalize()?;
+            let (f, pdf) = self.far_eval_pdf(wo, wi, Some((j, &g)));
             (f, pdf, wi)
         } else {
             // The geometry drawn from is the one evaluated at the new direction.
@@ -959,7 +975,7 @@ impl Bcsdf for Huang {
 
     fn pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> f32 {
         if self.far_field {
-            self.far_sum(wo, SAMPLING, 0.0, |g| self.pdf_at(g, wi))
+            self.far_sum(wo, SAMPLING, None, 0.0, |g| self.pdf_at(g, wi))
         } else {
             self.pdf_at(&self.geometry(wo, h, SAMPLING), wi)
         }
@@ -967,11 +983,7 @@ impl Bcsdf for Huang {
 
     fn eval_pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> (Rgb, f32) {
         if self.far_field {
-            let Pair(f, pdf) = self.far_sum(wo, BOTH, Pair(Rgb::ZERO, 0.0), |g| {
-                let (f, p) = self.eval_pdf_at(g, wi);
-                Pair(f, p)
-            });
-            (f, pdf)
+            self.far_eval_pdf(wo, wi, None)
         } else {
             self.eval_pdf_at(&self.geometry(wo, h, BOTH), wi)
         }
@@ -986,7 +998,7 @@ impl Bcsdf for Huang {
             return Rgb::ZERO;
         }
         if self.far_field {
-            self.far_sum(wo, EVAL, Rgb::ZERO, |g| self.lobes(g, wi)[p])
+            self.far_sum(wo, EVAL, None, Rgb::ZERO, |g| self.lobes(g, wi)[p])
         } else {
             self.lobes(&self.geometry(wo, h, EVAL), wi)[p]
         }
