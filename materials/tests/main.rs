@@ -7,3 +7,4 @@
 
 mod bcsdf_statistics;
 mod chiang_reference;
+mod huang_reference;
