@@ -35,6 +35,10 @@ pub struct EnvironmentMap {
     integral: f32,
     /// Rotation about +y in radians.
     rotation: f32,
+    /// How far inside its texel, as a fraction of the texel's width and height, a sampled
+    /// point must lie for the texel that `uv_of` finds for its direction to be certainly the
+    /// one drawn (see [`EnvironmentMap::sample`]).
+    interior: Vec2,
 }
 
 /// Texel k and entry k of the alias table over the texels, with the radiance of the entry's
@@ -221,6 +225,7 @@ impl EnvironmentMap {
             .map(|(k, &p)| importance(p, row_sin[k / w]))
             .collect();
         let distribution = Distribution1D::new(&func);
+        let rotation = rotation_deg.to_radians();
         let cells = pixels
             .iter()
             .enumerate()
@@ -240,7 +245,8 @@ impl EnvironmentMap {
             cells,
             row_sin,
             integral: distribution.integral(),
-            rotation: rotation_deg.to_radians(),
+            rotation,
+            interior: interior_margins(w, h, rotation),
         })
     }
 
@@ -256,9 +262,13 @@ impl EnvironmentMap {
         let theta = r.atan2(d.y);
         let phi = d.x.atan2(-d.z) + self.rotation;
         let u = (phi * (0.5 * FRAC_1_PI) + 0.5).rem_euclid(1.0);
-        let len = d.length();
-        let sin_theta = if len > 0.0 { r / len } else { 0.0 };
-        (Vec2::new(u, theta * FRAC_1_PI), sin_theta)
+        (Vec2::new(u, theta * FRAC_1_PI), sin_theta_of(d, r))
+    }
+
+    /// The direction of map point `uv`: the inverse of [`Self::uv_of`].
+    #[inline]
+    fn direction_at(&self, uv: Vec2) -> Vec3 {
+        map_direction(0.5 * PI - uv.y * PI, (uv.x - 0.5) * TAU - self.rotation)
     }
 
     /// Radiance arriving from direction `dir` (nearest texel).
@@ -376,12 +386,18 @@ impl EnvironmentMap {
             (i as f32 + du) / self.width as f32,
             (j as f32 + dv) / self.height as f32,
         );
-        let wi = map_direction(0.5 * PI - uv.y * PI, (uv.x - 0.5) * TAU - self.rotation);
-        // Density and radiance are re-derived from `wi` so that they equal `pdf(wi)` and
-        // `radiance(wi)` bit for bit; the texel is the one drawn, whose radiance is at hand,
-        // unless rounding moved `wi` across its edge.
-        let (uv, sin_theta) = self.uv_of(wi);
-        let (t, row) = self.texel_at(uv);
+        let wi = self.direction_at(uv);
+        // Density and radiance are those `pdf(wi)` and `radiance(wi)` return, bit for bit: of
+        // the texel `uv_of(wi)` falls in, which is the one drawn unless rounding moved `wi`
+        // across its edge. Inside the margins it cannot have, and the drawn texel is taken
+        // without `uv_of`'s two arc tangents (a quarter of a light sample's time).
+        let inside = |d: f32, margin: f32| d >= margin && d <= 1.0 - margin;
+        let (t, row) = if inside(du, self.interior.x) && inside(dv, self.interior.y) {
+            (k, j)
+        } else {
+            self.texel_at(self.uv_of(wi).0)
+        };
+        let sin_theta = sin_theta_of(wi, wi.x.hypot(wi.z));
         let radiance = if t == k {
             drawn
         } else {
@@ -404,6 +420,32 @@ impl EnvironmentMap {
 /// Steps of the row offset inside a texel taken from the top bits of what is left of the
 /// second sampling number (the other bits give the column offset).
 const JITTER_STEPS: f32 = 4096.0;
+
+/// sin θ of direction `d` (need not be normalised) whose distance from the y axis is `r`; 0
+/// for the zero vector.
+#[inline]
+fn sin_theta_of(d: Vec3, r: f32) -> f32 {
+    let len = d.length();
+    if len > 0.0 {
+        r / len
+    } else {
+        0.0
+    }
+}
+
+/// Fractions of a texel's width and height that bound how far rounding can move a point
+/// sampled in the texel, on its way to a direction and back through `uv_of`, on a `width` ×
+/// `height` map rotated by `rotation` radians. Each step (the point's (u, v), the angles,
+/// their sines and cosines, the arc tangents, adding the rotation) is accurate to a few units
+/// of f32 rounding (ε) of the angles involved, which reach π + |rotation|: 64 ε of those,
+/// over the angle a texel spans, is over ten times what they can add up to.
+fn interior_margins(width: usize, height: usize, rotation: f32) -> Vec2 {
+    let slack = 64.0 * f32::EPSILON;
+    Vec2::new(
+        slack * (TAU + rotation.abs()) / TAU * width as f32,
+        slack * height as f32,
+    )
+}
 
 /// A texel's sampling weight: its luminance times its row's mean sin θ, i.e. ∝ its power.
 #[inline]
@@ -682,7 +724,15 @@ mod tests {
 
     #[test]
     fn sample_agrees_with_radiance_and_pdf() {
-        let env = synthetic_map(37.5);
+        for rotation in [37.5, 7000.0] {
+            sample_agrees_on(&synthetic_map(rotation));
+        }
+        if Path::new(VENICE).exists() {
+            sample_agrees_on(&EnvironmentMap::from_file(VENICE, 120.0, 1.0).unwrap());
+        }
+    }
+
+    fn sample_agrees_on(env: &EnvironmentMap) {
         let mut s = Sampler::from_seed(2);
         let mut returned = 0;
         for _ in 0..200_000 {
@@ -700,6 +750,38 @@ mod tests {
             }
         }
         assert!(returned > 199_990, "{returned}");
+    }
+
+    /// A point as far inside its texel as `interior` allows (the worst case of
+    /// `EnvironmentMap::sample`'s shortcut) maps to a direction that `uv_of` puts back in the
+    /// same texel, for every texel of the real map, turned as scenes turn it and far beyond.
+    #[test]
+    fn points_inside_the_margins_stay_in_their_texel() {
+        let maps: Vec<EnvironmentMap> = if Path::new(VENICE).exists() {
+            [0.0, 120.0, -200.0, 7000.0]
+                .iter()
+                .map(|&r| EnvironmentMap::from_file(VENICE, r, 1.0).unwrap())
+                .collect()
+        } else {
+            vec![synthetic_map(37.5), synthetic_map(7000.0)]
+        };
+        for env in &maps {
+            let (w, h) = (env.width, env.height);
+            let m = env.interior;
+            assert!(m.x < 0.2 && m.y < 0.01, "{m}");
+            for j in 0..h {
+                for i in 0..w {
+                    for (du, dv) in [(m.x, m.y), (1.0 - m.x, m.y), (m.x, 1.0 - m.y)]
+                        .into_iter()
+                        .chain([(1.0 - m.x, 1.0 - m.y)])
+                    {
+                        let uv = Vec2::new((i as f32 + du) / w as f32, (j as f32 + dv) / h as f32);
+                        let found = env.texel_at(env.uv_of(env.direction_at(uv)).0);
+                        assert_eq!(found, (j * w + i, j), "texel ({i}, {j}), ({du}, {dv})");
+                    }
+                }
+            }
+        }
     }
 
     /// pbrt-v3#62: the sampled texel must be the texel whose radiance the lookup returns,
