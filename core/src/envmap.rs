@@ -8,15 +8,17 @@
 //! Sampling picks a texel ∝ luminance × sin θ (sin θ averaged over the texel's row) from one
 //! alias table over all texels, places (u, v) uniformly in it and maps it to the sphere; the
 //! solid-angle density is pdf(ω) = pdf_uv(u, v) / (2π² sin θ), since
-//! dω = sin θ dθ dφ = 2π² sin θ du dv. Each texel keeps its radiance and pdf_uv side by side,
-//! so a light sample reads two table entries (the alias entry and the texel), where a marginal
-//! and conditional distribution read four to five scattered ones: with a 1k map beside the
-//! BVH these are cache misses, and they were the largest item of the path tracer's profile.
+//! dω = sin θ dθ dφ = 2π² sin θ du dv. With a 1k map beside the BVH every table read is a
+//! cache miss, and they were the largest item of the path tracer's profile: a marginal and
+//! conditional distribution read four to five scattered entries. Here one 32-byte record per
+//! texel holds its radiance, its alias entry and the radiance of that entry's alias, and
+//! pdf_uv is recomputed from the radiance and a per-row factor, so a light sample reads one
+//! record whichever texel it draws, and an escape one record.
 
 use crate::image_io::{read_rgb, ImageError};
 use crate::light_sample::{LightSample, MAX_LIGHT};
 use crate::math::{luminance, Rgb, Vec2, Vec3};
-use crate::sampling::Distribution1D;
+use crate::sampling::{alias_choose, prefetch, Distribution1D};
 use std::f32::consts::{FRAC_1_PI, PI, TAU};
 use std::path::Path;
 
@@ -25,21 +27,33 @@ use std::path::Path;
 pub struct EnvironmentMap {
     width: usize,
     height: usize,
-    /// Row-major texels, top row (zenith) first.
-    texels: Vec<Texel>,
+    /// Row-major, top row (zenith) first.
+    cells: Vec<Cell>,
+    /// Per row: the mean sin θ, which weighs its texels' luminance in the sampling density.
+    row_sin: Vec<f32>,
+    /// Mean importance over the texels (0 for a black map, which is sampled uniformly).
+    integral: f32,
     /// Rotation about +y in radians.
     rotation: f32,
-    /// Over the texels, row-major.
-    distribution: Distribution1D,
+    /// How far inside its texel, as a fraction of the texel's width and height, a sampled
+    /// point must lie for the texel that `uv_of` finds for its direction to be certainly the
+    /// one drawn (see [`EnvironmentMap::sample`]).
+    interior: Vec2,
 }
 
-/// What a lookup needs of a texel, in one place.
+/// Texel k and entry k of the alias table over the texels, with the radiance of the entry's
+/// alias: a light sample reads this one record whichever of the two texels it takes. 32 bytes,
+/// aligned, so a record never straddles two cache lines.
 #[derive(Clone, Copy, Debug)]
-struct Texel {
+#[repr(C, align(32))]
+struct Cell {
     /// Already multiplied by the scale.
     radiance: Rgb,
-    /// Density of sampling (u, v) in this texel, w.r.t. area in [0, 1)².
-    pdf_uv: f32,
+    /// The probability that entry k takes texel k, else it takes texel `alias`.
+    keep: f32,
+    alias: u32,
+    /// The radiance of texel `alias`.
+    alias_radiance: Rgb,
 }
 
 impl EnvironmentMap {
@@ -199,31 +213,40 @@ impl EnvironmentMap {
             tracing::warn!("{origin}: clamped {clamped} pixels with negative components to 0");
         }
         // Importance ∝ luminance × the row's mean sin θ, i.e. ∝ the texel's power.
-        let mut func = Vec::with_capacity(w * h);
-        for j in 0..h {
-            let (t0, t1) = (PI * j as f32 / h as f32, PI * (j + 1) as f32 / h as f32);
-            let mean_sin = (t0.cos() - t1.cos()) / (t1 - t0);
-            func.extend(
-                pixels[j * w..(j + 1) * w]
-                    .iter()
-                    .map(|&p| luminance(p) * mean_sin),
-            );
-        }
-        let distribution = Distribution1D::new(&func);
-        let texels = pixels
+        let row_sin: Vec<f32> = (0..h)
+            .map(|j| {
+                let (t0, t1) = (PI * j as f32 / h as f32, PI * (j + 1) as f32 / h as f32);
+                (t0.cos() - t1.cos()) / (t1 - t0)
+            })
+            .collect();
+        let func: Vec<f32> = pixels
             .iter()
             .enumerate()
-            .map(|(k, &radiance)| Texel {
-                radiance,
-                pdf_uv: distribution.pdf_cell(k),
+            .map(|(k, &p)| importance(p, row_sin[k / w]))
+            .collect();
+        let distribution = Distribution1D::new(&func);
+        let rotation = rotation_deg.to_radians();
+        let cells = pixels
+            .iter()
+            .enumerate()
+            .map(|(k, &radiance)| {
+                let (keep, alias) = distribution.alias_entry(k);
+                Cell {
+                    radiance,
+                    keep,
+                    alias,
+                    alias_radiance: pixels[alias as usize],
+                }
             })
             .collect();
         Ok(EnvironmentMap {
             width: w,
             height: h,
-            distribution,
-            texels,
-            rotation: rotation_deg.to_radians(),
+            cells,
+            row_sin,
+            integral: distribution.integral(),
+            rotation,
+            interior: interior_margins(w, h, rotation),
         })
     }
 
@@ -239,14 +262,18 @@ impl EnvironmentMap {
         let theta = r.atan2(d.y);
         let phi = d.x.atan2(-d.z) + self.rotation;
         let u = (phi * (0.5 * FRAC_1_PI) + 0.5).rem_euclid(1.0);
-        let len = d.length();
-        let sin_theta = if len > 0.0 { r / len } else { 0.0 };
-        (Vec2::new(u, theta * FRAC_1_PI), sin_theta)
+        (Vec2::new(u, theta * FRAC_1_PI), sin_theta_of(d, r))
+    }
+
+    /// The direction of map point `uv`: the inverse of [`Self::uv_of`].
+    #[inline]
+    fn direction_at(&self, uv: Vec2) -> Vec3 {
+        map_direction(0.5 * PI - uv.y * PI, (uv.x - 0.5) * TAU - self.rotation)
     }
 
     /// Radiance arriving from direction `dir` (nearest texel).
     pub fn radiance(&self, dir: Vec3) -> Rgb {
-        self.texel_at(self.uv_of(dir).0).radiance
+        self.cells[self.texel_at(self.uv_of(dir).0).0].radiance
     }
 
     /// Radiance from `dir` interpolated bilinearly between the four nearest texel centres (u
@@ -263,42 +290,71 @@ impl EnvironmentMap {
         let column = |i: i64| i.rem_euclid(w) as usize;
         let row = |j: i64| j.clamp(0, h - 1) as usize;
         let (i0, j0) = (x0 as i64, y0 as i64);
-        let at = |i: i64, j: i64| self.texels[row(j) * self.width + column(i)].radiance;
+        let at = |i: i64, j: i64| self.cells[row(j) * self.width + column(i)].radiance;
         let top = at(i0, j0) * (1.0 - fx) + at(i0 + 1, j0) * fx;
         let bottom = at(i0, j0 + 1) * (1.0 - fx) + at(i0 + 1, j0 + 1) * fx;
         top * (1.0 - fy) + bottom * fy
     }
 
-    /// The texel whose cell holds `uv`: the one cell arithmetic of lookups, densities and
-    /// sampling.
+    /// The texel whose cell holds `uv`, as its index and row: the one cell arithmetic of
+    /// lookups, densities and sampling.
     #[inline]
-    fn texel_at(&self, uv: Vec2) -> Texel {
+    fn texel_at(&self, uv: Vec2) -> (usize, usize) {
         let i = ((uv.x * self.width as f32) as usize).min(self.width - 1);
         let j = ((uv.y * self.height as f32) as usize).min(self.height - 1);
-        self.texels[j * self.width + i]
+        (j * self.width + i, j)
+    }
+
+    /// Density of sampling (u, v) in a texel of row `row` with this radiance, w.r.t. area in
+    /// [0, 1)²: the distribution's `Distribution1D::pdf_cell`, recomputed from the radiance in
+    /// the same operations (bit for bit: tested), so that no table of densities is read.
+    #[inline]
+    fn pdf_uv(&self, radiance: Rgb, row: usize) -> f32 {
+        if self.integral > 0.0 {
+            importance(radiance, self.row_sin[row]) / self.integral
+        } else {
+            1.0
+        }
+    }
+
+    /// Solid-angle density of a direction at polar angle sin θ (0 at the poles) in a texel
+    /// of row `row` with this radiance.
+    #[inline]
+    fn solid_angle_pdf(&self, radiance: Rgb, row: usize, sin_theta: f32) -> f32 {
+        if sin_theta <= 0.0 {
+            return 0.0;
+        }
+        self.pdf_uv(radiance, row) / (2.0 * PI * PI * sin_theta)
     }
 
     /// `(radiance(dir), pdf(dir))`, locating the texel once: what a path that escapes toward
     /// the map needs for its MIS weight.
     pub fn radiance_pdf(&self, dir: Vec3) -> (Rgb, f32) {
         let (uv, sin_theta) = self.uv_of(dir);
-        let texel = self.texel_at(uv);
-        (texel.radiance, solid_angle_pdf(texel, sin_theta))
+        let (k, row) = self.texel_at(uv);
+        let radiance = self.cells[k].radiance;
+        (radiance, self.solid_angle_pdf(radiance, row, sin_theta))
     }
 
-    /// Asks for the texel that [`EnvironmentMap::radiance_pdf`] reads for `dir` to be brought
-    /// into the cache (a hint; it changes no result).
-    pub fn prefetch_radiance(&self, dir: Vec3) {
-        let uv = self.uv_of(dir).0;
-        let i = ((uv.x * self.width as f32) as usize).min(self.width - 1);
-        let j = ((uv.y * self.height as f32) as usize).min(self.height - 1);
-        crate::sampling::prefetch(&self.texels[j * self.width + i]);
-    }
-
-    /// Asks for the alias entry that [`EnvironmentMap::sample`] reads first for `u` to be
+    /// Asks for the record that [`EnvironmentMap::radiance_pdf`] reads for `dir` to be
     /// brought into the cache (a hint; it changes no result).
+    pub fn prefetch_radiance(&self, dir: Vec3) {
+        prefetch(&self.cells[self.texel_at(self.uv_of(dir).0).0]);
+    }
+
+    /// Asks for the record that [`EnvironmentMap::sample`] reads for `u` to be brought into
+    /// the cache (a hint; it changes no result).
     pub fn prefetch_sample(&self, u: Vec2) {
-        self.distribution.prefetch_cell_2d(u.x);
+        prefetch(&self.cells[self.entry_of(u.x).0]);
+    }
+
+    /// The alias entry `u_entry` picks, and what is left of `u_entry`, uniform in [0, 1].
+    #[inline]
+    fn entry_of(&self, u_entry: f32) -> (usize, f32) {
+        let n = self.cells.len();
+        let scaled = u_entry.clamp(0.0, 1.0) * n as f32;
+        let entry = (scaled as usize).min(n - 1);
+        (entry, (scaled - entry as f32).clamp(0.0, 1.0))
     }
 
     /// Solid-angle density with which [`EnvironmentMap::sample`] returns `wi`.
@@ -309,10 +365,19 @@ impl EnvironmentMap {
     /// A direction toward the environment, importance sampled ∝ luminance, from two uniform
     /// numbers. `None` only for the measure-zero poles.
     pub fn sample(&self, u: Vec2) -> Option<LightSample> {
-        // u.x picks the alias entry, u.y the texel of the entry; what is left of u.y places
-        // the point in the texel (its top 12 bits the row offset, the others the column
-        // offset) and what is left of u.x refines the row offset.
-        let (k, rest_entry, rest_choice) = self.distribution.sample_cell_2d(u.x, u.y);
+        // u.x picks the alias entry, u.y the texel of the entry with all its bits (one number
+        // would leave the choice 24 − log₂ n bits: 5 on a 1k × 512 map, which skews every
+        // texel's probability to a multiple of 1/32); what is left of u.y places the point in
+        // the texel (its top 12 bits the row offset, the others the column offset) and what
+        // is left of u.x refines the row offset.
+        let (entry, rest_entry) = self.entry_of(u.x);
+        let cell = &self.cells[entry];
+        let (k, rest_choice) = alias_choose(cell.keep, cell.alias, entry, u.y.clamp(0.0, 1.0));
+        let drawn = if k == entry {
+            cell.radiance
+        } else {
+            cell.alias_radiance
+        };
         let (i, j) = (k % self.width, k / self.width);
         let split = rest_choice * JITTER_STEPS;
         let row_step = split.floor().min(JITTER_STEPS - 1.0);
@@ -321,11 +386,24 @@ impl EnvironmentMap {
             (i as f32 + du) / self.width as f32,
             (j as f32 + dv) / self.height as f32,
         );
-        let wi = map_direction(0.5 * PI - uv.y * PI, (uv.x - 0.5) * TAU - self.rotation);
-        // Density and radiance are re-derived from `wi` (once, for both) so that they equal
-        // `pdf(wi)` and `radiance(wi)` bit for bit, also where rounding moves `wi` across a
-        // texel edge.
-        let (radiance, pdf) = self.radiance_pdf(wi);
+        let wi = self.direction_at(uv);
+        // Density and radiance are those `pdf(wi)` and `radiance(wi)` return, bit for bit: of
+        // the texel `uv_of(wi)` falls in, which is the one drawn unless rounding moved `wi`
+        // across its edge. Inside the margins it cannot have, and the drawn texel is taken
+        // without `uv_of`'s two arc tangents (a quarter of a light sample's time).
+        let inside = |d: f32, margin: f32| d >= margin && d <= 1.0 - margin;
+        let (t, row) = if inside(du, self.interior.x) && inside(dv, self.interior.y) {
+            (k, j)
+        } else {
+            self.texel_at(self.uv_of(wi).0)
+        };
+        let sin_theta = sin_theta_of(wi, wi.x.hypot(wi.z));
+        let radiance = if t == k {
+            drawn
+        } else {
+            self.cells[t].radiance
+        };
+        let pdf = self.solid_angle_pdf(radiance, row, sin_theta);
         if !(pdf > 0.0 && pdf.is_finite()) {
             return None;
         }
@@ -343,13 +421,36 @@ impl EnvironmentMap {
 /// second sampling number (the other bits give the column offset).
 const JITTER_STEPS: f32 = 4096.0;
 
-/// Solid-angle density of a direction in `texel` at polar angle sin θ (0 at the poles).
+/// sin θ of direction `d` (need not be normalised) whose distance from the y axis is `r`; 0
+/// for the zero vector.
 #[inline]
-fn solid_angle_pdf(texel: Texel, sin_theta: f32) -> f32 {
-    if sin_theta <= 0.0 {
-        return 0.0;
+fn sin_theta_of(d: Vec3, r: f32) -> f32 {
+    let len = d.length();
+    if len > 0.0 {
+        r / len
+    } else {
+        0.0
     }
-    texel.pdf_uv / (2.0 * PI * PI * sin_theta)
+}
+
+/// Fractions of a texel's width and height that bound how far rounding can move a point
+/// sampled in the texel, on its way to a direction and back through `uv_of`, on a `width` ×
+/// `height` map rotated by `rotation` radians. Each step (the point's (u, v), the angles,
+/// their sines and cosines, the arc tangents, adding the rotation) is accurate to a few units
+/// of f32 rounding (ε) of the angles involved, which reach π + |rotation|: 64 ε of those,
+/// over the angle a texel spans, is over ten times what they can add up to.
+fn interior_margins(width: usize, height: usize, rotation: f32) -> Vec2 {
+    let slack = 64.0 * f32::EPSILON;
+    Vec2::new(
+        slack * (TAU + rotation.abs()) / TAU * width as f32,
+        slack * height as f32,
+    )
+}
+
+/// A texel's sampling weight: its luminance times its row's mean sin θ, i.e. ∝ its power.
+#[inline]
+fn importance(radiance: Rgb, row_sin: f32) -> f32 {
+    luminance(radiance) * row_sin
 }
 
 /// World direction at `elevation` above the horizon and azimuth `phi` = atan2(x, −z).
@@ -566,7 +667,7 @@ mod tests {
         let env = synthetic_map(0.0);
         let (w, h) = (160.0f32, 80.0f32);
         let dir = |u: f32, v: f32| map_direction(0.5 * PI - v * PI, (u - 0.5) * TAU);
-        let texel = |i: usize, j: usize| env.texels[j * env.width + i].radiance;
+        let texel = |i: usize, j: usize| env.cells[j * env.width + i].radiance;
         // At a texel centre: the texel.
         let at = env.radiance_bilinear(dir(30.5 / w, 20.5 / h));
         assert!((at - texel(30, 20)).length() < 1e-4 * texel(30, 20).length());
@@ -583,6 +684,37 @@ mod tests {
         assert_eq!(env.radiance(dir(31.2 / w, 20.5 / h)), texel(31, 20));
     }
 
+    /// The densities recomputed from a texel's radiance are the alias table's own, bit for
+    /// bit, and each record's alias radiance is its alias's radiance.
+    #[test]
+    fn records_match_the_distribution() {
+        let mut maps = vec![
+            synthetic_map(37.5),
+            EnvironmentMap::builtin_sky(0.0, 3.0).unwrap(),
+            EnvironmentMap::from_pixels(4, 2, vec![Rgb::ZERO; 8], 0.0, 1.0).unwrap(),
+        ];
+        if Path::new(VENICE).exists() {
+            maps.push(EnvironmentMap::from_file(VENICE, 120.0, 1.0).unwrap());
+        }
+        for env in &maps {
+            let w = env.width;
+            let func: Vec<f32> = (env.cells.iter().enumerate())
+                .map(|(k, c)| luminance(c.radiance) * env.row_sin[k / w])
+                .collect();
+            let distribution = Distribution1D::new(&func);
+            assert_eq!(distribution.integral(), env.integral);
+            for (k, c) in env.cells.iter().enumerate() {
+                assert_eq!(
+                    env.pdf_uv(c.radiance, k / w),
+                    distribution.pdf_cell(k),
+                    "{k}"
+                );
+                assert_eq!((c.keep, c.alias), distribution.alias_entry(k));
+                assert_eq!(c.alias_radiance, env.cells[c.alias as usize].radiance);
+            }
+        }
+    }
+
     #[test]
     fn pdf_integrates_to_one() {
         assert_pdf_normalised(&synthetic_map(37.5));
@@ -592,7 +724,15 @@ mod tests {
 
     #[test]
     fn sample_agrees_with_radiance_and_pdf() {
-        let env = synthetic_map(37.5);
+        for rotation in [37.5, 7000.0] {
+            sample_agrees_on(&synthetic_map(rotation));
+        }
+        if Path::new(VENICE).exists() {
+            sample_agrees_on(&EnvironmentMap::from_file(VENICE, 120.0, 1.0).unwrap());
+        }
+    }
+
+    fn sample_agrees_on(env: &EnvironmentMap) {
         let mut s = Sampler::from_seed(2);
         let mut returned = 0;
         for _ in 0..200_000 {
@@ -610,6 +750,38 @@ mod tests {
             }
         }
         assert!(returned > 199_990, "{returned}");
+    }
+
+    /// A point as far inside its texel as `interior` allows (the worst case of
+    /// `EnvironmentMap::sample`'s shortcut) maps to a direction that `uv_of` puts back in the
+    /// same texel, for every texel of the real map, turned as scenes turn it and far beyond.
+    #[test]
+    fn points_inside_the_margins_stay_in_their_texel() {
+        let maps: Vec<EnvironmentMap> = if Path::new(VENICE).exists() {
+            [0.0, 120.0, -200.0, 7000.0]
+                .iter()
+                .map(|&r| EnvironmentMap::from_file(VENICE, r, 1.0).unwrap())
+                .collect()
+        } else {
+            vec![synthetic_map(37.5), synthetic_map(7000.0)]
+        };
+        for env in &maps {
+            let (w, h) = (env.width, env.height);
+            let m = env.interior;
+            assert!(m.x < 0.2 && m.y < 0.01, "{m}");
+            for j in 0..h {
+                for i in 0..w {
+                    for (du, dv) in [(m.x, m.y), (1.0 - m.x, m.y), (m.x, 1.0 - m.y)]
+                        .into_iter()
+                        .chain([(1.0 - m.x, 1.0 - m.y)])
+                    {
+                        let uv = Vec2::new((i as f32 + du) / w as f32, (j as f32 + dv) / h as f32);
+                        let found = env.texel_at(env.uv_of(env.direction_at(uv)).0);
+                        assert_eq!(found, (j * w + i, j), "texel ({i}, {j}), ({du}, {dv})");
+                    }
+                }
+            }
+        }
     }
 
     /// pbrt-v3#62: the sampled texel must be the texel whose radiance the lookup returns,
@@ -784,6 +956,6 @@ mod tests {
         let mut px = vec![Rgb::ONE; 8];
         px[0] = Rgb::new(-1.0, 2.0, 0.5);
         let env = EnvironmentMap::from_pixels(4, 2, px, 0.0, 1.0).unwrap();
-        assert!(env.texels[0].radiance == Rgb::new(0.0, 2.0, 0.5));
+        assert!(env.cells[0].radiance == Rgb::new(0.0, 2.0, 0.5));
     }
 }

@@ -184,6 +184,7 @@ pub fn trace_path(
     sampler: &mut Sampler,
     end_at: impl FnMut(&PathVertex) -> Option<Rgb>,
 ) -> Rgb {
+    prefetch_next_light(scene, sampler);
     let Some(hit) = scene.intersect(camera_ray) else {
         let mut radiance = Rgb::ZERO;
         for light in scene.lights.infinite() {
@@ -237,6 +238,7 @@ pub fn continue_path(
         if roulette(vertex.depth, rr_depth, &mut vertex.throughput, sampler).is_none() {
             break;
         }
+        prefetch_next_light(scene, sampler);
         let Some(hit) = scene.intersect(&next) else {
             for light in scene.lights.infinite() {
                 let select_pdf = scene.lights.select_pdf_of(light);
@@ -253,6 +255,24 @@ pub fn continue_path(
         };
     }
     radiance
+}
+
+/// Peeks at the draws the next vertex of a path takes first from `sampler` (its choice of
+/// light and the light's sample) and asks for the table entry they pick to be brought into
+/// the cache: issued before the ray to that vertex is traced, the fetch (a likely miss into an
+/// environment map's records) overlaps the trace. `sampler` is not advanced, so no result
+/// changes.
+#[inline]
+fn prefetch_next_light(scene: &Scene, sampler: &Sampler) {
+    if !scene.lights.sampling_reads_tables() {
+        return;
+    }
+    let mut ahead = sampler.clone();
+    let u_select = ahead.next_1d();
+    let u_light = ahead.next_2d();
+    if let Some((light, _)) = scene.lights.choose(u_select) {
+        light.prefetch_sample(u_light);
+    }
 }
 
 /// Russian roulette after a path's scattering event number `depth` (from 0), from `rr_depth`

@@ -257,12 +257,17 @@ impl Light {
     }
 
     /// Asks for what [`Light::sample_li`] reads first for `u` to be brought into the cache,
-    /// where it reads a table (environment maps): a hint for integrators that shade many paths
-    /// together, which changes no result.
+    /// where it reads a table (environment maps): a hint for integrators with other work to
+    /// do before they sample, which changes no result.
     pub fn prefetch_sample(&self, u: Vec2) {
         if let Light::Environment(env) = self {
             env.prefetch_sample(u);
         }
+    }
+
+    /// Whether [`Light::sample_li`] reads a table ([`Light::prefetch_sample`] fetches ahead).
+    pub fn sampling_reads_table(&self) -> bool {
+        matches!(self, Light::Environment(_))
     }
 
     /// As [`Light::prefetch_sample`], for what [`Light::le_pdf`] reads for `dir`.

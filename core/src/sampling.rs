@@ -145,37 +145,17 @@ impl Distribution1D {
         self.choose(entry, rest)
     }
 
-    /// [`Self::sample_cell`] for large tables: `u_entry` picks the table entry alone and
-    /// `u_choice`, with all its bits, chooses between the entry's cell and its alias (one
-    /// number would leave the choice 24 − log₂ n bits: 5 on a 1k × 512 map, which skews every
-    /// cell's probability to a multiple of 1/32). Returns the cell, what is left of
-    /// `u_entry` and what is left of `u_choice`, both uniform in [0, 1].
-    pub fn sample_cell_2d(&self, u_entry: f32, u_choice: f32) -> (usize, f32, f32) {
-        let n = self.func.len();
-        let scaled = u_entry.clamp(0.0, 1.0) * n as f32;
-        let entry = (scaled as usize).min(n - 1);
-        let (cell, rest) = self.choose(entry, u_choice.clamp(0.0, 1.0));
-        (cell, (scaled - entry as f32).clamp(0.0, 1.0), rest)
-    }
-
-    /// Asks for the alias entry that [`Self::sample_cell_2d`] reads for `u_entry` to be
-    /// brought into the cache: a hint, which changes no result.
-    #[inline]
-    pub fn prefetch_cell_2d(&self, u_entry: f32) {
-        let n = self.func.len();
-        let entry = ((u_entry.clamp(0.0, 1.0) * n as f32) as usize).min(n - 1);
-        prefetch(&self.alias[entry]);
+    /// Entry `entry` of the alias table: the probability of keeping cell `entry`, and the cell
+    /// taken otherwise (see [`alias_choose`]). Tables too large for the cache copy these into
+    /// records of their own, beside what a draw reads next.
+    pub fn alias_entry(&self, entry: usize) -> (f32, u32) {
+        self.alias[entry]
     }
 
     /// Entry `entry`'s cell or its alias, by `u` ∈ [0, 1]; and `u` rescaled to [0, 1].
     fn choose(&self, entry: usize, u: f32) -> (usize, f32) {
         let (keep, other) = self.alias[entry];
-        let (i, du) = if u < keep {
-            (entry, u / keep)
-        } else {
-            (other as usize, (u - keep) / (1.0 - keep))
-        };
-        (i, du.clamp(0.0, 1.0))
+        alias_choose(keep, other, entry, u)
     }
 
     /// Density (w.r.t. x ∈ [0,1)) of cell `i`.
@@ -192,6 +172,18 @@ impl Distribution1D {
         let i = ((x * self.func.len() as f32) as usize).min(self.func.len() - 1);
         self.pdf_cell(i)
     }
+}
+
+/// The choice of an alias table's entry `entry` = (`keep`, `other`) by `u` ∈ [0, 1]: the
+/// entry's own cell or `other`, and `u` rescaled to [0, 1].
+#[inline]
+pub fn alias_choose(keep: f32, other: u32, entry: usize, u: f32) -> (usize, f32) {
+    let (i, du) = if u < keep {
+        (entry, u / keep)
+    } else {
+        (other as usize, (u - keep) / (1.0 - keep))
+    };
+    (i, du.clamp(0.0, 1.0))
 }
 
 /// Vose's alias table of non-negative weights with a positive sum: entry i keeps cell i with

@@ -83,6 +83,7 @@ pub struct Lights {
     non_delta: Vec<usize>,
     delta: Vec<usize>,
     weighs_escapes: bool,
+    sampling_reads_tables: bool,
 }
 
 impl From<Vec<Light>> for Lights {
@@ -94,12 +95,16 @@ impl From<Vec<Light>> for Lights {
         let weighs_escapes = all
             .iter()
             .any(|l| l.is_infinite() && !l.is_delta() && l.is_sampled_directly());
+        let sampling_reads_tables = all
+            .iter()
+            .any(|l| l.sampling_reads_table() && l.is_sampled_directly());
         Lights {
             all,
             sampled,
             non_delta,
             delta,
             weighs_escapes,
+            sampling_reads_tables,
         }
     }
 }
@@ -146,6 +151,12 @@ impl Lights {
     /// of its direction. Without one, every light at infinity it finds takes the whole weight.
     pub fn weighs_escapes(&self) -> bool {
         self.weighs_escapes
+    }
+
+    /// Whether sampling a light may read a table too large for the cache (an environment
+    /// map's), so that fetching its entry ahead ([`Light::prefetch_sample`]) pays.
+    pub fn sampling_reads_tables(&self) -> bool {
+        self.sampling_reads_tables
     }
 
     /// The lights at infinity (environment maps, constant skies, suns, disc or delta).
