@@ -16,8 +16,9 @@
 //!    metavariables (`$m::X`) not. Files that name each other, directly or round a longer
 //!    loop, fail with the loop and the line of each step.
 //! 2. **No process-wide mutable state.** No `static mut` and no `static` of an interior-mutable
-//!    type (atomics, `Cell`s, locks, `OnceLock`, `LazyLock`, …), in code or in a macro body
-//!    that is a list of items: state lives in values their owners pass in, never beside them.
+//!    type (atomics, `Cell`s, locks, `OnceLock`, `LazyLock`, …), in code or in a macro body,
+//!    where the type is the names written after the static's name: state lives in values their
+//!    owners pass in, never beside them. A type alias hides an interior-mutable type.
 //!
 //! The library crates are the workspace members named in the root `Cargo.toml` except the
 //! front ends `cli` and `python`; their modules are found by following `mod` declarations
@@ -57,6 +58,21 @@ struct FileScan {
 
 fn line(span: Span) -> usize {
     span.start().line
+}
+
+/// What makes a `static` process-wide mutable state, if anything: `mut`, or an interior-mutable
+/// type among the names its type is written with (`ty`, read up to a `=` or `;`).
+fn mutable_static(mutable: bool, name: &str, ty: &[TokenTree]) -> Option<String> {
+    if mutable {
+        return Some("`static mut`".into());
+    }
+    let mut names = ty
+        .iter()
+        .map(|t| t.to_string())
+        .take_while(|t| t != "=" && t != ";");
+    let interior = |n: &String| INTERIOR_MUTABLE.split(' ').any(|m| m == n);
+    let ty = names.find(|n| n.starts_with("Atomic") || interior(n))?;
+    Some(format!("`static {name}` of type {ty}"))
 }
 
 /// The tokens of a stream with its groups opened.
@@ -99,9 +115,10 @@ impl FileScan {
         }
     }
 
-    /// The paths in a macro body left as tokens: an identifier followed by `::` and more, not
-    /// after `::` (a tail) or `.` (a method), and after `$` only as `$crate`.
-    fn macro_paths(&mut self, tokens: TokenStream) {
+    /// The paths and statics in a macro body left as tokens (a `macro_rules!` template, a
+    /// `format!`). A path is an identifier followed by `::` and more, not after `::` (a tail) or
+    /// `.` (a method), and after `$` only as `$crate`.
+    fn macro_tokens(&mut self, tokens: TokenStream) {
         let t = flatten(tokens);
         let punct = |k, c| matches!(t.get(k), Some(TokenTree::Punct(p)) if p.as_char() == c);
         let ident = |k| match t.get(k) {
@@ -116,6 +133,13 @@ impl FileScan {
             let after = |c| i > 0 && punct(i - 1, c);
             if (i > 1 && path_sep(i - 2)) || after('.') || (after('$') && first != "crate") {
                 continue;
+            }
+            if first == "static" && !after('\'') {
+                let mutable = ident(i + 1).is_some_and(|m| m == "mut");
+                let ty = t.get(i + 2..).unwrap_or_default();
+                if let Some(what) = ident(i + 1).and_then(|n| mutable_static(mutable, &n, ty)) {
+                    self.state.push((line(tree.span()), what));
+                }
             }
             let mut segments = vec![first.to_string()];
             let next = |n: usize| ident(i + 3 * n).filter(|_| path_sep(i + 3 * n - 2));
@@ -188,17 +212,10 @@ impl<'ast> Visit<'ast> for FileScan {
 
     fn visit_item_static(&mut self, s: &'ast syn::ItemStatic) {
         visit::visit_item_static(self, s);
-        let mut names = flatten(s.ty.to_token_stream())
-            .into_iter()
-            .map(|t| t.to_string());
-        let interior =
-            names.find(|n| n.starts_with("Atomic") || INTERIOR_MUTABLE.split(' ').any(|m| m == n));
-        let what = match (&s.mutability, interior) {
-            (syn::StaticMutability::Mut(_), _) => "`static mut`".to_owned(),
-            (_, Some(ty)) => format!("`static {}` of type {ty}", s.ident),
-            _ => return,
-        };
-        if !self.in_test {
+        let mutable = matches!(s.mutability, syn::StaticMutability::Mut(_));
+        let ty = flatten(s.ty.to_token_stream());
+        let what = mutable_static(mutable, &s.ident.to_string(), &ty);
+        if let Some(what) = what.filter(|_| !self.in_test) {
             self.state.push((line(s.static_token.span), what));
         }
     }
@@ -208,7 +225,7 @@ impl<'ast> Visit<'ast> for FileScan {
         visit::visit_macro(self, mac);
         match syn::parse2::<syn::File>(mac.tokens.clone()) {
             Ok(items) => self.visit_file(&items),
-            Err(_) if !self.in_test => self.macro_paths(mac.tokens.clone()),
+            Err(_) if !self.in_test => self.macro_tokens(mac.tokens.clone()),
             Err(_) => {}
         }
     }
@@ -559,6 +576,7 @@ pub fn id() -> u64 {
 }
 static CACHE: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
 thread_local! { static RAYS: std::cell::Cell<u64> = const { std::cell::Cell::new(0) }; }
+macro_rules! counter { () => { static HITS: AtomicU64 = AtomicU64::new(0); }; }
 pub fn f(x: &'static str) -> &'static str { x }
 #[cfg(test)]
 mod tests {
@@ -576,6 +594,7 @@ mod tests {
         "core/src/lib.rs:5: `static NEXT` of type AtomicU64",
         "core/src/lib.rs:8: `static CACHE` of type OnceLock",
         "core/src/lib.rs:9: `static RAYS` of type Cell",
+        "core/src/lib.rs:10: `static HITS` of type AtomicU64",
     ];
     assert_eq!(found, expected);
 }
