@@ -16,9 +16,9 @@
 //!    metavariables (`$m::X`) not. Files that name each other, directly or round a longer
 //!    loop, fail with the loop and the line of each step.
 //! 2. **No process-wide mutable state.** No `static mut` and no `static` of an interior-mutable
-//!    type (atomics, `Cell`s, locks, `OnceLock`, `LazyLock`, …), in code or in a macro body,
-//!    where the type is the names written after the static's name: state lives in values their
-//!    owners pass in, never beside them. A type alias hides an interior-mutable type.
+//!    type (atomics, `Cell`s, locks, `OnceLock`, `LazyLock`, …), in code or in a macro body:
+//!    state lives in values their owners pass in, never beside them. A type is judged by the
+//!    names it is written with, so an alias hides an interior-mutable one.
 //!
 //! The library crates are the workspace members named in the root `Cargo.toml` except the
 //! front ends `cli` and `python`; their modules are found by following `mod` declarations
@@ -247,12 +247,8 @@ struct Crate {
 /// The `.rs` files in `dir` and its subfolders.
 fn rs_files(dir: &Path) -> Vec<PathBuf> {
     let mut files = Vec::new();
-    for path in std::fs::read_dir(dir)
-        .into_iter()
-        .flatten()
-        .flatten()
-        .map(|e| e.path())
-    {
+    let entries = std::fs::read_dir(dir).into_iter().flatten().flatten();
+    for path in entries.map(|e| e.path()) {
         if path.is_dir() {
             files.extend(rs_files(&path));
         } else if path.extension().is_some_and(|e| e == "rs") {
@@ -272,7 +268,9 @@ fn read_crate(root: &Path, member: &str) -> Result<Crate, String> {
     while let Some((path, module, test, owns_dir)) = queue.pop_front() {
         let fail = |e: &dyn std::fmt::Display| format!("{member}/{}: {e}", rel(&path));
         let text = std::fs::read_to_string(&path).map_err(|e| fail(&e))?;
-        let file = syn::parse_file(&text).map_err(|e| fail(&format!("{}: {e}", line(e.span()))))?;
+        let parse_error =
+            |e: syn::Error| format!("{member}/{}:{}: {e}", rel(&path), line(e.span()));
+        let file = syn::parse_file(&text).map_err(parse_error)?;
         let mut scan = FileScan::default();
         scan.visit_file(&file);
         let here = path.parent().unwrap_or(&dir).to_path_buf();
