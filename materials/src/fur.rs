@@ -46,8 +46,8 @@
 //! cell, so `pdf` is exactly the sampling density. The tables are built by [`Fur::new`] on
 //! every core with fixed seeds (bit-identical for any thread count), with a progress bar on a
 //! terminal. They are not cached: a library keeps no process-wide state and reads no
-//! environment (`tests/library_sources.rs`), and a cache passed in by the front ends needs
-//! `HairModel::build` to take one.
+//! environment (`clippy.toml`, `tests/tests/library_sources.rs`), and a cache passed in by the
+//! front ends needs `HairModel::build` to take one.
 //!
 //! # Simplifications (against the papers)
 //! - The cortex pigment changes how much scattered light leaves (ρ), not where it goes: D is
