@@ -11,8 +11,8 @@
 //! [`SceneBuilder::without_filters`](crate::SceneBuilder::without_filters) has no filter
 //! support at all: the baseline of Embree alone.
 //!
-//! This module is a child of `scene` (see the `#[path]` there) because it builds the private
-//! intersection context the filter reads.
+//! It is a child of the `embree` module because it builds the private intersection context the
+//! filter reads.
 
 use super::{EmbreeAccel, Exclude};
 use embree3::{Hit8, IntersectContextExt, Ray8, RayHit, RayHit8, ValidMask, ValidMaskN};
