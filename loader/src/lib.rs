@@ -1,8 +1,8 @@
 //! tress's scene layer, under both front ends (the `tress` command line and the Python
 //! bindings): scene files with their `${name}` placeholders, objects, materials and lights, built
-//! into a renderable [`tress_core::Scene`]; the integrator registry; and comparative studies
-//! without their plots. It holds no process-wide state and reads no environment variables:
-//! everything a run depends on is passed in.
+//! into a renderable [`tress_core::Scene`], and the integrator registry (comparative studies are
+//! `tress-study`'s, above it). It holds no process-wide state and reads no environment
+//! variables: everything a run depends on is passed in.
 
 // Test code is not library code: it writes its fixtures and reads what it is asked to bless
 // (clippy.toml's rules are for the library).
