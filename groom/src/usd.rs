@@ -517,9 +517,24 @@ fn attr_name(attr: &usd::Attribute) -> String {
         .to_string()
 }
 
-impl Reader {
-    /// Adds the strands of one `BasisCurves` prim.
-    fn add(&mut self, stage: &usd::Stage, curves: &BasisCurves) -> anyhow::Result<()> {
+/// A `BasisCurves` prim's curves: their kind, points and how the points split into curves.
+struct CurveLayout {
+    /// Cubic curves (through `basis`), else linear.
+    cubic: bool,
+    basis: Basis,
+    points: Vec<DVec3>,
+    /// Points per curve.
+    counts: Vec<usize>,
+    /// Each curve's first point.
+    starts: Vec<usize>,
+    /// Segments per curve: Béziers for cubic curves, chords for linear ones.
+    segments: Vec<usize>,
+}
+
+impl CurveLayout {
+    /// The prim's `type`, `basis`, `wrap`, `curveVertexCounts` and `points`, checked against
+    /// each other.
+    fn read(curves: &BasisCurves) -> anyhow::Result<Self> {
         let token = |attr: usd::Attribute, default: &str| -> anyhow::Result<String> {
             Ok(value::<String>(&attr)?.unwrap_or_else(|| default.into()))
         };
@@ -565,20 +580,19 @@ impl Reader {
                 points.len()
             );
         }
-        // Each curve's segments: Béziers for cubic curves, chords for linear ones.
-        let as_segments = |cp: &[DVec3]| -> Result<Vec<[DVec3; 4]>, String> {
-            match basis {
-                Basis::Bezier => bezier_segments(cp, 3.0, false),
-                Basis::BSpline => bezier_segments(cp, 3.0, true),
-                Basis::CatmullRom => catmull_rom_segments(cp),
-            }
+        let mut layout = CurveLayout {
+            cubic,
+            basis,
+            points,
+            starts: Vec::with_capacity(counts.len()),
+            segments: Vec::with_capacity(counts.len()),
+            counts,
         };
-        let mut starts = Vec::with_capacity(counts.len());
-        let mut segments = Vec::with_capacity(counts.len());
         let mut start = 0;
-        for (i, &n) in counts.iter().enumerate() {
+        for (i, &n) in layout.counts.iter().enumerate() {
             let s = if cubic {
-                as_segments(&points[start..start + n])
+                layout
+                    .as_segments(&layout.points[start..start + n])
                     .map_err(|e| anyhow::anyhow!("curve {i}: {e}"))?
                     .len()
             } else if n >= 2 {
@@ -586,36 +600,58 @@ impl Reader {
             } else {
                 anyhow::bail!("curve {i}: {n} points: a linear curve needs at least 2");
             };
-            starts.push(start);
-            segments.push(s);
+            layout.starts.push(start);
+            layout.segments.push(s);
             start += n;
         }
+        Ok(layout)
+    }
+
+    /// The Bézier segments of one cubic curve's control points `cp` through the basis.
+    fn as_segments(&self, cp: &[DVec3]) -> Result<Vec<[DVec3; 4]>, String> {
+        match self.basis {
+            Basis::Bezier => bezier_segments(cp, 3.0, false),
+            Basis::BSpline => bezier_segments(cp, 3.0, true),
+            Basis::CatmullRom => catmull_rom_segments(cp),
+        }
+    }
+}
+
+/// A prim's primvars, each checked to have as many values as its interpolation needs.
+struct CurvePrimvars {
+    /// Widths, in the vectors' x.
+    widths: Primvar,
+    colors: Option<Primvar>,
+    normals: Option<Primvar>,
+}
+
+impl CurvePrimvars {
+    /// The `widths`, `primvars:displayColor` and `normals` of `curves`, laid out as `layout`.
+    fn read(curves: &BasisCurves, layout: &CurveLayout) -> anyhow::Result<Self> {
+        let vectors = |a: &usd::Attribute| -> anyhow::Result<Option<Vec<DVec3>>> {
+            Ok(value::<Vec<openusd::gf::Vec3f>>(a)?.map(|c| {
+                c.iter()
+                    .map(|c| DVec3::new(c.x as f64, c.y as f64, c.z as f64))
+                    .collect()
+            }))
+        };
         let widths = Primvar::read(&curves.widths_attr(), |a| {
             Ok(value::<Vec<f32>>(a)?
                 .map(|w| w.iter().map(|&w| DVec3::new(w as f64, 0.0, 0.0)).collect()))
         })?
         .ok_or_else(|| anyhow::anyhow!("no widths"))?;
-        let colors = Primvar::read(&curves.display_color_attr(), |a| {
-            Ok(value::<Vec<openusd::gf::Vec3f>>(a)?.map(|c| {
-                c.iter()
-                    .map(|c| DVec3::new(c.x as f64, c.y as f64, c.z as f64))
-                    .collect()
-            }))
-        })?;
-        let normals = Primvar::read(&curves.normals_attr(), |a| {
-            Ok(value::<Vec<openusd::gf::Vec3f>>(a)?.map(|c| {
-                c.iter()
-                    .map(|c| DVec3::new(c.x as f64, c.y as f64, c.z as f64))
-                    .collect()
-            }))
-        })?;
+        let primvars = CurvePrimvars {
+            widths,
+            colors: Primvar::read(&curves.display_color_attr(), vectors)?,
+            normals: Primvar::read(&curves.normals_attr(), vectors)?,
+        };
         for (what, primvar) in [
-            ("widths", Some(&widths)),
-            ("primvars:displayColor", colors.as_ref()),
-            ("normals", normals.as_ref()),
+            ("widths", Some(&primvars.widths)),
+            ("primvars:displayColor", primvars.colors.as_ref()),
+            ("normals", primvars.normals.as_ref()),
         ] {
             let Some(p) = primvar else { continue };
-            let expected = p.expected(&counts, &segments);
+            let expected = p.expected(&layout.counts, &layout.segments);
             if p.values.len() != expected {
                 anyhow::bail!(
                     "{what}: {} values, but {:?} interpolation over these curves needs {expected}",
@@ -624,90 +660,136 @@ impl Reader {
                 );
             }
         }
+        Ok(primvars)
+    }
+}
 
+/// Where a prim's curves go: its transform, and what it does to widths and normals.
+struct Placement {
+    transform: DMat4,
+    /// Widths scale by the cube root of the transform's determinant.
+    width_scale: f64,
+    /// Normals transform by the inverse transpose.
+    normal_matrix: DMat3,
+}
+
+impl Reader {
+    /// Adds the strands of one `BasisCurves` prim.
+    fn add(&mut self, stage: &usd::Stage, curves: &BasisCurves) -> anyhow::Result<()> {
+        let layout = CurveLayout::read(curves)?;
+        let primvars = CurvePrimvars::read(curves, &layout)?;
         let transform = self.scale * world_transform(stage, curves)?;
-        let width_scale = DMat3::from_mat4(transform).determinant().abs().cbrt();
-        // Normals transform by the inverse transpose.
-        let normal_matrix = DMat3::from_mat4(transform).inverse().transpose();
+        let placement = Placement {
+            transform,
+            width_scale: DMat3::from_mat4(transform).determinant().abs().cbrt(),
+            normal_matrix: DMat3::from_mat4(transform).inverse().transpose(),
+        };
         let mut varying_start = 0;
-        for (i, (&start, &n)) in starts.iter().zip(&counts).enumerate() {
-            let cp = &points[start..start + n];
-            // A primvar's value at parameter u of segment s of this curve.
-            let at = |p: &Primvar, seg: &[[DVec3; 4]], s: usize, u: f64| -> DVec3 {
-                match p.interpolation {
-                    Interpolation::Constant => p.values[0],
-                    Interpolation::Uniform => p.values[i],
-                    Interpolation::Varying => {
-                        let v = &p.values[varying_start..];
-                        v[s].lerp(v[s + 1], u)
-                    }
-                    Interpolation::Vertex if cubic => bezier(&seg[s], u),
-                    Interpolation::Vertex => p.values[start + s].lerp(p.values[start + s + 1], u),
+        for i in 0..layout.counts.len() {
+            self.add_curve(&layout, &primvars, &placement, i, varying_start)?;
+            varying_start += layout.segments[i] + 1;
+        }
+        Ok(())
+    }
+
+    /// Adds curve `i` of `layout` as one strand; its `varying` primvar values start at
+    /// `varying_start`.
+    fn add_curve(
+        &mut self,
+        layout: &CurveLayout,
+        primvars: &CurvePrimvars,
+        placement: &Placement,
+        i: usize,
+        varying_start: usize,
+    ) -> anyhow::Result<()> {
+        let (cubic, start, n) = (layout.cubic, layout.starts[i], layout.counts[i]);
+        let cp = &layout.points[start..start + n];
+        let Placement {
+            transform,
+            width_scale,
+            normal_matrix,
+        } = *placement;
+        let CurvePrimvars {
+            widths,
+            colors,
+            normals,
+        } = primvars;
+        // A primvar's value at parameter u of segment s of this curve.
+        let at = |p: &Primvar, seg: &[[DVec3; 4]], s: usize, u: f64| -> DVec3 {
+            match p.interpolation {
+                Interpolation::Constant => p.values[0],
+                Interpolation::Uniform => p.values[i],
+                Interpolation::Varying => {
+                    let v = &p.values[varying_start..];
+                    v[s].lerp(v[s + 1], u)
                 }
-            };
-            // The Béziers of the vertex primvars, through the same basis as the points.
-            let vertex_segments = |p: &Primvar| -> Vec<[DVec3; 4]> {
-                if cubic && p.interpolation == Interpolation::Vertex {
-                    as_segments(&p.values[start..start + n]).expect("checked with the points")
-                } else {
-                    Vec::new()
-                }
-            };
-            let width_segments = vertex_segments(&widths);
-            let color_segments = colors.as_ref().map(vertex_segments).unwrap_or_default();
-            let normal_segments = normals.as_ref().map(vertex_segments).unwrap_or_default();
-            // The (segment, u) each point is made from, for the normals there.
-            let mut params = Vec::new();
-            let push = |hair: &mut HairGeometry, point: DVec3, s: usize, u: f64| -> Option<Rgb> {
-                hair.points.push(point.as_vec3());
-                let width = at(&widths, &width_segments, s, u).x;
-                hair.radii.push((0.5 * width * width_scale) as f32);
-                colors
-                    .as_ref()
-                    .map(|c| -> Rgb { at(c, &color_segments, s, u).as_vec3() })
-            };
-            let mut point_colors = Vec::new();
-            if cubic {
-                let beziers = as_segments(cp).expect("checked above");
-                for (s, b) in beziers.iter().enumerate() {
-                    let b = b.map(|p| transform.transform_point3(p));
-                    let w0 = at(&widths, &width_segments, s, 0.0).x;
-                    let w1 = at(&widths, &width_segments, s, 1.0).x;
-                    let pieces = 1u32 << refinement_depth(&b, w0.max(w1) * width_scale);
-                    self.check_points(pieces as usize)?;
-                    if s == 0 {
-                        point_colors.extend(push(&mut self.hair, b[0], 0, 0.0));
-                        params.push((0, 0.0));
-                    }
-                    for k in 1..=pieces {
-                        let u = k as f64 / pieces as f64;
-                        point_colors.extend(push(&mut self.hair, bezier(&b, u), s, u));
-                        params.push((s, u));
-                    }
-                }
+                Interpolation::Vertex if cubic => bezier(&seg[s], u),
+                Interpolation::Vertex => p.values[start + s].lerp(p.values[start + s + 1], u),
+            }
+        };
+        // The Béziers of the vertex primvars, through the same basis as the points.
+        let vertex_segments = |p: &Primvar| -> Vec<[DVec3; 4]> {
+            if cubic && p.interpolation == Interpolation::Vertex {
+                layout
+                    .as_segments(&p.values[start..start + n])
+                    .expect("checked with the points")
             } else {
-                self.check_points(n)?;
-                for (k, p) in cp.iter().enumerate() {
-                    let (s, u) = if k + 1 < n { (k, 0.0) } else { (k - 1, 1.0) };
-                    let color = push(&mut self.hair, transform.transform_point3(*p), s, u);
-                    point_colors.extend(color);
+                Vec::new()
+            }
+        };
+        let width_segments = vertex_segments(widths);
+        let color_segments = colors.as_ref().map(vertex_segments).unwrap_or_default();
+        let normal_segments = normals.as_ref().map(vertex_segments).unwrap_or_default();
+        // The (segment, u) each point is made from, for the normals there.
+        let mut params = Vec::new();
+        let push = |hair: &mut HairGeometry, point: DVec3, s: usize, u: f64| -> Option<Rgb> {
+            hair.points.push(point.as_vec3());
+            let width = at(widths, &width_segments, s, u).x;
+            hair.radii.push((0.5 * width * width_scale) as f32);
+            colors
+                .as_ref()
+                .map(|c| -> Rgb { at(c, &color_segments, s, u).as_vec3() })
+        };
+        let mut point_colors = Vec::new();
+        if cubic {
+            let beziers = layout.as_segments(cp).expect("checked above");
+            for (s, b) in beziers.iter().enumerate() {
+                let b = b.map(|p| transform.transform_point3(p));
+                let w0 = at(widths, &width_segments, s, 0.0).x;
+                let w1 = at(widths, &width_segments, s, 1.0).x;
+                let pieces = 1u32 << refinement_depth(&b, w0.max(w1) * width_scale);
+                self.check_points(pieces as usize)?;
+                if s == 0 {
+                    point_colors.extend(push(&mut self.hair, b[0], 0, 0.0));
+                    params.push((0, 0.0));
+                }
+                for k in 1..=pieces {
+                    let u = k as f64 / pieces as f64;
+                    point_colors.extend(push(&mut self.hair, bezier(&b, u), s, u));
                     params.push((s, u));
                 }
             }
-            self.hair.strand_offsets.push(self.hair.points.len() as u32);
-            // The normals at the points just added, at the (segment, u) each was made from.
-            match (&mut self.normals, &normals) {
-                (Some(all), Some(p)) => all.extend((params.iter()).map(|&(s, u)| {
-                    // Only the direction matters (models project it across the fiber).
-                    (normal_matrix * at(p, &normal_segments, s, u))
-                        .normalize_or_zero()
-                        .as_vec3()
-                })),
-                (normals, _) => *normals = None,
+        } else {
+            self.check_points(n)?;
+            for (k, p) in cp.iter().enumerate() {
+                let (s, u) = if k + 1 < n { (k, 0.0) } else { (k - 1, 1.0) };
+                let color = push(&mut self.hair, transform.transform_point3(*p), s, u);
+                point_colors.extend(color);
+                params.push((s, u));
             }
-            varying_start += segments[i] + 1;
-            self.add_colors(colors.as_ref(), point_colors);
         }
+        self.hair.strand_offsets.push(self.hair.points.len() as u32);
+        // The normals at the points just added, at the (segment, u) each was made from.
+        match (&mut self.normals, normals) {
+            (Some(all), Some(p)) => all.extend((params.iter()).map(|&(s, u)| {
+                // Only the direction matters (models project it across the fiber).
+                (normal_matrix * at(p, &normal_segments, s, u))
+                    .normalize_or_zero()
+                    .as_vec3()
+            })),
+            (normals, _) => *normals = None,
+        }
+        self.add_colors(colors.as_ref(), point_colors);
         Ok(())
     }
 
