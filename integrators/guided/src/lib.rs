@@ -58,7 +58,7 @@ use tress_core::{
     luminance, Hit, Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint,
 };
 use tress_learned_light::{
-    block_of, block_segments, blocks_of, check_ranges, FilmKey, LastFilm, Lattice, OutOfRange,
+    block_of, block_segments, check_ranges, BlockLearning, FilmKey, LastFilm, Lattice, OutOfRange,
     RadianceCache, Records as RadianceRecords,
 };
 use tress_path::{PathSettings, PathTracer};
@@ -268,27 +268,16 @@ impl Integrator for GuidedPathTracer {
         cancel: &AtomicBool,
         progress: &(dyn Fn(f64) + Sync),
     ) -> Option<FilmIntegrator> {
-        let key = FilmKey::of(film);
-        let blocks = blocks_of(self.settings.block_spp, samples);
-        let t = self.trained.get_or_train(
-            key,
-            |t| t.covers(&blocks),
-            |before| {
-                Trained::new(
-                    &self.settings,
-                    scene,
-                    key,
-                    blocks.clone(),
-                    before,
-                    cancel,
-                    progress,
-                )
-            },
-        )?;
-        Some(FilmIntegrator {
-            note: t.description.clone(),
-            integrator: t,
-        })
+        let block_spp = self.settings.block_spp;
+        self.trained.for_film(
+            &self.settings,
+            block_spp,
+            scene,
+            film,
+            samples,
+            cancel,
+            progress,
+        )
     }
 
     /// One segment a sample block, so that a render holds one block's guide at a time.
@@ -504,12 +493,14 @@ impl Training {
     }
 }
 
-impl Trained {
+impl BlockLearning for Trained {
+    type Settings = GuidedSettings;
+
     /// The guides of sample blocks `blocks`, going on from `before` (the training of earlier
     /// blocks of the same film) where it has trained for no block past the first of `blocks`;
     /// the records are the same sums of the same paths in the same order either way, so the
     /// guides are too. `None` when cancelled.
-    fn new(
+    fn train(
         settings: &GuidedSettings,
         scene: &Scene,
         film: FilmKey,
@@ -615,6 +606,10 @@ impl Trained {
     fn covers(&self, blocks: &Range<u32>) -> bool {
         blocks.start >= self.first_block
             && blocks.end <= self.first_block + self.guides.len() as u32
+    }
+
+    fn description(&self) -> &str {
+        &self.description
     }
 }
 

@@ -17,5 +17,5 @@ mod training;
 pub use blocks::{block_of, block_segments, block_start, blocks_of};
 pub use lattice::Lattice;
 pub use radiance::{RadianceCache, Records};
-pub use settings::{check_ranges, LastFilm, OutOfRange, RangeCheck};
+pub use settings::{check_ranges, BlockLearning, LastFilm, OutOfRange, RangeCheck};
 pub use training::{train, FilmKey};

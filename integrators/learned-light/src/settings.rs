@@ -1,8 +1,13 @@
 //! What the learning integrators share around their settings: range checks, and what was
-//! learned for the film last rendered.
+//! learned for the film last rendered, and how it is prepared for a film.
 
-use crate::FilmKey;
+use crate::{blocks_of, FilmKey};
+use std::ops::Range;
+use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
+use tress_core::film::FilmSettings;
+use tress_core::integrator::FilmIntegrator;
+use tress_core::{Integrator, Scene};
 
 /// A setting outside its range.
 #[derive(Debug, thiserror::Error)]
@@ -71,6 +76,70 @@ impl<T> LastFilm<T> {
         let learned = Arc::new(train(before)?);
         *last = Some((film, learned.clone()));
         Some(learned)
+    }
+}
+
+/// What a learning integrator learns for some sample blocks of one film, trained block after
+/// block, so that [`LastFilm::for_film`] prepares either integrator alike.
+pub trait BlockLearning: Integrator + Sized + 'static {
+    /// The integrator's settings.
+    type Settings;
+
+    /// What is learned for sample blocks `blocks` of `film`, going on from `before` (what was
+    /// learned for earlier blocks of the same film) where it serves; `None` when cancelled.
+    fn train(
+        settings: &Self::Settings,
+        scene: &Scene,
+        film: FilmKey,
+        blocks: Range<u32>,
+        before: Option<Arc<Self>>,
+        cancel: &AtomicBool,
+        progress: &(dyn Fn(f64) + Sync),
+    ) -> Option<Self>;
+
+    /// Whether it has learned for every block of `blocks`.
+    fn covers(&self, blocks: &Range<u32>) -> bool;
+
+    /// What was learned and what it cost, one line for logs.
+    fn description(&self) -> &str;
+}
+
+impl<T: BlockLearning> LastFilm<T> {
+    /// [`Integrator::for_film`] of an integrator whose samples come in blocks starting at
+    /// `block_spp`: what was learned for the blocks `samples` fall in, trained when it is not
+    /// kept already.
+    #[allow(clippy::too_many_arguments)]
+    pub fn for_film(
+        &self,
+        settings: &T::Settings,
+        block_spp: u32,
+        scene: &Scene,
+        film: &FilmSettings,
+        samples: Range<u64>,
+        cancel: &AtomicBool,
+        progress: &(dyn Fn(f64) + Sync),
+    ) -> Option<FilmIntegrator> {
+        let key = FilmKey::of(film);
+        let blocks = blocks_of(block_spp, samples);
+        let learned = self.get_or_train(
+            key,
+            |t| t.covers(&blocks),
+            |before| {
+                T::train(
+                    settings,
+                    scene,
+                    key,
+                    blocks.clone(),
+                    before,
+                    cancel,
+                    progress,
+                )
+            },
+        )?;
+        Some(FilmIntegrator {
+            note: learned.description().to_owned(),
+            integrator: learned,
+        })
     }
 }
 

@@ -41,7 +41,7 @@ use tress_core::math::Vec3;
 use tress_core::prepare::Preparation;
 use tress_core::{Integrator, IntegratorKind, Ray, Rgb, Sampler, Scene, ShadingPoint};
 use tress_learned_light::{
-    block_of, block_segments, blocks_of, check_ranges, FilmKey, LastFilm, Lattice, OutOfRange,
+    block_of, block_segments, check_ranges, BlockLearning, FilmKey, LastFilm, Lattice, OutOfRange,
     RadianceCache, Records,
 };
 
@@ -232,27 +232,16 @@ impl Integrator for RadianceCacheIntegrator {
         cancel: &AtomicBool,
         progress: &(dyn Fn(f64) + Sync),
     ) -> Option<FilmIntegrator> {
-        let key = FilmKey::of(film);
-        let blocks = blocks_of(self.settings.block_spp, samples);
-        let t = self.trained.get_or_train(
-            key,
-            |t| t.covers(&blocks),
-            |before| {
-                Trained::new(
-                    &self.settings,
-                    scene,
-                    key,
-                    blocks.clone(),
-                    before,
-                    cancel,
-                    progress,
-                )
-            },
-        )?;
-        Some(FilmIntegrator {
-            note: t.description.clone(),
-            integrator: t,
-        })
+        let block_spp = self.settings.block_spp;
+        self.trained.for_film(
+            &self.settings,
+            block_spp,
+            scene,
+            film,
+            samples,
+            cancel,
+            progress,
+        )
     }
 
     /// One segment a sample block, so that a render holds one block's caches at a time.
@@ -355,13 +344,15 @@ impl BlockCaches {
 /// Stream tag of the training paths' random numbers (apart from every pixel sample's).
 const TRAINING_STREAM: u64 = 0x7261_6469_616e_6365;
 
-impl Trained {
+impl BlockLearning for Trained {
+    type Settings = CacheSettings;
+
     /// The caches of sample blocks `blocks`: block `b`'s from the first `training_spp · 2^b`
     /// training paths per pixel (each block's paths include the block before's). Goes on from
     /// `before`, the training of earlier blocks of the same film, where it traced no more paths
     /// than the first of `blocks` needs; the records are the same sums of the same paths in
     /// the same order either way, so the caches are too. `None` when cancelled.
-    fn new(
+    fn train(
         settings: &CacheSettings,
         scene: &Scene,
         film: FilmKey,
@@ -455,6 +446,10 @@ impl Trained {
     fn covers(&self, blocks: &Range<u32>) -> bool {
         blocks.start >= self.first_block
             && blocks.end <= self.first_block + self.caches.len() as u32
+    }
+
+    fn description(&self) -> &str {
+        &self.description
     }
 }
 
