@@ -137,6 +137,24 @@ impl HairGeometry {
         self.points.len()
     }
 
+    /// Bytes its arrays hold: what keeping it in memory costs.
+    pub fn heap_bytes(&self) -> usize {
+        fn attribute<T>(a: &Option<HairAttribute<T>>) -> usize {
+            match a {
+                Some(HairAttribute::PerStrand(v) | HairAttribute::PerPoint(v)) => {
+                    std::mem::size_of_val(v.as_slice())
+                }
+                Some(HairAttribute::Uniform(_)) | None => 0,
+            }
+        }
+        std::mem::size_of_val(self.points.as_slice())
+            + std::mem::size_of_val(self.radii.as_slice())
+            + std::mem::size_of_val(self.strand_offsets.as_slice())
+            + attribute(&self.colors)
+            + attribute(&self.transparency)
+            + attribute(&self.orientations)
+    }
+
     /// Polyline segments: one fewer than the points of each strand.
     pub fn segment_count(&self) -> usize {
         (0..self.strand_count())

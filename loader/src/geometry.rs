@@ -5,11 +5,12 @@ use crate::materials::MaterialDesc;
 use crate::paths::resolve;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use tress_accel::{EmbreeAccel, HairOptions, SceneBuilder, TriangleMesh};
 use tress_core::Material;
-use tress_groom::{HairAttribute, HairSource, Transform};
+use tress_groom::{HairAttribute, HairGeometry, HairSource, Transform};
 use tress_materials::pigment::Pigment;
 use tress_materials::strand_variation::{quantise_variants, StrandVariation};
 
@@ -88,6 +89,7 @@ pub fn build_accel(
         builder = builder.with_fiber_orientation();
     }
     let mut notes = Vec::new();
+    let mut reads = SharedReads::new(objects, scene_path);
     for (i, object) in objects.iter().enumerate() {
         let name = object.material();
         let &material = material_index.get(name).ok_or_else(|| {
@@ -118,14 +120,18 @@ pub fn build_accel(
                         ))
                     }
                 };
-                let mut source = source.clone();
-                if let Some(p) = source.path_mut() {
-                    *p = resolve(scene_path, p);
-                }
-                // Loaded within what the objects before it leave of the memory limit.
-                let hair = source
-                    .load(&builder.limits())
-                    .map_err(|e| here(i, e.into()))?;
+                let hair = match reads.take(i) {
+                    Some(hair) => hair,
+                    None => {
+                        // Loaded within what the objects before it (and the files kept for
+                        // later ones) leave of the memory limit.
+                        let hair = resolved(source, scene_path)
+                            .load(&builder.limits())
+                            .map_err(|e| here(i, e.into()))?;
+                        reads.keep(i, hair)
+                    }
+                };
+                builder.hold_beside(reads.kept_bytes());
                 match variation {
                     None => builder
                         .add_hair(&hair, options, material)
@@ -181,6 +187,13 @@ pub fn build_accel(
             }
         };
     }
+    if reads.read_once > 0 {
+        notes.push(format!(
+            "{} objects reused a file read for an earlier object",
+            reads.read_once
+        ));
+    }
+    drop(reads);
     let accel = builder.build().map_err(|source| Error::Accel {
         scene: scene_path.to_owned(),
         source,
@@ -191,6 +204,90 @@ pub fn build_accel(
         summary.push_str(&note);
     }
     Ok((accel, summary))
+}
+
+/// `source` with its file path resolved against the scene file's folder.
+fn resolved(source: &HairSource, scene_path: &Path) -> HairSource {
+    let mut source = source.clone();
+    if let Some(p) = source.path_mut() {
+        *p = resolve(scene_path, p);
+    }
+    source
+}
+
+/// Hair files that several objects name (the same file with the same reader options, each
+/// object with its own transform and options): read once, and kept from the first object
+/// that names them to the last, counted against the memory limit meanwhile
+/// ([`SceneBuilder::hold_beside`]). A file named once is never kept.
+struct SharedReads {
+    /// Per object: the key of its file source, if another object names the same.
+    keys: Vec<Option<String>>,
+    /// Per key: the objects still to come that name it.
+    uses_left: HashMap<String, usize>,
+    /// Per key: the file read, while objects still to come name it.
+    kept: HashMap<String, Arc<HairGeometry>>,
+    /// Objects that took a file read for an earlier object.
+    read_once: usize,
+}
+
+impl SharedReads {
+    fn new(objects: &[ObjectDesc], scene_path: &Path) -> Self {
+        // The resolved source's description is its key: the same path with other reader
+        // options is another read. Generated hair is cheap to make again and never kept.
+        let keys: Vec<Option<String>> = objects
+            .iter()
+            .map(|object| match object {
+                ObjectDesc::Hair { source, .. } if source.path().is_some() => {
+                    Some(format!("{:?}", resolved(source, scene_path)))
+                }
+                _ => None,
+            })
+            .collect();
+        let mut uses_left = HashMap::new();
+        for key in keys.iter().flatten() {
+            *uses_left.entry(key.clone()).or_insert(0usize) += 1;
+        }
+        let keys = keys
+            .into_iter()
+            .map(|key| key.filter(|k| uses_left[k] > 1))
+            .collect();
+        SharedReads {
+            keys,
+            uses_left,
+            kept: HashMap::new(),
+            read_once: 0,
+        }
+    }
+
+    /// The file object `i` names, if an earlier object read it; counts object `i`'s use.
+    fn take(&mut self, i: usize) -> Option<Arc<HairGeometry>> {
+        let key = self.keys[i].as_ref()?;
+        let left = self.uses_left.get_mut(key)?;
+        *left -= 1;
+        let hair = if *left == 0 {
+            self.kept.remove(key)
+        } else {
+            self.kept.get(key).cloned()
+        };
+        self.read_once += usize::from(hair.is_some());
+        hair
+    }
+
+    /// Keeps `hair`, just read for object `i`, if objects after it name the same file.
+    fn keep(&mut self, i: usize, hair: HairGeometry) -> Arc<HairGeometry> {
+        let hair = Arc::new(hair);
+        if let Some(key) = &self.keys[i] {
+            if self.uses_left[key] > 0 {
+                self.kept.insert(key.clone(), Arc::clone(&hair));
+            }
+        }
+        hair
+    }
+
+    /// Bytes of the files kept.
+    fn kept_bytes(&self) -> f64 {
+        self.kept.values().map(|h| h.heap_bytes() as f64).sum()
+    }
 }
 
 /// Adds a hair object whose material varies (`variation`): every segment's absorption and

@@ -471,3 +471,62 @@ fn tfx_guides_with_children_cover_far_more_of_the_image() {
         "{guides_only} → {with_children}"
     );
 }
+
+/// Objects that name the same file with the same reader options share one read (each keeps
+/// its own transform); the same path with other reader options is another read.
+#[test]
+fn a_file_several_objects_name_is_read_once() {
+    let dir = scratch("shared_reads");
+    let file = dir.join("guides.tfx");
+    std::fs::write(&file, tfx_bytes(&guides())).unwrap();
+    let summary = |objects: &[(&str, f32)]| {
+        let objects: Vec<String> = objects
+            .iter()
+            .map(|(source, x)| {
+                format!(
+                    r#"Hair(source: {source}, material: "brown",
+                            options: (transform: (translate: ({x}, 0, 0))))"#
+                )
+            })
+            .collect();
+        let path = dir.join("scene.ron");
+        std::fs::write(
+            &path,
+            format!(
+                r#"(
+    camera: (look_from: (1.5, -1, 8), look_at: (1.5, -1, 0), fov: 40),
+    film: (width: 48, height: 48, spp: 1, seed: 1),
+    integrator: Path(),
+    materials: {{ "brown": Hair(Chiang()) }},
+    objects: [ {} ],
+    lights: [Sky(rotation: 0, scale: 1)],
+)"#,
+                objects.join(",\n")
+            ),
+        )
+        .unwrap();
+        let desc = tress_loader::scene_desc::load(&path).unwrap();
+        tress_loader::scene_desc::build(&desc, &path, &Default::default())
+            .unwrap()
+            .summary
+    };
+    let plain = format!("File({file:?})");
+    let other_radius = format!("Tfx(path: {file:?}, radius: 0.005)");
+
+    let shared = summary(&[
+        (&plain, 0.0),
+        (&plain, 1.0),
+        (&other_radius, 2.0),
+        (&plain, 3.0),
+    ]);
+    assert!(
+        shared.contains("2 objects reused a file read for an earlier object"),
+        "{shared}"
+    );
+    assert_eq!(shared.matches(" 16 strands").count(), 4, "{shared}");
+
+    // Named once, a file is read once and not kept: no reuse to report.
+    let alone = summary(&[(&plain, 0.0), (&other_radius, 2.0)]);
+    assert!(!alone.contains("reused"), "{alone}");
+    assert_eq!(alone.matches(" 16 strands").count(), 2, "{alone}");
+}

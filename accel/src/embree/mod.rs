@@ -259,6 +259,8 @@ pub struct SceneBuilder {
     /// Estimated bytes of the objects added so far (see [`OBJECT_BYTES`] and the rates it
     /// cites).
     planned_bytes: f64,
+    /// Bytes the caller holds for the scene beside the builder ([`SceneBuilder::hold_beside`]).
+    held_beside_bytes: f64,
     /// Whether hair objects keep their fibers' orientation ([`SceneBuilder::with_fiber_orientation`]).
     orientation: bool,
 }
@@ -315,6 +317,7 @@ impl SceneBuilder {
             filters: true,
             limits: Limits::default(),
             planned_bytes: 0.0,
+            held_beside_bytes: 0.0,
             orientation: false,
         })
     }
@@ -331,9 +334,17 @@ impl SceneBuilder {
     /// generators refuse an object that would not fit before allocating it.
     pub fn limits(&self) -> Limits {
         Limits {
-            scene_gib: self.limits.scene_gib + self.planned_bytes / GIB,
+            scene_gib: self.limits.scene_gib + (self.planned_bytes + self.held_beside_bytes) / GIB,
             ..self.limits
         }
+    }
+
+    /// Counts `bytes` that the caller holds for this scene outside the builder (a file read
+    /// once and kept for the later objects that name it) against the memory limit from now on,
+    /// in place of what an earlier call counted. Objects added afterwards are checked with
+    /// them in; they are not refused here, since they are already allocated.
+    pub fn hold_beside(&mut self, bytes: f64) {
+        self.held_beside_bytes = bytes;
     }
 
     /// Counts `bytes` more for `object` against the scene's memory limit, or refuses them,

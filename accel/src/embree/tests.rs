@@ -935,3 +935,29 @@ fn hits_carry_the_orientation_the_options_state() {
         2 * 5 * 12,
     );
 }
+
+/// What the caller holds beside the builder (a file kept for later objects) counts against
+/// the scene's memory limit, each call replacing the last count.
+#[test]
+fn bytes_held_beside_the_builder_count_against_the_memory_limit() {
+    let limits = Limits {
+        memory_gib: 1.0,
+        ..Limits::default()
+    };
+    let strands = hair(&[line(Vec3::ZERO, Vec3::Y, 100)], 0.01);
+    let mut builder = SceneBuilder::new().unwrap().with_limits(limits);
+    builder.hold_beside(0.25 * GIB);
+    assert_eq!(builder.limits().scene_gib, 0.25);
+    builder.hold_beside(0.5 * GIB);
+    assert_eq!(builder.limits().scene_gib, 0.5);
+    let mut builder = builder
+        .add_hair(&strands, &HairOptions::default(), 0)
+        .expect("fits beside half a GiB");
+    builder.hold_beside(GIB);
+    let e = builder
+        .add_hair(&strands, &HairOptions::default(), 0)
+        .err()
+        .expect("nothing fits beside a whole GiB")
+        .to_string();
+    assert!(e.contains("GiB"), "{e}");
+}
