@@ -251,9 +251,8 @@ impl DensityFactors {
 #[derive(Debug, Clone, thiserror::Error, PartialEq)]
 pub enum DualScatteringError {
     /// A table setting is out of range.
-    // The cause is in the message, not also a `source`: chains printed with `{:#}` said it twice.
-    #[error("dual-scattering settings: {0}")]
-    Param(ParamError),
+    #[error("dual-scattering settings")]
+    Param(#[from] ParamError),
     /// The BCSDF returned NaN or infinity while the tables were being integrated.
     #[error(
         "the BCSDF returned a non-finite value (lobe {lobe}, light inclination θ = {theta} rad)"
@@ -264,12 +263,6 @@ pub enum DualScatteringError {
         /// Light inclination at which it happened, in radians.
         theta: f32,
     },
-}
-
-impl From<ParamError> for DualScatteringError {
-    fn from(e: ParamError) -> Self {
-        DualScatteringError::Param(e)
-    }
 }
 
 /// The global (lobe-summed) quantities at one light inclination θ, per RGB channel.

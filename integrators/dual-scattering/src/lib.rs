@@ -94,28 +94,15 @@ pub enum DualError {
     NoHairGeometry,
     /// The density grid could not be built (e.g. too large for the memory limit); the
     /// message says "density grid: …".
-    #[error("{0}")]
+    // Transparent: the cause's message once, and its causes as this error's sources.
+    #[error(transparent)]
     DensityGrid(tress_core::accel::BuildError),
     /// The tables could not be built: invalid table settings, or a non-finite BCSDF value.
-    // Causes are in the messages, not also `source`s: chains printed with `{:#}` said them
-    // two or three times ("d_f = 1.5: must lie in [0, 1]: d_f = 1.5: …").
-    #[error("{0}")]
-    Tables(DualScatteringError),
+    #[error(transparent)]
+    Tables(#[from] DualScatteringError),
     /// A density factor `d_f` or `d_b` lies outside [0, 1].
-    #[error("dual-scattering settings: {0}")]
-    Param(tress_materials::ParamError),
-}
-
-impl From<DualScatteringError> for DualError {
-    fn from(e: DualScatteringError) -> Self {
-        DualError::Tables(e)
-    }
-}
-
-impl From<tress_materials::ParamError> for DualError {
-    fn from(e: tress_materials::ParamError) -> Self {
-        DualError::Param(e)
-    }
+    #[error("dual-scattering settings")]
+    Param(#[from] tress_materials::ParamError),
 }
 
 /// A hair point being shaded: everything a [`DirectionSampling`] needs.
