@@ -7,4 +7,5 @@
 
 mod bcsdf_statistics;
 mod chiang_reference;
+mod fur_statements;
 mod huang_reference;
