@@ -7,4 +7,5 @@
 
 mod bcsdf_statistics;
 mod chiang_reference;
+mod huang_cost;
 mod huang_reference;
