@@ -385,6 +385,20 @@ impl Exits {
     };
 }
 
+/// Four paths from [`Huang::paths`], one per lane.
+struct Paths {
+    tt: Exits,
+    trt: Exits,
+    /// Energy of the residual lobe per lane and channel.
+    residual: [f32x4; 3],
+    /// Energies of the exits (for sampling only, else zero), and the lanes whose smooth
+    /// refraction leaves.
+    e_tt: f32x4,
+    e_trt: f32x4,
+    tt_leaves: f32x4,
+    trt_leaves: f32x4,
+}
+
 /// Everything that depends on (wo, h) only.
 #[derive(Clone, Debug)]
 struct Geometry {
@@ -609,14 +623,65 @@ impl Huang {
             // The cuticle faces away from the viewer (grazing, against the tilt): nothing.
             return g;
         }
-        let c = f32x4::splat;
         // Every node's microfacet normal, refraction into the fiber and its weight.
         let frame = Frame::from_z(m_e);
         let wl = self.vndf_nodes(frame.to_local(wo));
+        let hv = V4::splat(frame.x) * wl.x + V4::splat(frame.y) * wl.y + V4::splat(frame.z) * wl.z;
+        let c = f32x4::splat;
+        let all = f32x4::ONE.simd_gt(f32x4::ZERO);
+        let p = self.paths(
+            wo,
+            hv,
+            V4::splat(m_e),
+            [c(p_e.x), c(p_e.y)],
+            c(g.lambda_o),
+            all,
+            needs,
+        );
+        g.residual = Rgb::new(
+            p.residual[0].reduce_add(),
+            p.residual[1].reduce_add(),
+            p.residual[2].reduce_add(),
+        );
+        g.tt = p.tt;
+        g.trt = p.trt;
+        if !needs.sampling {
+            return g;
+        }
+        let e_r = fresnel(cos_o, self.eta);
+        let total = e_r + (p.e_tt + p.e_trt).reduce_add() + luminance(g.residual);
+        if total > 0.0 && total.is_finite() {
+            let scale = (1.0 - DEFENSIVE) / total;
+            g.prob_r = e_r * scale;
+            g.tt.prob = p.tt_leaves.select(p.e_tt * c(scale), f32x4::ZERO);
+            g.trt.prob = p.trt_leaves.select(p.e_trt * c(scale), f32x4::ZERO);
+            let lobes = g.prob_r + (g.tt.prob + g.trt.prob).reduce_add();
+            g.prob_uniform = (1.0 - lobes).max(0.0);
+        }
+        g
+    }
+
+    /// Four paths side by side: from `wo` through the (unnormalised) microfacet normals `hv` of
+    /// the entry points `p_e` (cross-section y, z) whose mesonormals are `m_e` and Smith's Λ(wo)
+    /// there `lambda_o`, in the lanes `alive`. The lanes may hold the four quadrature nodes of one
+    /// offset h (the near field) or one node at four offsets (the far field): nothing here
+    /// depends on which.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn paths(
+        &self,
+        wo: Vec3,
+        hv: V4,
+        m_e: V4,
+        p_e: [f32x4; 2],
+        lambda_o: f32x4,
+        alive: f32x4,
+        needs: Needs,
+    ) -> Paths {
+        let c = f32x4::splat;
         // The microfacet normals ω_h = H / |H|, kept as H: with the cosines scaled by |H|
         // (wo·H = |H| cos, and |H| cos_t), refraction needs one division by |H|² and Fresnel
         // none, instead of a normalisation ahead of them on the critical path.
-        let hv = V4::splat(frame.x) * wl.x + V4::splat(frame.y) * wl.y + V4::splat(frame.z) * wl.z;
         let wo4 = V4::splat(wo);
         let l2 = hv.dot(hv);
         let cos_h = wo4.dot(hv);
@@ -626,15 +691,17 @@ impl Huang {
             .max(f32x4::ZERO)
             .sqrt();
         let d = wo4 * -inv_eta + hv * ((cos_h * inv_eta - cos_t) / l2);
-        let cos_d = d.dot(V4::splat(m_e));
-        let entered =
-            cos_h.simd_gt(f32x4::ZERO) & l2.simd_gt(f32x4::ZERO) & cos_d.simd_lt(f32x4::ZERO);
+        let cos_d = d.dot(m_e);
+        let entered = alive
+            & cos_h.simd_gt(f32x4::ZERO)
+            & l2.simd_gt(f32x4::ZERO)
+            & cos_d.simd_lt(f32x4::ZERO);
         // The node carries 1/K of the visible normals; its transmission weight is the
         // estimator of VNDF sampling, (1 − F) G₂/G₁.
-        let g1 = c(1.0 + g.lambda_o);
+        let g1 = f32x4::ONE + lambda_o;
         let (f_num, f_den) = fresnel4(cos_h, cos_t, self.eta);
         let w1 = (f_den - f_num) * g1 / (f_den * (g1 + self.lambda4(cos_d)) * c(K as f32));
-        let x = self.cross([c(p_e.x), c(p_e.y)], d);
+        let x = self.cross(p_e, d);
         let tt_alive = entered & x.ok;
         let thr_tt = mul3(x.absorbed, w1);
         // TRT: the inner reflection at the mesonormal.
@@ -651,31 +718,23 @@ impl Huang {
         let r_3 = trt_alive.select(y.reflectance, f32x4::ZERO);
         let tail = geometric_tail(r_3, a);
         let thr = mul3(trt.throughput, r_3);
-        g.residual = Rgb::new(
-            (thr[0] * tail[0]).reduce_add(),
-            (thr[1] * tail[1]).reduce_add(),
-            (thr[2] * tail[2]).reduce_add(),
-        );
-        g.tt = tt;
-        g.trt = trt;
-        if !needs.sampling {
-            return g;
+        let residual = [thr[0] * tail[0], thr[1] * tail[1], thr[2] * tail[2]];
+        let (mut e_tt, mut e_trt) = (f32x4::ZERO, f32x4::ZERO);
+        if needs.sampling {
+            e_tt = luminance4(&tt.throughput) * (f32x4::ONE - x.reflectance);
+            e_trt = luminance4(&trt.throughput) * (f32x4::ONE - r_3);
+            e_tt = tt_alive.select(e_tt, f32x4::ZERO);
+            e_trt = trt_alive.select(e_trt, f32x4::ZERO);
         }
-        let e_r = fresnel(cos_o, self.eta);
-        let e_tt = luminance4(&tt.throughput) * (f32x4::ONE - x.reflectance);
-        let e_trt = luminance4(&trt.throughput) * (f32x4::ONE - r_3);
-        let e_tt = tt_alive.select(e_tt, f32x4::ZERO);
-        let e_trt = trt_alive.select(e_trt, f32x4::ZERO);
-        let total = e_r + (e_tt + e_trt).reduce_add() + luminance(g.residual);
-        if total > 0.0 && total.is_finite() {
-            let scale = (1.0 - DEFENSIVE) / total;
-            g.prob_r = e_r * scale;
-            g.tt.prob = tt_leaves.select(e_tt * c(scale), f32x4::ZERO);
-            g.trt.prob = trt_leaves.select(e_trt * c(scale), f32x4::ZERO);
-            let lobes = g.prob_r + (g.tt.prob + g.trt.prob).reduce_add();
-            g.prob_uniform = (1.0 - lobes).max(0.0);
+        Paths {
+            tt,
+            trt,
+            residual,
+            e_tt,
+            e_trt,
+            tt_leaves,
+            trt_leaves,
         }
-        g
     }
 
     /// The reflectance from inside of the rough wall for light at cosine `cos` to its
