@@ -210,6 +210,11 @@ pub struct Huang {
     node_q1: f32x4,
     node_p2: f32x4,
     far_field: bool,
+    /// The far field's offsets (the rule's nodes) in two groups of four lanes, with √(1 − h²)
+    /// and the halved weights.
+    far_h: [f32x4; 2],
+    far_sq: [f32x4; 2],
+    far_w: [f32x4; 2],
     /// Reflectance from inside per cosine ([`Self::inner_reflectance`]).
     inner_r: [f32; R_TABLE],
 }
@@ -418,6 +423,36 @@ struct Geometry {
     prob_uniform: f32,
 }
 
+/// The far field's geometry for four of the rule's offsets, one per lane.
+#[derive(Clone, Debug)]
+struct FarGroup {
+    /// Entry mesonormals and macro normals, `wo · m_e` and Smith's Λ(wo) there.
+    m_e: V4,
+    n_e: V4,
+    cos_o: f32x4,
+    lambda_o: f32x4,
+    /// Per quadrature node, its paths at the four offsets, their throughput weighted by the
+    /// rule (their probabilities are the offsets' own).
+    tt: [Exits; K],
+    trt: [Exits; K],
+    /// The residual's energy per offset, weighted by the rule.
+    residual: [f32x4; 3],
+    /// Each offset's probabilities of sampling R and a uniform direction.
+    prob_r: f32x4,
+    prob_uniform: f32x4,
+    /// The rule's weights (halved: h is uniform on [−1, 1]).
+    weight: f32x4,
+}
+
+/// Everything of the far field that depends on wo only.
+#[derive(Clone, Debug)]
+struct FarGeometry {
+    wo: Vec3,
+    groups: [FarGroup; 2],
+    /// The residual's energy over the width.
+    residual: Rgb,
+}
+
 /// What a call needs of the [`Geometry`]: the exits' terms that `eval` uses, the sampling
 /// mixture (centres, probabilities) that `sample` and `pdf` use, or both. Each part is computed
 /// the same way whatever else is asked for, so every entry point gives the same values bit for
@@ -474,6 +509,13 @@ impl Huang {
             node_q1: f32x4::new(disc.map(|(p1, _)| safe_sqrt(1.0 - p1 * p1))),
             node_p2: f32x4::new(disc.map(|(_, p2)| p2)),
             far_field: p.far_field,
+            far_h: [0, 1].map(|i| f32x4::new(std::array::from_fn(|l| GL_X[4 * i + l]))),
+            far_sq: [0, 1].map(|i| {
+                f32x4::new(std::array::from_fn(|l| {
+                    safe_sqrt(1.0 - GL_X[4 * i + l] * GL_X[4 * i + l])
+                }))
+            }),
+            far_w: [0, 1].map(|i| f32x4::new(std::array::from_fn(|l| 0.5 * GL_W[4 * i + l]))),
             inner_r: [0.0; R_TABLE],
         };
         m.vmf_norm = m.kappa / (TAU * -(-2.0 * m.kappa).exp_m1());
@@ -542,19 +584,24 @@ impl Huang {
         }
     }
 
-    /// The entry point of the ray seen from `wo` at offset `h`, as (2D point, outward normal).
-    fn entry(&self, wo: Vec3, h: f32) -> (Vec2, Vec2) {
-        // Scaling y by 1/b maps the ellipse onto the unit circle, and lines parallel to the
-        // view onto parallel lines at the same fraction of the width: the ray at offset h
-        // meets the circle at h along the view's perpendicular and √(1 − h²) toward the
-        // viewer. The view's direction back to the viewer in the cross-section is z_v (any
-        // length), and h is measured along y_v = z_v × x.
+    /// The direction back to the viewer in the cross-section, in the unit circle that scaling y
+    /// by 1/b maps the ellipse onto (unit). That scaling maps lines parallel to the view onto
+    /// parallel lines at the same fraction of the width: the ray at offset h meets the circle at
+    /// h along the view's perpendicular and √(1 − h²) toward the viewer.
+    fn view_in_circle(&self, wo: Vec3) -> Vec2 {
+        // The view's direction back to the viewer in the cross-section is z_v (any length), and
+        // h is measured along y_v = z_v × x.
         let mut zv = Vec2::new(wo.y, wo.z);
         if zv.length_squared() < 1e-30 {
             // Looking (nearly) along the fiber: z_v as precise as it gets, or any normal.
             zv = zv.normalize_or(Vec2::Y);
         }
-        let q = Vec2::new(zv.x * self.inv_b, zv.y).normalize();
+        Vec2::new(zv.x * self.inv_b, zv.y).normalize()
+    }
+
+    /// The entry point of the ray seen from `wo` at offset `h`, as (2D point, outward normal).
+    fn entry(&self, wo: Vec3, h: f32) -> (Vec2, Vec2) {
+        let q = self.view_in_circle(wo);
         let h = h.clamp(-1.0, 1.0);
         let c = Vec2::new(q.y, -q.x) * h + q * safe_sqrt(1.0 - h * h);
         // Back from the circle; the ellipse's normal (y/b², z) is (c_y/b, c_z) there.
@@ -861,6 +908,13 @@ impl Huang {
     /// throughput and summed.
     #[inline(always)]
     fn eval_exits(&self, e: &Exits, wi: Vec3) -> Rgb {
+        let v = self.exits_lanes(e, wi);
+        Rgb::new(v[0].reduce_add(), v[1].reduce_add(), v[2].reduce_add())
+    }
+
+    /// [`Self::eval_exits`] per lane, not summed.
+    #[inline(always)]
+    fn exits_lanes(&self, e: &Exits, wi: Vec3) -> [f32x4; 3] {
         let c = f32x4::splat;
         let eta = self.eta;
         let w = V4::splat(wi);
@@ -898,11 +952,7 @@ impl Huang {
                 * denom
                 * denom);
         let v = ok.select(v, f32x4::ZERO);
-        Rgb::new(
-            (e.throughput[0] * v).reduce_add(),
-            (e.throughput[1] * v).reduce_add(),
-            (e.throughput[2] * v).reduce_add(),
-        )
+        mul3(e.throughput, v)
     }
 
     with_avx! {
@@ -941,22 +991,41 @@ impl Huang {
     /// unit normal, a vMF direction in the frame of a unit centre, a uniform one), so `sample`
     /// does not normalise it again.
     fn draw(&self, g: &Geometry, u: [f32; 3]) -> Vec3 {
+        let (tt, trt) = (g.tt.prob.to_array(), g.trt.prob.to_array());
+        let probs = std::array::from_fn(|i| if i < K { tt[i] } else { trt[i - K] });
+        let centre = |i: usize| {
+            let e = if i < K { &g.tt } else { &g.trt };
+            e.centre.lane(i % K)
+        };
+        self.draw_from(g.wo, g.m_e, g.prob_r, probs, centre, u)
+    }
+
+    /// A direction from one offset's mixture: R at the mesonormal `m_e` with probability
+    /// `prob_r`, the vMF lobe about `centre(i)` with `probs[i]` (TT's nodes, then TRT's), else
+    /// uniform.
+    fn draw_from(
+        &self,
+        wo: Vec3,
+        m_e: Vec3,
+        prob_r: f32,
+        probs: [f32; 2 * K],
+        centre: impl Fn(usize) -> Vec3,
+        u: [f32; 3],
+    ) -> Vec3 {
         let mut x = u[0];
         let uv = [u[1], u[2]];
-        if x < g.prob_r {
-            let frame = Frame::from_z(g.m_e);
-            let wh = frame.to_world(self.sample_vndf(frame.to_local(g.wo), uv));
-            return wh * (2.0 * g.wo.dot(wh)) - g.wo;
+        if x < prob_r {
+            let frame = Frame::from_z(m_e);
+            let wh = frame.to_world(self.sample_vndf(frame.to_local(wo), uv));
+            return wh * (2.0 * wo.dot(wh)) - wo;
         }
-        x -= g.prob_r;
-        for e in [&g.tt, &g.trt] {
-            for (k, p) in e.prob.to_array().into_iter().enumerate() {
-                if p > 0.0 {
-                    if x < p {
-                        return sample_vmf(self.kappa, self.vmf_floor, e.centre.lane(k), uv);
-                    }
-                    x -= p;
+        x -= prob_r;
+        for (i, p) in probs.into_iter().enumerate() {
+            if p > 0.0 {
+                if x < p {
+                    return sample_vmf(self.kappa, self.vmf_floor, centre(i), uv);
                 }
+                x -= p;
             }
         }
         sample_uniform_sphere(Vec2::new(uv[0], uv[1]))
@@ -974,32 +1043,278 @@ impl Huang {
         unreachable!("the loop returns at its last node")
     }
 
-    /// `f` over every far-field node, weighted by the rule; `known` is a node's geometry the
-    /// caller has already computed (with `needs`).
-    fn far_sum<T: std::ops::Add<Output = T> + std::ops::Mul<f32, Output = T>>(
-        &self,
-        wo: Vec3,
-        needs: Needs,
-        known: Option<(usize, &Geometry)>,
-        zero: T,
-        f: impl Fn(&Geometry) -> T,
-    ) -> T {
-        (0..GL_X.len()).fold(zero, |acc, i| {
-            let v = match known {
-                Some((j, g)) if j == i => f(g),
-                _ => f(&self.geometry(wo, GL_X[i], needs)),
-            };
-            acc + v * (0.5 * GL_W[i])
-        })
+    with_avx! {
+        /// The far field's paths from `wo`: the eight offsets of the rule in two groups of four
+        /// lanes.
+        fn far_geometry / far_geometry_avx => far_geometry_impl(&self, wo: Vec3, needs: Needs) -> FarGeometry
+    }
+
+    #[inline(always)]
+    fn far_geometry_impl(&self, wo: Vec3, needs: Needs) -> FarGeometry {
+        let q = self.view_in_circle(wo);
+        // Not `[0, 1].map(..)`: the closure would be compiled without AVX and not inlined.
+        let groups = [
+            self.far_group(wo, q, 0, needs),
+            self.far_group(wo, q, 1, needs),
+        ];
+        let residual = |c: usize| (groups[0].residual[c] + groups[1].residual[c]).reduce_add();
+        FarGeometry {
+            wo,
+            residual: Rgb::new(residual(0), residual(1), residual(2)),
+            groups,
+        }
+    }
+
+    /// Group `i` of the far field's offsets (lanes) seen from `wo`, whose direction in the
+    /// circle is `q` ([`Self::view_in_circle`]): the near field's geometry, computed for the
+    /// four offsets side by side, and each quadrature node's four paths by [`Self::paths`].
+    #[inline(always)]
+    fn far_group(&self, wo: Vec3, q: Vec2, i: usize, needs: Needs) -> FarGroup {
+        let c = f32x4::splat;
+        let (zero, one) = (f32x4::ZERO, f32x4::ONE);
+        // The entry points ([`Self::entry`]) and their normals.
+        let (h, sq) = (self.far_h[i], self.far_sq[i]);
+        let (cy, cz) = (c(q.y) * h + c(q.x) * sq, c(-q.x) * h + c(q.y) * sq);
+        let (ny, nz) = (cy * c(self.inv_b), cz);
+        let inv = one / (ny * ny + nz * nz).sqrt();
+        let unit = inv.is_finite() & inv.simd_gt(zero);
+        let (ny, nz) = (unit.select(ny * inv, zero), unit.select(nz * inv, one));
+        let p_e = [cy * c(self.b), cz];
+        let m_e = V4 {
+            x: c(self.sin_tilt),
+            y: c(self.cos_tilt) * ny,
+            z: c(self.cos_tilt) * nz,
+        };
+        let wo4 = V4::splat(wo);
+        let cos_o = wo4.dot(m_e);
+        // Offsets whose cuticle faces away from the viewer scatter nothing.
+        let alive = cos_o.simd_gt(c(COS_MIN));
+        let lambda_o = self.lambda4(cos_o);
+        // Frame::from_z(m_e) per lane, and wo in it.
+        let sign = m_e.z.simd_lt(zero).select(c(-1.0), one);
+        let a = c(-1.0) / (sign + m_e.z);
+        let b = m_e.x * m_e.y * a;
+        let fx = V4 {
+            x: one + sign * m_e.x * m_e.x * a,
+            y: sign * b,
+            z: -sign * m_e.x,
+        };
+        let fy = V4 {
+            x: b,
+            y: sign + m_e.y * m_e.y * a,
+            z: -m_e.y,
+        };
+        let (wx, wy, wz) = (wo4.dot(fx), wo4.dot(fy), cos_o);
+        // The visible-normal warp's basis ([`Self::vndf_basis`]) per lane.
+        let alpha = c(self.alpha);
+        let (vx, vy) = (alpha * wx, alpha * wy);
+        let inv_v = one / (vx * vx + vy * vy + wz * wz).sqrt();
+        let v = V4 {
+            x: vx * inv_v,
+            y: vy * inv_v,
+            z: wz * inv_v,
+        };
+        let inv_t = one / (wx * wx + wy * wy).sqrt();
+        let tangent = v.z.simd_lt(c(0.9999));
+        let t1 = V4 {
+            x: tangent.select(-wy * inv_t, one),
+            y: tangent.select(wx * inv_t, zero),
+            z: zero,
+        };
+        let t2 = V4 {
+            x: -v.z * t1.y,
+            y: v.z * t1.x,
+            z: v.x * t1.y - v.y * t1.x,
+        };
+        let mix = c(0.5) * (one + v.z);
+        let (p1s, q1s, p2s) = (
+            self.node_p1.to_array(),
+            self.node_q1.to_array(),
+            self.node_p2.to_array(),
+        );
+        let mut tt = [Exits::NONE; K];
+        let mut trt = [Exits::NONE; K];
+        let mut leaves = [[zero; K]; 2];
+        let mut energy = [[zero; K]; 2];
+        let mut residual = [zero; 3];
+        for k in 0..K {
+            // [`Self::vndf_nodes`]' node k at every offset.
+            let p1 = c(p1s[k]);
+            let p2 = (one - mix) * c(q1s[k]) + mix * c(p2s[k]);
+            let pz = (one - p1 * p1 - p2 * p2).max(zero).sqrt();
+            let nh = t1 * p1 + t2 * p2 + v * pz;
+            let hv = fx * (alpha * nh.x) + fy * (alpha * nh.y) + m_e * nh.z.max(c(1e-7));
+            let p = self.paths(wo, hv, m_e, p_e, lambda_o, alive, needs);
+            residual = [
+                residual[0] + p.residual[0],
+                residual[1] + p.residual[1],
+                residual[2] + p.residual[2],
+            ];
+            (tt[k], trt[k]) = (p.tt, p.trt);
+            leaves[0][k] = p.tt_leaves;
+            leaves[1][k] = p.trt_leaves;
+            energy[0][k] = p.e_tt;
+            energy[1][k] = p.e_trt;
+        }
+        let mut prob_r = zero;
+        let mut prob_uniform = one;
+        if needs.sampling {
+            // Each offset's mixture, as the near field's at that offset.
+            let e_r = alive.select(fresnel_lanes(cos_o, self.eta), zero);
+            let mut total = e_r + luminance4(&residual);
+            for k in 0..K {
+                total = total + energy[0][k] + energy[1][k];
+            }
+            let ok = total.simd_gt(zero) & total.is_finite();
+            let scale = c(1.0 - DEFENSIVE) / total;
+            prob_r = ok.select(e_r * scale, zero);
+            let mut lobes = prob_r;
+            for k in 0..K {
+                tt[k].prob = (ok & leaves[0][k]).select(energy[0][k] * scale, zero);
+                trt[k].prob = (ok & leaves[1][k]).select(energy[1][k] * scale, zero);
+                lobes = lobes + tt[k].prob + trt[k].prob;
+            }
+            prob_uniform = ok.select((one - lobes).max(zero), one);
+        }
+        // The rule's weights in the light the exits carry (the probabilities stay the offsets'
+        // own, which `sample` draws from).
+        let weight = self.far_w[i];
+        for e in tt.iter_mut().chain(trt.iter_mut()) {
+            e.throughput = mul3(e.throughput, weight);
+        }
+        FarGroup {
+            m_e,
+            n_e: V4 {
+                x: zero,
+                y: ny,
+                z: nz,
+            },
+            cos_o,
+            lambda_o,
+            tt,
+            trt,
+            residual: mul3(residual, weight),
+            prob_r,
+            prob_uniform,
+            weight,
+        }
+    }
+
+    with_avx! {
+        /// The far field's lobes at `wi`: R, TT, TRT, residual.
+        fn far_lobes / far_lobes_avx => far_lobes_impl(&self, g: &FarGeometry, wi: Vec3) -> [Rgb; 4]
+    }
+
+    #[inline(always)]
+    fn far_lobes_impl(&self, g: &FarGeometry, wi: Vec3) -> [Rgb; 4] {
+        let c = f32x4::splat;
+        let zero = f32x4::ZERO;
+        // R ([`Self::eval_r`]) per offset: Fresnel at wo·ω_h depends on wo·wi only.
+        let k = 1.0 + g.wo.dot(wi);
+        let mut r = zero;
+        if k > 0.0 {
+            let cos_t = safe_sqrt(1.0 - (1.0 - 0.5 * k) / (self.eta * self.eta));
+            let (f_num, f_den) = fresnel_fraction((0.5 * k).sqrt(), cos_t, self.eta);
+            let h2 = 2.0 * k;
+            let w = V4::splat(wi);
+            for grp in &g.groups {
+                let cos_i = w.dot(grp.m_e);
+                let mh = grp.cos_o + cos_i;
+                let ok = grp.cos_o.simd_gt(c(COS_MIN))
+                    & cos_i.simd_gt(zero)
+                    & w.dot(grp.n_e).simd_gt(zero)
+                    & mh.simd_gt(zero);
+                let x = mh * mh * c(self.alpha2 - 1.0) + c(h2);
+                let v = c(f_num * self.alpha2 * h2 * h2 / PI) * grp.weight
+                    / (x * x
+                        * c(f_den * 4.0)
+                        * (f32x4::ONE + grp.lambda_o + self.lambda4(cos_i))
+                        * grp.cos_o);
+                r += ok.select(v, zero);
+            }
+        }
+        let (mut tt, mut trt) = ([zero; 3], [zero; 3]);
+        for grp in &g.groups {
+            for k in 0..K {
+                let a = self.exits_lanes(&grp.tt[k], wi);
+                let b = self.exits_lanes(&grp.trt[k], wi);
+                tt = [tt[0] + a[0], tt[1] + a[1], tt[2] + a[2]];
+                trt = [trt[0] + b[0], trt[1] + b[1], trt[2] + b[2]];
+            }
+        }
+        let sum = |v: [f32x4; 3]| Rgb::new(v[0].reduce_add(), v[1].reduce_add(), v[2].reduce_add());
+        [
+            Rgb::splat(r.reduce_add()),
+            sum(tt),
+            sum(trt),
+            g.residual * INV_4PI,
+        ]
+    }
+
+    with_avx! {
+        /// The far field's sampling density at `wi`: the offsets' mixtures weighted by the rule.
+        fn far_pdf / far_pdf_avx => far_pdf_impl(&self, g: &FarGeometry, wi: Vec3) -> f32
+    }
+
+    #[inline(always)]
+    fn far_pdf_impl(&self, g: &FarGeometry, wi: Vec3) -> f32 {
+        let c = f32x4::splat;
+        let zero = f32x4::ZERO;
+        let k = 1.0 + g.wo.dot(wi);
+        let h2 = 2.0 * k;
+        let w = V4::splat(wi);
+        let kappa = c(self.kappa);
+        let mut pdf = zero;
+        for grp in &g.groups {
+            // R ([`Self::pdf_r`]) where it is sampled.
+            let mh = grp.cos_o + w.dot(grp.m_e);
+            let ok = grp.prob_r.simd_gt(zero) & mh.simd_gt(zero) & c(k).simd_gt(zero);
+            let x = mh * mh * c(self.alpha2 - 1.0) + c(h2);
+            let r = grp.prob_r * c(self.alpha2 * h2 * h2 / PI)
+                / (x * x * (f32x4::ONE + grp.lambda_o) * c(4.0) * grp.cos_o);
+            let mut vmf = zero;
+            for k in 0..K {
+                for e in [&grp.tt[k], &grp.trt[k]] {
+                    vmf += e.prob * simd_math::exp(kappa * (e.centre.dot(w) - f32x4::ONE));
+                }
+            }
+            let p = grp.prob_uniform * c(INV_4PI) + ok.select(r, zero) + c(self.vmf_norm) * vmf;
+            pdf += grp.weight * p;
+        }
+        pdf.reduce_add()
     }
 
     /// `(eval, pdf)` of the far field at `wi`.
-    fn far_eval_pdf(&self, wo: Vec3, wi: Vec3, known: Option<(usize, &Geometry)>) -> (Rgb, f32) {
-        let Pair(f, pdf) = self.far_sum(wo, BOTH, known, Pair(Rgb::ZERO, 0.0), |g| {
-            let (f, p) = self.eval_pdf_at(g, wi);
-            Pair(f, p)
+    fn far_eval_pdf(&self, g: &FarGeometry, wi: Vec3) -> (Rgb, f32) {
+        let l = self.far_lobes(g, wi);
+        (l[0] + l[1] + l[2] + l[3], self.far_pdf(g, wi))
+    }
+
+    /// A direction from the far field's mixture: an offset by the rule's weights (`u[3]`), then
+    /// that offset's mixture.
+    fn far_draw(&self, g: &FarGeometry, u: [f32; 4]) -> Vec3 {
+        let (j, u3) = Self::far_node(u[3]);
+        let (grp, l) = (&g.groups[j / 4], j % 4);
+        let lane = |x: f32x4| x.to_array()[l];
+        let probs = std::array::from_fn(|i| {
+            lane(if i < K {
+                grp.tt[i].prob
+            } else {
+                grp.trt[i - K].prob
+            })
         });
-        (f, pdf)
+        let centre = |i: usize| {
+            let e = if i < K { &grp.tt[i] } else { &grp.trt[i - K] };
+            e.centre.lane(l)
+        };
+        self.draw_from(
+            g.wo,
+            grp.m_e.lane(l),
+            lane(grp.prob_r),
+            probs,
+            centre,
+            [u[0], u[1], u3],
+        )
     }
 }
 
@@ -1010,7 +1325,8 @@ impl Bcsdf for Huang {
             l[0] + l[1] + l[2] + l[3]
         };
         if self.far_field {
-            self.far_sum(wo, EVAL, None, Rgb::ZERO, sum)
+            let l = self.far_lobes(&self.far_geometry(wo, EVAL), wi);
+            l[0] + l[1] + l[2] + l[3]
         } else {
             sum(&self.geometry(wo, h, EVAL))
         }
@@ -1018,14 +1334,13 @@ impl Bcsdf for Huang {
 
     fn sample(&self, wo: Vec3, h: f32, u: [f32; 4]) -> Option<BcsdfSample> {
         let (f, pdf, wi) = if self.far_field {
-            // The node drawn from is one of the rule's nodes evaluated at the new direction.
-            let (j, u3) = Self::far_node(u[3]);
-            let g = self.geometry(wo, GL_X[j], BOTH);
-            let wi = self.draw(&g, [u[0], u[1], u3]);
+            // The geometry drawn from is the one evaluated at the new direction.
+            let g = self.far_geometry(wo, BOTH);
+            let wi = self.far_draw(&g, u);
             if !wi.is_finite() {
                 return None;
             }
-            let (f, pdf) = self.far_eval_pdf(wo, wi, Some((j, &g)));
+            let (f, pdf) = self.far_eval_pdf(&g, wi);
             (f, pdf, wi)
         } else {
             // The geometry drawn from is the one evaluated at the new direction.
@@ -1042,7 +1357,7 @@ impl Bcsdf for Huang {
 
     fn pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> f32 {
         if self.far_field {
-            self.far_sum(wo, SAMPLING, None, 0.0, |g| self.pdf_at(g, wi))
+            self.far_pdf(&self.far_geometry(wo, SAMPLING), wi)
         } else {
             self.pdf_at(&self.geometry(wo, h, SAMPLING), wi)
         }
@@ -1050,7 +1365,7 @@ impl Bcsdf for Huang {
 
     fn eval_pdf(&self, wo: Vec3, wi: Vec3, h: f32) -> (Rgb, f32) {
         if self.far_field {
-            self.far_eval_pdf(wo, wi, None)
+            self.far_eval_pdf(&self.far_geometry(wo, BOTH), wi)
         } else {
             self.eval_pdf_at(&self.geometry(wo, h, BOTH), wi)
         }
@@ -1065,7 +1380,7 @@ impl Bcsdf for Huang {
             return Rgb::ZERO;
         }
         if self.far_field {
-            self.far_sum(wo, EVAL, None, Rgb::ZERO, |g| self.lobes(g, wi)[p])
+            self.far_lobes(&self.far_geometry(wo, EVAL), wi)[p]
         } else {
             self.lobes(&self.geometry(wo, h, EVAL), wi)[p]
         }
@@ -1073,43 +1388,21 @@ impl Bcsdf for Huang {
 
     // The geometry (entry point, quadrature paths, absorption) once for every direction.
     fn eval_lobes_batch(&self, wo: Vec3, h: f32, wis: &[Vec3], out: &mut [Rgb]) {
-        out.fill(Rgb::ZERO);
-        let geometries: Vec<(Geometry, f32)> = if self.far_field {
-            GL_X.iter()
-                .zip(GL_W)
-                .map(|(&h, w)| (self.geometry(wo, h, EVAL), 0.5 * w))
-                .collect()
-        } else {
-            vec![(self.geometry(wo, h, EVAL), 1.0)]
-        };
-        for (g, w) in &geometries {
+        if self.far_field {
+            let g = self.far_geometry(wo, EVAL);
             for (&wi, row) in wis.iter().zip(out.chunks_exact_mut(4)) {
-                for (v, l) in row.iter_mut().zip(self.lobes(g, wi)) {
-                    *v += l * *w;
-                }
+                row.copy_from_slice(&self.far_lobes(&g, wi));
+            }
+        } else {
+            let g = self.geometry(wo, h, EVAL);
+            for (&wi, row) in wis.iter().zip(out.chunks_exact_mut(4)) {
+                row.copy_from_slice(&self.lobes(&g, wi));
             }
         }
     }
 
     fn uses_orientation(&self) -> bool {
         self.b < 1.0
-    }
-}
-
-/// (eval, pdf) as one value the far-field rule can weight and add.
-struct Pair(Rgb, f32);
-
-impl std::ops::Add for Pair {
-    type Output = Pair;
-    fn add(self, o: Pair) -> Pair {
-        Pair(self.0 + o.0, self.1 + o.1)
-    }
-}
-
-impl std::ops::Mul<f32> for Pair {
-    type Output = Pair;
-    fn mul(self, w: f32) -> Pair {
-        Pair(self.0 * w, self.1 * w)
     }
 }
 
@@ -1125,6 +1418,21 @@ fn fresnel(cos_i: f32, eta: f32) -> f32 {
     let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
     let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
     0.5 * (rs * rs + rp * rp)
+}
+
+/// [`fresnel`] per lane.
+#[inline(always)]
+fn fresnel_lanes(cos_i: f32x4, eta: f32) -> f32x4 {
+    let c = f32x4::splat;
+    let cos_i = cos_i.clamp(f32x4::ZERO, f32x4::ONE);
+    let sin_t2 = (f32x4::ONE - cos_i * cos_i) * c(1.0 / (eta * eta));
+    let cos_t = (f32x4::ONE - sin_t2).max(f32x4::ZERO).sqrt();
+    let (a, b) = (c(eta) * cos_t, c(eta) * cos_i);
+    let rs = (cos_i - a) / (cos_i + a);
+    let rp = (b - cos_t) / (b + cos_t);
+    sin_t2
+        .simd_ge(f32x4::ONE)
+        .select(f32x4::ONE, c(0.5) * (rs * rs + rp * rp))
 }
 
 /// [`fresnel`] where light refracts (cosines `cos_i` and `cos_t`, both in [0, 1] or both scaled
@@ -1507,6 +1815,130 @@ mod tests {
                 let (g, base) = (b.geometry(wo, h, BOTH), b.geometry_impl(wo, h, BOTH));
                 assert_eq!(format!("{g:?}"), format!("{base:?}"), "{}", t.name);
                 assert_eq!(b.lobes(&g, wi), b.lobes_impl(&g, wi), "{}", t.name);
+                let (g, base) = (b.far_geometry(wo, BOTH), b.far_geometry_impl(wo, BOTH));
+                assert_eq!(format!("{g:?}"), format!("{base:?}"), "{}", t.name);
+                assert_eq!(b.far_lobes(&g, wi), b.far_lobes_impl(&g, wi), "{}", t.name);
+                assert_eq!(
+                    b.far_pdf(&g, wi).to_bits(),
+                    b.far_pdf_impl(&g, wi).to_bits(),
+                    "{}",
+                    t.name
+                );
+            }
+        }
+    }
+
+    /// The far field (its eight offsets side by side in lanes) is the rule's weighted sum of the
+    /// near field at its offsets, to rounding: 3000 random (wo, wi) per parameter set, relative
+    /// to the largest channel of f and to the pdf (measured worst 4·10⁻⁷ and 1.4·10⁻⁶).
+    #[test]
+    fn the_far_field_is_the_rule_over_the_near_field() {
+        let mut rng = Sampler::from_seed(17);
+        let sets = test_instances().into_iter().map(|t| t.params).chain([
+            clear_round(0.05),
+            Params {
+                tilt: -7.0,
+                aspect_ratio: 0.3,
+                eta: 2.2,
+                ..clear_round(0.9)
+            },
+        ]);
+        let (mut worst_f, mut worst_pdf) = (0.0f32, 0.0f32);
+        for p in sets {
+            let near = huang(Params {
+                far_field: false,
+                ..p.clone()
+            });
+            let far = huang(Params {
+                far_field: true,
+                ..p
+            });
+            for _ in 0..3000 {
+                let wo = sample_uniform_sphere(rng.next_2d());
+                let wi = sample_uniform_sphere(rng.next_2d());
+                let (f, pdf) = far.eval_pdf(wo, wi, 0.3);
+                let (mut f_sum, mut pdf_sum) = (Rgb::ZERO, 0.0f32);
+                for (&x, &w) in GL_X.iter().zip(&GL_W) {
+                    let (fx, px) = near.eval_pdf(wo, wi, x);
+                    f_sum += fx * (0.5 * w);
+                    pdf_sum += px * (0.5 * w);
+                }
+                let err_f = (f - f_sum).abs().max_element() / f_sum.max_element().max(1e-12);
+                let err_pdf = ((pdf - pdf_sum) / pdf_sum).abs();
+                assert!(
+                    err_f < 1e-4 && err_pdf < 1e-4,
+                    "wo {wo}, wi {wi}: far {f} {pdf}, rule over the near field {f_sum} {pdf_sum}"
+                );
+                worst_f = worst_f.max(err_f);
+                worst_pdf = worst_pdf.max(err_pdf);
+            }
+        }
+        println!("worst relative error: f {worst_f:.1e}, pdf {worst_pdf:.1e}");
+    }
+
+    /// Experiment: the far field's error with fewer Gauss–Legendre nodes in h, against 64.
+    #[test]
+    #[ignore]
+    fn far_field_rule_error() {
+        let ns = [2usize, 3, 4, 5, 6, 8, 12];
+        let reference = crate::dual_scattering::gauss_legendre(64);
+        for (name, pigment) in [
+            (
+                "eu0.8",
+                Pigment::Melanin {
+                    eumelanin: 0.8,
+                    pheomelanin: 0.0,
+                    tint: crate::pigment::NO_TINT,
+                },
+            ),
+            ("clear", Pigment::SigmaA((0.0, 0.0, 0.0))),
+        ] {
+            for roughness in [0.1f32, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0] {
+                let b = huang(Params {
+                    roughness,
+                    aspect_ratio: 0.75,
+                    pigment: pigment.clone(),
+                    ..Params::default()
+                });
+                let mut rng = Sampler::from_seed(21);
+                let far = |rule: &[(f64, f64)], wo: Vec3, wi: Vec3| {
+                    rule.iter().fold((Rgb::ZERO, 0.0f32), |(f, p), &(x, w)| {
+                        let (fx, px) = b.eval_pdf_at(&b.geometry(wo, x as f32, BOTH), wi);
+                        (f + fx * (0.5 * w) as f32, p + px * (0.5 * w) as f32)
+                    })
+                };
+                // Per rule: worst and 99th percentile of |Δf| / max channel of f_ref, the
+                // energy-weighted mean Σ|Δf|/Σf, worst relative pdf error.
+                let mut errs: Vec<Vec<f64>> = vec![Vec::new(); ns.len()];
+                let mut l1 = vec![(0.0f64, 0.0f64); ns.len()];
+                let mut pdf_worst = vec![0.0f64; ns.len()];
+                for _ in 0..1500 {
+                    let wo = sample_uniform_sphere(rng.next_2d());
+                    let wi = sample_uniform_sphere(rng.next_2d());
+                    let (fr, pr) = far(&reference, wo, wi);
+                    let scale = fr.max_element().max(1e-12) as f64;
+                    for (j, &n) in ns.iter().enumerate() {
+                        let (f, p) = far(&crate::dual_scattering::gauss_legendre(n), wo, wi);
+                        let d = (f - fr).abs().max_element() as f64;
+                        errs[j].push(d / scale);
+                        l1[j].0 += d;
+                        l1[j].1 += scale;
+                        pdf_worst[j] = pdf_worst[j].max(((p - pr) / pr).abs() as f64);
+                    }
+                }
+                let mut line = format!("{name} r{roughness}:");
+                for (j, &n) in ns.iter().enumerate() {
+                    let e = &mut errs[j];
+                    e.sort_by(f64::total_cmp);
+                    line += &format!(
+                        " | N{n} max {:.1e} p99 {:.1e} L1 {:.1e} pdf {:.1e}",
+                        e[e.len() - 1],
+                        e[e.len() * 99 / 100],
+                        l1[j].0 / l1[j].1,
+                        pdf_worst[j]
+                    );
+                }
+                println!("{line}");
             }
         }
     }

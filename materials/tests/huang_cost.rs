@@ -107,3 +107,36 @@ fn huang_cost() {
         println!("{line}");
     }
 }
+
+/// Prints a digest of every Huang test instance's `eval_pdf` and `sample` bits at 20,000 random
+/// points: two builds printing the same digests compute the same values (how the commits that
+/// rearrange Huang's code check that they change no bit).
+#[test]
+#[ignore]
+fn huang_digest() {
+    use std::hash::{Hash, Hasher};
+    let mut rng = Pcg32::new(99, 0);
+    let mut r = || rng.next_f32();
+    let all = HairModel::test_instances();
+    for t in all.iter().filter(|t| t.name.starts_with("Huang/")) {
+        let b = t.params.build().unwrap();
+        let mut hs = std::collections::hash_map::DefaultHasher::new();
+        for _ in 0..20_000 {
+            let wo = sample_uniform_sphere(Vec2::new(r(), r()));
+            let wi = sample_uniform_sphere(Vec2::new(r(), r()));
+            let h = 2.0 * r() - 1.0;
+            let u = [r(), r(), r(), r()];
+            let (f, pdf) = b.eval_pdf(wo, wi, h);
+            (f.to_array().map(f32::to_bits), pdf.to_bits()).hash(&mut hs);
+            if let Some(s) = b.sample(wo, h, u) {
+                (
+                    s.wi.to_array().map(f32::to_bits),
+                    s.f.to_array().map(f32::to_bits),
+                    s.pdf.to_bits(),
+                )
+                    .hash(&mut hs);
+            }
+        }
+        println!("{} {:016x}", t.name, hs.finish());
+    }
+}
