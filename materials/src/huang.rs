@@ -220,19 +220,28 @@ pub struct Huang {
 }
 
 /// Defines the method `$name` to run `$imp` (an `#[inline(always)]` method), compiled a second
-/// time with AVX enabled (`$avx`) and taken where the CPU has it. AVX adds no operation the code
-/// uses: the same IEEE single-precision operations (no fused multiply–add) give the same bits,
-/// but VEX's three-operand forms spare most of the register copies SSE2's two-operand forms
-/// need with this many live vectors: eval and pdf take a sixth less time (measured in
-/// docs/src/research/performance.md).
+/// time with AVX enabled (`$avx`) and a third with AVX-512 F and VL (`$avx512`), the best taken
+/// that the CPU has. Neither adds an operation the code uses: the same IEEE single-precision
+/// operations (no fused multiply–add) give the same bits, but VEX's three-operand forms spare
+/// most of the register copies SSE2's two-operand forms need with this many live vectors (eval
+/// and pdf a sixth less time), and EVEX's 32 vector registers instead of 16 most of the spills
+/// (another 4–6 %; measured in docs/src/research/performance.md).
 macro_rules! with_avx {
-    ($(#[$doc:meta])* fn $name:ident / $avx:ident => $imp:ident(&self $(, $arg:ident: $ty:ty)*) -> $ret:ty) => {
+    ($(#[$doc:meta])* fn $name:ident / $avx:ident / $avx512:ident => $imp:ident(&self $(, $arg:ident: $ty:ty)*) -> $ret:ty) => {
         $(#[$doc])*
         fn $name(&self $(, $arg: $ty)*) -> $ret {
             #[cfg(target_arch = "x86_64")]
-            if std::arch::is_x86_feature_detected!("avx") {
-                // SAFETY: the CPU has AVX, the only requirement of the AVX build.
-                return unsafe { self.$avx($($arg),*) };
+            {
+                if std::arch::is_x86_feature_detected!("avx512f")
+                    && std::arch::is_x86_feature_detected!("avx512vl")
+                {
+                    // SAFETY: the CPU has AVX-512 F and VL, the AVX-512 build's requirements.
+                    return unsafe { self.$avx512($($arg),*) };
+                }
+                if std::arch::is_x86_feature_detected!("avx") {
+                    // SAFETY: the CPU has AVX, the only requirement of the AVX build.
+                    return unsafe { self.$avx($($arg),*) };
+                }
             }
             self.$imp($($arg),*)
         }
@@ -240,6 +249,12 @@ macro_rules! with_avx {
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx")]
         fn $avx(&self $(, $arg: $ty)*) -> $ret {
+            self.$imp($($arg),*)
+        }
+
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx512f,avx512vl")]
+        fn $avx512(&self $(, $arg: $ty)*) -> $ret {
             self.$imp($($arg),*)
         }
     };
@@ -645,7 +660,7 @@ impl Huang {
 
     with_avx! {
         /// Everything about the paths from `wo` at `h` that `needs` asks for.
-        fn geometry / geometry_avx => geometry_impl(&self, wo: Vec3, h: f32, needs: Needs) -> Geometry
+        fn geometry / geometry_avx / geometry_avx512 => geometry_impl(&self, wo: Vec3, h: f32, needs: Needs) -> Geometry
     }
 
     #[inline(always)]
@@ -957,7 +972,7 @@ impl Huang {
 
     with_avx! {
         /// The lobes at `wi`: R, TT, TRT, residual.
-        fn lobes / lobes_avx => lobes_impl(&self, g: &Geometry, wi: Vec3) -> [Rgb; 4]
+        fn lobes / lobes_avx / lobes_avx512 => lobes_impl(&self, g: &Geometry, wi: Vec3) -> [Rgb; 4]
     }
 
     #[inline(always)]
@@ -1046,7 +1061,7 @@ impl Huang {
     with_avx! {
         /// The far field's paths from `wo`: the eight offsets of the rule in two groups of four
         /// lanes.
-        fn far_geometry / far_geometry_avx => far_geometry_impl(&self, wo: Vec3, needs: Needs) -> FarGeometry
+        fn far_geometry / far_geometry_avx / far_geometry_avx512 => far_geometry_impl(&self, wo: Vec3, needs: Needs) -> FarGeometry
     }
 
     #[inline(always)]
@@ -1202,7 +1217,7 @@ impl Huang {
 
     with_avx! {
         /// The far field's lobes at `wi`: R, TT, TRT, residual.
-        fn far_lobes / far_lobes_avx => far_lobes_impl(&self, g: &FarGeometry, wi: Vec3) -> [Rgb; 4]
+        fn far_lobes / far_lobes_avx / far_lobes_avx512 => far_lobes_impl(&self, g: &FarGeometry, wi: Vec3) -> [Rgb; 4]
     }
 
     #[inline(always)]
@@ -1253,7 +1268,7 @@ impl Huang {
 
     with_avx! {
         /// The far field's sampling density at `wi`: the offsets' mixtures weighted by the rule.
-        fn far_pdf / far_pdf_avx => far_pdf_impl(&self, g: &FarGeometry, wi: Vec3) -> f32
+        fn far_pdf / far_pdf_avx / far_pdf_avx512 => far_pdf_impl(&self, g: &FarGeometry, wi: Vec3) -> f32
     }
 
     #[inline(always)]
@@ -1801,10 +1816,18 @@ mod tests {
         }
     }
 
-    /// The AVX build of the geometry and lobes gives the same bits as the baseline one: it
-    /// only encodes the same operations differently (`with_avx!`).
+    /// The AVX and AVX-512 builds of the geometry, the lobes and the far field's density give
+    /// the same bits as the baseline one: they only encode the same operations differently
+    /// (`with_avx!`). Each build the CPU has is called directly.
     #[test]
-    fn the_avx_build_gives_the_same_bits() {
+    #[cfg(target_arch = "x86_64")]
+    fn the_avx_builds_give_the_same_bits() {
+        let builds = [
+            is_x86_feature_detected!("avx"),
+            is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("avx512vl"),
+        ];
+        println!("builds tested: AVX {}, AVX-512 {}", builds[0], builds[1]);
+        let bits = |l: [Rgb; 4]| l.map(|c| c.to_array().map(f32::to_bits));
         let mut rng = Sampler::from_seed(3);
         for t in test_instances() {
             let b = huang(t.params);
@@ -1812,18 +1835,38 @@ mod tests {
                 let wo = sample_uniform_sphere(rng.next_2d());
                 let wi = sample_uniform_sphere(rng.next_2d());
                 let h = 2.0 * rng.next_1d() - 1.0;
-                let (g, base) = (b.geometry(wo, h, BOTH), b.geometry_impl(wo, h, BOTH));
-                assert_eq!(format!("{g:?}"), format!("{base:?}"), "{}", t.name);
-                assert_eq!(b.lobes(&g, wi), b.lobes_impl(&g, wi), "{}", t.name);
-                let (g, base) = (b.far_geometry(wo, BOTH), b.far_geometry_impl(wo, BOTH));
-                assert_eq!(format!("{g:?}"), format!("{base:?}"), "{}", t.name);
-                assert_eq!(b.far_lobes(&g, wi), b.far_lobes_impl(&g, wi), "{}", t.name);
-                assert_eq!(
-                    b.far_pdf(&g, wi).to_bits(),
-                    b.far_pdf_impl(&g, wi).to_bits(),
-                    "{}",
-                    t.name
+                let g = b.geometry_impl(wo, h, BOTH);
+                let far = b.far_geometry_impl(wo, BOTH);
+                let want = (
+                    format!("{g:?}"),
+                    bits(b.lobes_impl(&g, wi)),
+                    format!("{far:?}"),
+                    bits(b.far_lobes_impl(&far, wi)),
+                    b.far_pdf_impl(&far, wi).to_bits(),
                 );
+                for (i, _) in builds.iter().enumerate().filter(|(_, &has)| has) {
+                    // SAFETY: the CPU has the build's features (detected above).
+                    let got = unsafe {
+                        if i == 0 {
+                            (
+                                format!("{:?}", b.geometry_avx(wo, h, BOTH)),
+                                bits(b.lobes_avx(&g, wi)),
+                                format!("{:?}", b.far_geometry_avx(wo, BOTH)),
+                                bits(b.far_lobes_avx(&far, wi)),
+                                b.far_pdf_avx(&far, wi).to_bits(),
+                            )
+                        } else {
+                            (
+                                format!("{:?}", b.geometry_avx512(wo, h, BOTH)),
+                                bits(b.lobes_avx512(&g, wi)),
+                                format!("{:?}", b.far_geometry_avx512(wo, BOTH)),
+                                bits(b.far_lobes_avx512(&far, wi)),
+                                b.far_pdf_avx512(&far, wi).to_bits(),
+                            )
+                        }
+                    };
+                    assert_eq!(got, want, "{} build {i}: wo {wo}, wi {wi}, h {h}", t.name);
+                }
             }
         }
     }
