@@ -227,7 +227,7 @@ mod lanes {
 
     /// Eight lanes in one `__m256`. Its methods call AVX and AVX2 intrinsics: they may only
     /// run inside functions compiled for those features, into which they are always inlined
-    /// (the far field's AVX-512 build, taken where the CPU has it).
+    /// (the far field's AVX2 and AVX-512 builds, taken where the CPU has them).
     #[cfg(target_arch = "x86_64")]
     mod avx {
         use super::{f32x4, Lanes, R_TABLE};
@@ -1347,12 +1347,15 @@ impl Huang {
     }
 
     /// The far field's paths from `wo`: all eight offsets in the lanes of one [`F8`] where the
-    /// CPU has AVX-512, else in two groups of four lanes.
+    /// CPU has AVX2 (built for AVX-512 where it has that too), else in two groups of four lanes.
     fn far_geometry(&self, wo: Vec3, needs: Needs) -> Far {
         #[cfg(target_arch = "x86_64")]
         if has_avx512() {
             // SAFETY: the CPU has the features the build needs.
             return Far::Eight(unsafe { self.far_geometry8(wo, needs) });
+        } else if has_avx2() {
+            // SAFETY: as above.
+            return Far::Eight(unsafe { self.far_geometry8_avx2(wo, needs) });
         }
         Far::Four(self.far_geometry4(wo, needs))
     }
@@ -1384,6 +1387,20 @@ impl Huang {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,avx512f,avx512vl")]
     fn far_geometry8(&self, wo: Vec3, needs: Needs) -> FarGeometry<F8, 1> {
+        self.far_geometry8_impl(wo, needs)
+    }
+
+    /// [`Self::far_geometry8`] for CPUs with AVX2 but not AVX-512.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn far_geometry8_avx2(&self, wo: Vec3, needs: Needs) -> FarGeometry<F8, 1> {
+        self.far_geometry8_impl(wo, needs)
+    }
+
+    /// [`Self::far_geometry8`]'s body: only ever inlined into builds with AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn far_geometry8_impl(&self, wo: Vec3, needs: Needs) -> FarGeometry<F8, 1> {
         let q = self.view_in_circle(wo);
         let group = self.far_group::<F8>(wo, q, 0, needs);
         let residual = |c: usize| group.residual[c].fold4().reduce_add();
@@ -1533,9 +1550,12 @@ impl Huang {
     fn far_lobes(&self, g: &Far, wi: Vec3) -> [Rgb; 4] {
         match g {
             Far::Four(g) => self.far_lobes4(g, wi),
-            // SAFETY: `Eight` is built only where the CPU has the features.
+            // SAFETY: `Eight` is built only where the CPU has AVX2, and AVX-512 is detected.
             #[cfg(target_arch = "x86_64")]
-            Far::Eight(g) => unsafe { self.far_lobes8(g, wi) },
+            Far::Eight(g) if has_avx512() => unsafe { self.far_lobes8(g, wi) },
+            // SAFETY: as above.
+            #[cfg(target_arch = "x86_64")]
+            Far::Eight(g) => unsafe { self.far_lobes8_avx2(g, wi) },
         }
     }
 
@@ -1553,6 +1573,13 @@ impl Huang {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,avx512f,avx512vl")]
     fn far_lobes8(&self, g: &FarGeometry<F8, 1>, wi: Vec3) -> [Rgb; 4] {
+        self.far_lobes_lanes(g, wi)
+    }
+
+    /// [`Self::far_lobes8`] for CPUs with AVX2 but not AVX-512.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn far_lobes8_avx2(&self, g: &FarGeometry<F8, 1>, wi: Vec3) -> [Rgb; 4] {
         self.far_lobes_lanes(g, wi)
     }
 
@@ -1631,9 +1658,12 @@ impl Huang {
     fn far_pdf(&self, g: &Far, wi: Vec3) -> f32 {
         match g {
             Far::Four(g) => self.far_pdf4(g, wi),
-            // SAFETY: `Eight` is built only where the CPU has the features.
+            // SAFETY: `Eight` is built only where the CPU has AVX2, and AVX-512 is detected.
             #[cfg(target_arch = "x86_64")]
-            Far::Eight(g) => unsafe { self.far_pdf8(g, wi) },
+            Far::Eight(g) if has_avx512() => unsafe { self.far_pdf8(g, wi) },
+            // SAFETY: as above.
+            #[cfg(target_arch = "x86_64")]
+            Far::Eight(g) => unsafe { self.far_pdf8_avx2(g, wi) },
         }
     }
 
@@ -1651,6 +1681,13 @@ impl Huang {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,avx512f,avx512vl")]
     fn far_pdf8(&self, g: &FarGeometry<F8, 1>, wi: Vec3) -> f32 {
+        self.far_pdf_lanes(g, wi)
+    }
+
+    /// [`Self::far_pdf8`] for CPUs with AVX2 but not AVX-512.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn far_pdf8_avx2(&self, g: &FarGeometry<F8, 1>, wi: Vec3) -> f32 {
         self.far_pdf_lanes(g, wi)
     }
 
@@ -1735,7 +1772,13 @@ enum Far {
     Eight(FarGeometry<F8, 1>),
 }
 
-/// Whether the CPU has what the AVX-512 builds (and [`F8`]) need.
+/// Whether the CPU has what [`F8`] needs.
+#[cfg(target_arch = "x86_64")]
+fn has_avx2() -> bool {
+    std::arch::is_x86_feature_detected!("avx2")
+}
+
+/// Whether the CPU has what the AVX-512 builds need.
 #[cfg(target_arch = "x86_64")]
 fn has_avx512() -> bool {
     std::arch::is_x86_feature_detected!("avx2")
@@ -2277,23 +2320,36 @@ mod tests {
                     };
                     assert_eq!(got, want, "{} build {i}: wo {wo}, wi {wi}, h {h}", t.name);
                 }
-                if builds[1] {
-                    // The eight-lane far field: its own geometry, then its lobes, density and
-                    // draws.
-                    // SAFETY: the CPU has AVX-512 (detected above).
+                // The eight-lane far field (AVX2 and AVX-512 builds): its own geometry, then its
+                // lobes, density and draws.
+                for build in [has_avx2(), builds[1]]
+                    .into_iter()
+                    .enumerate()
+                    .filter_map(|(i, has)| has.then_some(i))
+                {
+                    // SAFETY: the CPU has the build's features (detected above).
                     let (lobes, pdf, draw) = unsafe {
-                        let g8 = b.far_geometry8(wo, BOTH);
+                        let g8 = if build == 0 {
+                            b.far_geometry8_avx2(wo, BOTH)
+                        } else {
+                            b.far_geometry8(wo, BOTH)
+                        };
                         assert_eq!(g8.residual, far.residual, "{}", t.name);
+                        let (lobes, pdf) = if build == 0 {
+                            (b.far_lobes8_avx2(&g8, wi), b.far_pdf8_avx2(&g8, wi))
+                        } else {
+                            (b.far_lobes8(&g8, wi), b.far_pdf8(&g8, wi))
+                        };
                         (
-                            bits(b.far_lobes8(&g8, wi)),
-                            b.far_pdf8(&g8, wi).to_bits(),
+                            bits(lobes),
+                            pdf.to_bits(),
                             b.far_draw_lanes(&g8, u).to_array().map(f32::to_bits),
                         )
                     };
                     assert_eq!(
                         (lobes, pdf, draw),
                         (want.3, want.4, far_draw),
-                        "{} eight lanes: wo {wo}, wi {wi}, u {u:?}",
+                        "{} eight lanes, build {build}: wo {wo}, wi {wi}, u {u:?}",
                         t.name
                     );
                 }
