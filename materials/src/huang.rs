@@ -718,6 +718,7 @@ impl<L: Lanes> Exits<L> {
 }
 
 /// Four paths from [`Huang::paths`], one per lane.
+#[derive(Clone, Copy)]
 struct Paths<L = f32x4> {
     tt: Exits<L>,
     trt: Exits<L>,
@@ -1478,30 +1479,52 @@ impl Huang {
             self.node_q1.to_array(),
             self.node_p2.to_array(),
         );
-        let mut tt = [Exits::NONE; K];
-        let mut trt = [Exits::NONE; K];
-        let mut leaves = [[zero; K]; 2];
-        let mut energy = [[zero; K]; 2];
+        // [`Self::vndf_nodes`]' node k at every offset, and its paths. Written out per node
+        // rather than filling arrays in a loop, which cleared them first (a memset per call).
+        // (A macro, not a closure: closures are compiled without the caller's AVX.)
+        macro_rules! node {
+            ($k:expr) => {{
+                let p1 = c(p1s[$k]);
+                let p2 = (one - mix) * c(q1s[$k]) + mix * c(p2s[$k]);
+                let pz = (one - p1 * p1 - p2 * p2).max(zero).sqrt();
+                let nh = t1 * p1 + t2 * p2 + v * pz;
+                fx * (alpha * nh.x) + fy * (alpha * nh.y) + m_e * nh.z.max(c(1e-7))
+            }};
+        }
+        let ps = [
+            self.paths(wo, node!(0), m_e, p_e, lambda_o, alive, needs),
+            self.paths(wo, node!(1), m_e, p_e, lambda_o, alive, needs),
+            self.paths(wo, node!(2), m_e, p_e, lambda_o, alive, needs),
+            self.paths(wo, node!(3), m_e, p_e, lambda_o, alive, needs),
+        ];
         let mut residual = [zero; 3];
-        for k in 0..K {
-            // [`Self::vndf_nodes`]' node k at every offset.
-            let p1 = c(p1s[k]);
-            let p2 = (one - mix) * c(q1s[k]) + mix * c(p2s[k]);
-            let pz = (one - p1 * p1 - p2 * p2).max(zero).sqrt();
-            let nh = t1 * p1 + t2 * p2 + v * pz;
-            let hv = fx * (alpha * nh.x) + fy * (alpha * nh.y) + m_e * nh.z.max(c(1e-7));
-            let p = self.paths(wo, hv, m_e, p_e, lambda_o, alive, needs);
+        for p in &ps {
             residual = [
                 residual[0] + p.residual[0],
                 residual[1] + p.residual[1],
                 residual[2] + p.residual[2],
             ];
-            (tt[k], trt[k]) = (p.tt, p.trt);
-            leaves[0][k] = p.tt_leaves;
-            leaves[1][k] = p.trt_leaves;
-            energy[0][k] = p.e_tt;
-            energy[1][k] = p.e_trt;
         }
+        let mut tt = [ps[0].tt, ps[1].tt, ps[2].tt, ps[3].tt];
+        let mut trt = [ps[0].trt, ps[1].trt, ps[2].trt, ps[3].trt];
+        let leaves = [
+            [
+                ps[0].tt_leaves,
+                ps[1].tt_leaves,
+                ps[2].tt_leaves,
+                ps[3].tt_leaves,
+            ],
+            [
+                ps[0].trt_leaves,
+                ps[1].trt_leaves,
+                ps[2].trt_leaves,
+                ps[3].trt_leaves,
+            ],
+        ];
+        let energy = [
+            [ps[0].e_tt, ps[1].e_tt, ps[2].e_tt, ps[3].e_tt],
+            [ps[0].e_trt, ps[1].e_trt, ps[2].e_trt, ps[3].e_trt],
+        ];
         let mut prob_r = zero;
         let mut prob_uniform = one;
         if needs.sampling {
