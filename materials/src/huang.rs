@@ -45,7 +45,11 @@
 //! field averaged over h uniform in [−1, 1] (uniform in the projected width), here by an 8-point
 //! Gauss–Legendre rule in h; `eval`, `pdf` and `sample` are then the rule's mixtures, so `pdf`
 //! stays the exact density of `sample`. `h` is ignored. The eight near-field lobes merge into one
-//! only for rough fibers (roughness ≳ 0.2).
+//! only for rough fibers (roughness ≳ 0.2). The near field is discontinuous in h (where R's `wi`
+//! passes below the surface, where paths start or stop leaving), so the rule is only as accurate
+//! as eight points on such a function: against 64 points, about 2 % of f energy-weighted at
+//! roughness 0.5 to 1 and up to tens of percent at single directions (the ignored test
+//! `far_field_rule_error` prints it; docs/src/research/performance.md).
 //!
 //! # Sampling
 //! A mixture with exactly computable density: R by GGX visible-normal sampling at `m_e` (exact);
@@ -59,10 +63,14 @@
 //! The K = 4 nodes' paths run side by side in the lanes of `f32x4`, and the code keeps the
 //! dependent chain of divisions and square roots short (cosines scaled by an unnormalised half
 //! vector's length rather than normalised ones, several divisions folded into one), since the
-//! geometry is one long such chain. `eval` and `pdf` compute only the parts of it they use; an
-//! AVX build of the geometry and the lobes (the same operations, so the same bits) is taken where
-//! the CPU has it. Near field about 2.6× Chiang per `eval` and `pdf` and 2.9× per `sample`; the far
-//! field evaluates eight near fields (docs/src/research/performance.md).
+//! geometry is one long such chain. `eval` and `pdf` compute only the parts of it they use; AVX
+//! and AVX-512 builds of the geometry and the lobes (the same operations, so the same bits) are
+//! taken where the CPU has them. The far field computes its eight offsets side by side too: the
+//! offsets in the lanes, one quadrature node at a time, all eight in one 256-bit vector where the
+//! CPU has AVX2 (two groups of four elsewhere; the same bits either way), with the entry points,
+//! frames and R's Fresnel computed once per call. Near field about 2.4× Chiang per `eval`, 2.2×
+//! per `pdf` and 2.7× per `sample`; far field about 8× (about 16× on a CPU with AVX but not
+//! AVX2; docs/src/research/performance.md, "Huang's cost").
 //!
 //! # Orientation
 //! The model reports [`Bcsdf::uses_orientation`]: the shading point hands it directions in the
