@@ -102,11 +102,10 @@ use tress_core::sampling::{sample_uniform_sphere, INV_4PI};
 use tress_core::{Bcsdf, BcsdfSample};
 use wide::f32x4;
 
-/// The lane types the paths run in: `f32x4` everywhere, and where the CPU has AVX-512 (and so
-/// AVX2) the far field's eight offsets in the eight lanes of one 256-bit vector
-/// ([`lanes::F8`]). Every operation here is the one `wide`'s `f32x4` performs, lane by lane
-/// (the same NaN handling in `max`, `min` and `clamp`, the same bit masks), so a value computed
-/// in either type has the same bits.
+/// The lane types the paths run in: `f32x4` everywhere, and where the CPU has AVX2 the far
+/// field's eight offsets in the eight lanes of one 256-bit vector ([`lanes::F8`]). Every
+/// operation here is the one `wide`'s `f32x4` performs, lane by lane (the same NaN handling in
+/// `max` and `clamp`, the same bit masks), so a value computed in either type has the same bits.
 mod lanes {
     use super::R_TABLE;
     use crate::simd_math;
@@ -725,7 +724,7 @@ impl<L: Lanes> Exits<L> {
     };
 }
 
-/// Four paths from [`Huang::paths`], one per lane.
+/// Paths from [`Huang::paths`], one per lane.
 #[derive(Clone, Copy)]
 struct Paths<L = f32x4> {
     tt: Exits<L>,
