@@ -926,7 +926,7 @@ impl NodeMoments {
 }
 
 /// Gauss–Legendre nodes and weights on [−1, 1] (Newton iteration on P_n).
-fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
+pub(crate) fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
     (0..n)
         .map(|i| {
             // Tricomi's initial guess for the i-th root, descending from +1.

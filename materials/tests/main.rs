@@ -8,4 +8,5 @@
 mod bcsdf_statistics;
 mod chiang_reference;
 mod fur_statements;
+mod huang_cost;
 mod huang_reference;
