@@ -1423,7 +1423,7 @@ mod tests {
             ),
             (resum(other_key), "key differs"),
         ] {
-            std::fs::write(&path, &bad).unwrap();
+            tress_core::output_file::write_bytes(&path, &Default::default(), &bad).unwrap();
             let again = run();
             assert_eq!(table_bits(&table_of(&p, &again)), fresh, "{why}");
             let notes = again.take_notes();
