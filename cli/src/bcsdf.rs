@@ -86,7 +86,10 @@ fn build_model(ron_text: &str) -> Result<Arc<dyn Bcsdf>> {
                 HairModel::names().join(", ")
             )
         })?;
-    model.build().map_err(|e| anyhow!("--model: {e}"))
+    let prep = crate::default_preparation();
+    let bcsdf = model.build(&prep).map_err(|e| anyhow!("--model: {e}"));
+    crate::print_warnings(&prep);
+    bcsdf
 }
 
 /// Mean and standard error of an albedo estimator over `samples` draws at θ_o with h uniform:

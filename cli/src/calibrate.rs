@@ -383,8 +383,11 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         output_file::check(out, &inputs)?;
     }
     let pool = args.run.thread_pool()?;
-    let built =
-        pool.install(|| scene_desc::build(&desc, &args.scene, &crate::limits_from_env()))?;
+    // One preparation context: the scene's models and the corner and check renders share
+    // their tables.
+    let prep = args.run.preparation();
+    let built = pool.install(|| scene_desc::build(&desc, &args.scene, &prep))?;
+    crate::print_warnings(&prep);
     let renders = Renders {
         pool: &pool,
         scene: &built.scene,
@@ -393,8 +396,6 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         verbose: !args.run.quiet,
     };
     let (mask, hair_pixels) = hair_mask(&renders, &args)?;
-    // One preparation context: the corner and check renders share their tables.
-    let prep = tress_core::prepare::Preparation::with_limits(crate::limits_from_env());
     let path = reference_integrator.build(&built.scene, &prep)?;
     let reference = renders.render(path.as_ref(), args.reference_spp, "path reference")?;
     let reference_mean = masked_mean(&reference, &mask);

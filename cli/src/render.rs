@@ -262,12 +262,13 @@ pub fn render(args: RenderArgs, log: &mut Log) -> Result<()> {
     let pool = args.run.thread_pool()?;
     let verbose = !args.run.quiet;
 
-    let built =
-        pool.install(|| scene_desc::build(&desc, &args.scene, &crate::limits_from_env()))?;
+    // One preparation context for the run: the scene's models and the integrator take what
+    // they precompute from it (and from the table folder it names).
+    let prep = args.run.preparation();
+    let built = pool.install(|| scene_desc::build(&desc, &args.scene, &prep))?;
     if verbose {
         eprintln!("{}", built.summary);
     }
-    let prep = tress_core::prepare::Preparation::with_limits(crate::limits_from_env());
     let integrator = build_integrator(&args, &desc, &built.scene, &pool, &prep, verbose)?;
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)
@@ -348,11 +349,11 @@ fn build_integrator(
         .install(|| desc.integrator.build(scene, prep))
         .with_context(|| args.scene.display().to_string())?;
     let setup = t_integrator.elapsed();
-    if verbose {
-        prep.take_notes()
-            .iter()
-            .for_each(|line| eprintln!("{line}"));
-    }
+    // What the models and the integrator built or read; warnings (a stored table refused)
+    // are printed either way.
+    (prep.take_notes().iter())
+        .filter(|line| verbose || line.starts_with("warning"))
+        .for_each(|line| eprintln!("{line}"));
     if verbose && setup >= Duration::from_millis(50) {
         eprintln!(
             "{} set up in {:.2} s",
@@ -583,7 +584,9 @@ pub fn info(scene: &Path, defines: &[(String, String)]) -> Result<()> {
     desc.film
         .validate()
         .map_err(|e| anyhow::anyhow!("{}: film: {e}", scene.display()))?;
-    let built = scene_desc::build(&desc, scene, &crate::limits_from_env())?;
+    let prep = crate::default_preparation();
+    let built = scene_desc::build(&desc, scene, &prep)?;
+    crate::print_warnings(&prep);
     println!("{}", built.summary);
     println!(
         "film: {}x{} at {} spp, seed {}",

@@ -1,6 +1,7 @@
 //! The `tress` binary end to end: rendering, outputs, and clear errors for bad input.
 
-use crate::common::{render_ok, scene_dir, stderr, tress, SCENE};
+use crate::common::{files_in, pixels, render_ok, scene_dir, stderr, tress, SCENE};
+use std::path::Path;
 
 #[test]
 fn renders_exr_and_png_with_metadata() {
@@ -353,6 +354,72 @@ fn calibrate_fits_the_density_factors_and_writes_them() {
     );
     assert!(
         !o.status.success() && stderr(&o).contains("no pixel"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+/// A fur scene rendered twice with `--table-cache` in a temporary folder: the first run builds
+/// the medulla's table and stores it, the second reads it and says so, and both images are the
+/// one rendered with `--no-table-cache`, bit for bit. A damaged table file is a warning, printed
+/// even with `--quiet`, and is rebuilt.
+#[test]
+fn render_keeps_the_fur_table_in_the_table_cache() {
+    let fur = SCENE.replace(
+        "Chiang(beta_m: 0.3, beta_n: 0.3, pigment: Melanin(eumelanin: 1.0))",
+        "Fur(medulla_ratio: 0.5, medulla_sigma_s: 3.0, pigment: Melanin(eumelanin: 1.0))",
+    );
+    assert_ne!(fur, SCENE);
+    let (dir, _) = scene_dir(&fur);
+    let cache = dir.path().join("tables");
+    let cache = cache.to_str().unwrap();
+    let run = |args: &[&str], out: &str| {
+        let log = render_ok(&[args, &["--out", out]].concat(), dir.path());
+        (log, pixels(&dir.path().join(out)))
+    };
+    let (first, built) = run(&["--table-cache", cache], "first.exr");
+    assert!(
+        first.contains("fur-medulla table built in") && first.contains(", stored in "),
+        "{first}"
+    );
+    let stored = files_in(Path::new(cache));
+    assert!(
+        stored.len() == 1 && stored[0].starts_with("fur-medulla-v"),
+        "{stored:?}"
+    );
+    let (second, read) = run(&["--table-cache", cache], "second.exr");
+    assert!(second.contains("fur-medulla table read from"), "{second}");
+    assert!(!second.contains("table built"), "{second}");
+    let (none, uncached) = run(&["--no-table-cache"], "none.exr");
+    assert!(
+        none.contains("fur-medulla table built in") && !none.contains("stored"),
+        "{none}"
+    );
+    assert_eq!(read, built);
+    assert_eq!(uncached, built);
+
+    let file = Path::new(cache).join(&stored[0]);
+    let bytes = std::fs::read(&file).unwrap();
+    std::fs::write(&file, &bytes[..bytes.len() - 100]).unwrap();
+    let (quiet, rebuilt) = run(&["--table-cache", cache, "--quiet"], "rebuilt.exr");
+    assert!(
+        quiet.starts_with("warning: ignoring") && quiet.contains("truncated"),
+        "{quiet}"
+    );
+    assert_eq!(rebuilt, built);
+    assert_eq!(std::fs::read(&file).unwrap(), bytes, "stored again");
+    let o = tress(
+        &[
+            "render",
+            "scene.ron",
+            "--table-cache",
+            cache,
+            "--no-table-cache",
+        ],
+        dir.path(),
+    );
+    assert!(
+        !o.status.success() && stderr(&o).contains("cannot be used with"),
         "{}",
         stderr(&o)
     );

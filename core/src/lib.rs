@@ -31,6 +31,7 @@ pub mod sampling;
 pub mod scene;
 pub mod shading;
 pub mod stats;
+pub mod stored_table;
 #[cfg(test)]
 mod test_util;
 

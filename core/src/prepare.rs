@@ -4,13 +4,18 @@
 //! know nothing of integrators: an integrator asks for what it needs while it is built. It replaces process-wide caches: two runs in one process (a study's
 //! jobs share one; separate renders or tests do not) never see each other's data, and a cache
 //! entry is found by the value of its key, never by a description of it. It also carries the
-//! run's [`Limits`], which what is built is checked against.
+//! run's [`Limits`], which what is built is checked against, and the folder, if the front end
+//! chose one, where tables are kept between runs ([`Preparation::get_or_build_stored`],
+//! [`crate::stored_table`]).
 
 use crate::limits::Limits;
+use crate::stored_table::{self, Loaded, StoredTable};
 use std::any::{Any, TypeId};
 use std::collections::HashMap;
 use std::hash::Hash;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
+use std::time::Instant;
 
 /// Derived data of a run, by key, built on first request (see the module docs).
 #[derive(Default)]
@@ -21,6 +26,8 @@ pub struct Preparation {
     notes: Mutex<Vec<String>>,
     /// What building may spend.
     limits: Limits,
+    /// Where tables are kept between runs; `None`: nowhere.
+    table_dir: Option<PathBuf>,
 }
 
 impl std::fmt::Debug for Preparation {
@@ -28,6 +35,7 @@ impl std::fmt::Debug for Preparation {
         f.debug_struct("Preparation")
             .field("kinds", &self.lock().len())
             .field("limits", &self.limits)
+            .field("table_dir", &self.table_dir)
             .finish()
     }
 }
@@ -46,9 +54,24 @@ impl Preparation {
         }
     }
 
+    /// The same context, keeping the tables that can be stored ([`StoredTable`]) in `dir`
+    /// between runs (`None`: nowhere). The front ends choose the folder; the library reads no
+    /// environment.
+    pub fn with_table_dir(self, dir: Option<PathBuf>) -> Self {
+        Preparation {
+            table_dir: dir,
+            ..self
+        }
+    }
+
     /// The limits builds are held to.
     pub fn limits(&self) -> &Limits {
         &self.limits
+    }
+
+    /// The folder where tables are kept between runs, if any.
+    pub fn table_dir(&self) -> Option<&Path> {
+        self.table_dir.as_deref()
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<TypeId, Box<dyn Any + Send + Sync>>> {
@@ -80,6 +103,61 @@ impl Preparation {
         let t = Arc::new(build()?);
         cache.insert(key, Arc::clone(&t));
         Ok(t)
+    }
+
+    /// [`Preparation::get_or_build`] for a table that can be kept on disk: on first request in
+    /// the run it is read from the table folder if that holds it for `key`, otherwise built and
+    /// stored there. A file that is not the table asked for (truncated, corrupt, of another
+    /// version or key) is ignored with a warning note and replaced; a table that cannot be
+    /// stored is kept for the run with a warning note. Reading back gives the built table bit
+    /// for bit, so images do not depend on the folder. Each read and build is noted.
+    pub fn get_or_build_stored<T, E>(
+        &self,
+        key: T::Key,
+        build: impl FnOnce() -> Result<T, E>,
+    ) -> Result<Arc<T>, E>
+    where
+        T: StoredTable,
+    {
+        let stored = self.table_dir.as_deref().map(|dir| {
+            let key_bytes = T::key_bytes(&key);
+            (stored_table::path::<T>(dir, &key_bytes), key_bytes)
+        });
+        // get_or_build holds the cache's lock while this runs: one read or build per key.
+        self.get_or_build(key, || {
+            if let Some((path, key_bytes)) = &stored {
+                match stored_table::load::<T>(path, key_bytes) {
+                    Loaded::Table(t) => {
+                        self.note(format!("{} table read from {}", T::KIND, path.display()));
+                        return Ok(t);
+                    }
+                    Loaded::Absent => {}
+                    Loaded::Rejected(why) => self.note(format!(
+                        "warning: ignoring {}: {why}; building the {} table again",
+                        path.display(),
+                        T::KIND
+                    )),
+                }
+            }
+            let start = Instant::now();
+            let t = build()?;
+            let seconds = start.elapsed().as_secs_f64();
+            let kept = match &stored {
+                None => String::new(),
+                Some((path, key_bytes)) => match stored_table::store(path, key_bytes, &t) {
+                    Ok(()) => format!(", stored in {}", path.display()),
+                    Err(why) => {
+                        self.note(format!(
+                            "warning: the {} table is kept for this run only: {why}",
+                            T::KIND
+                        ));
+                        String::new()
+                    }
+                },
+            };
+            self.note(format!("{} table built in {seconds:.2} s{kept}", T::KIND));
+            Ok(t)
+        })
     }
 
     /// Records one line about something built (what, how large, how long), for the caller to
@@ -137,5 +215,53 @@ mod tests {
         prep.note("tables".into());
         assert_eq!(prep.take_notes(), ["grid", "tables"]);
         assert!(prep.take_notes().is_empty());
+    }
+
+    #[test]
+    fn stored_tables_are_read_back_and_bad_files_rebuilt() {
+        use crate::stored_table::tests::Squares;
+        let dir = tempfile::tempdir().unwrap();
+        let builds = std::cell::Cell::new(0);
+        let build = |seed: u32| {
+            builds.set(builds.get() + 1);
+            Ok::<_, ()>(Squares((0..4).map(|i| (seed + i) * (seed + i)).collect()))
+        };
+        let run = || Preparation::new().with_table_dir(Some(dir.path().join("tables")));
+        // A first run builds and stores; within it, the same key is built once.
+        let first = run();
+        let a = first.get_or_build_stored(2, || build(2)).unwrap();
+        let b = first.get_or_build_stored(2, || build(2)).unwrap();
+        assert!(Arc::ptr_eq(&a, &b));
+        assert_eq!(builds.get(), 1);
+        let notes = first.take_notes();
+        assert!(
+            notes.len() == 1 && notes[0].contains("squares table built in"),
+            "{notes:?}"
+        );
+        assert!(notes[0].contains("stored in"), "{notes:?}");
+        // A second run reads it.
+        let second = run();
+        assert_eq!(*second.get_or_build_stored(2, || build(2)).unwrap(), *a);
+        assert_eq!(builds.get(), 1);
+        assert!(second.take_notes()[0].starts_with("squares table read from"));
+        // A damaged file is rebuilt, with a warning, and replaced.
+        let path =
+            crate::stored_table::path::<Squares>(&dir.path().join("tables"), &2u32.to_le_bytes());
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() - 3]).unwrap();
+        let third = run();
+        assert_eq!(*third.get_or_build_stored(2, || build(2)).unwrap(), *a);
+        assert_eq!(builds.get(), 2);
+        let notes = third.take_notes();
+        assert!(
+            notes[0].starts_with("warning: ignoring") && notes[0].contains("truncated"),
+            "{notes:?}"
+        );
+        assert_eq!(std::fs::read(&path).unwrap(), bytes);
+        // Without a folder nothing is read or written.
+        let plain = Preparation::new();
+        plain.get_or_build_stored(2, || build(2)).unwrap();
+        assert_eq!(builds.get(), 3);
+        assert!(plain.table_dir().is_none());
     }
 }

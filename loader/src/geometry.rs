@@ -9,6 +9,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tress_accel::{EmbreeAccel, HairOptions, SceneBuilder, TriangleMesh};
+use tress_core::prepare::Preparation;
 use tress_core::Material;
 use tress_groom::{HairAttribute, HairGeometry, HairSource, Transform};
 use tress_materials::pigment::Pigment;
@@ -69,7 +70,7 @@ impl ObjectDesc {
 /// Builds the accelerator for the scene's objects with `builder`, whose limits the hair is
 /// loaded and built within; returns it with a summary (`tress info`).
 /// `materials` holds the built materials of `descriptions` (in `material_index` order); hair
-/// objects with a `variation` append their variants to it.
+/// objects with a `variation` append their variants to it, built through the run's `prep`.
 pub fn build_accel(
     objects: &[ObjectDesc],
     scene_path: &Path,
@@ -77,6 +78,7 @@ pub fn build_accel(
     material_index: &BTreeMap<String, u32>,
     materials: &mut Vec<Material>,
     mut builder: SceneBuilder,
+    prep: &Preparation,
 ) -> Result<(EmbreeAccel, String)> {
     let here = |index: usize, source: ObjectError| Error::Object {
         scene: scene_path.to_owned(),
@@ -137,17 +139,18 @@ pub fn build_accel(
                         .add_hair(&hair, options, material)
                         .map_err(|e| here(i, e.into()))?,
                     Some(variation) => {
-                        let (builder, note) =
-                            add_varied_hair(builder, &hair, options, variation, model, materials)
-                                .map_err(|source| {
-                                here(
-                                    i,
-                                    ObjectError::Variation {
-                                        material: name.to_owned(),
-                                        source,
-                                    },
-                                )
-                            })?;
+                        let (builder, note) = add_varied_hair(
+                            builder, &hair, options, variation, model, materials, prep,
+                        )
+                        .map_err(|source| {
+                            here(
+                                i,
+                                ObjectError::Variation {
+                                    material: name.to_owned(),
+                                    source,
+                                },
+                            )
+                        })?;
                         notes.push(format!("objects[{i}]: {note}"));
                         builder
                     }
@@ -301,6 +304,7 @@ fn add_varied_hair(
     variation: &StrandVariation,
     model: &tress_materials::HairModel,
     materials: &mut Vec<Material>,
+    prep: &Preparation,
 ) -> Result<(SceneBuilder, String), VariationError> {
     let varied = variation.for_model(model)?;
     if varied.uses_file_colors() {
@@ -345,11 +349,13 @@ fn add_varied_hair(
             .with_pigment(Pigment::SigmaA((sigma.x, sigma.y, sigma.z)))
             .ok_or(VariationError::NoPigment)?
             .with_roughness_scale(v.roughness);
-        let bcsdf = variant.build().map_err(|source| VariationError::Variant {
-            sigma_a: sigma,
-            roughness: v.roughness,
-            source,
-        })?;
+        let bcsdf = variant
+            .build(prep)
+            .map_err(|source| VariationError::Variant {
+                sigma_a: sigma,
+                roughness: v.roughness,
+                source,
+            })?;
         materials.push(Material::Hair(bcsdf));
     }
     let note = match palette.len() {

@@ -19,8 +19,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use tress_accel::{EmbreeAccel, SceneBuilder};
 use tress_core::film::FilmSettings;
-use tress_core::limits::Limits;
 use tress_core::output_file::Inputs;
+use tress_core::prepare::Preparation;
 use tress_core::{Accel, Camera, Material, Scene};
 
 /// A whole scene file.
@@ -204,9 +204,11 @@ pub fn parse(text: &str) -> std::result::Result<SceneDesc, SyntaxError> {
         .map_err(|e| SyntaxError::new(text, e))
 }
 
-/// Builds the renderable scene, its hair within `limits`.
-pub fn build(desc: &SceneDesc, scene_path: &Path, limits: &Limits) -> Result<BuiltScene> {
-    build_wrapped(desc, scene_path, limits, |accel| Box::new(accel))
+/// Builds the renderable scene, its hair within the limits of the run's `prep`, and its hair
+/// models through `prep` (what they precompute is shared by the run and kept in its table
+/// folder, if it has one: [`tress_materials::HairModel::build`]).
+pub fn build(desc: &SceneDesc, scene_path: &Path, prep: &Preparation) -> Result<BuiltScene> {
+    build_wrapped(desc, scene_path, prep, |accel| Box::new(accel))
 }
 
 /// The scene's geometry alone, built without Embree's filter support: Embree's own speed on the
@@ -215,11 +217,11 @@ pub fn build(desc: &SceneDesc, scene_path: &Path, limits: &Limits) -> Result<Bui
 pub fn build_plain_accel(
     desc: &SceneDesc,
     scene_path: &Path,
-    limits: &Limits,
+    prep: &Preparation,
 ) -> Result<EmbreeAccel> {
-    let (mut materials, material_index) = build_materials(desc, scene_path)?;
+    let (mut materials, material_index) = build_materials(desc, scene_path, prep)?;
     let builder = new_builder(scene_path)?
-        .with_limits(*limits)
+        .with_limits(*prep.limits())
         .without_filters();
     let (accel, _) = geometry::build_accel(
         &desc.objects,
@@ -228,6 +230,7 @@ pub fn build_plain_accel(
         &material_index,
         &mut materials,
         builder,
+        prep,
     )?;
     Ok(accel)
 }
@@ -237,13 +240,14 @@ pub fn build_plain_accel(
 fn build_materials(
     desc: &SceneDesc,
     scene_path: &Path,
+    prep: &Preparation,
 ) -> Result<(Vec<Material>, BTreeMap<String, u32>)> {
     let mut material_index = BTreeMap::new();
     let mut materials = Vec::new();
     for (name, m) in &desc.materials {
         let built = match m {
             MaterialDesc::Hair(model) => {
-                Material::Hair(model.build().map_err(|source| Error::HairMaterial {
+                Material::Hair(model.build(prep).map_err(|source| Error::HairMaterial {
                     scene: scene_path.to_owned(),
                     name: name.clone(),
                     source,
@@ -271,7 +275,7 @@ fn build_materials(
 pub fn build_wrapped(
     desc: &SceneDesc,
     scene_path: &Path,
-    limits: &Limits,
+    prep: &Preparation,
     wrap: impl FnOnce(EmbreeAccel) -> Box<dyn Accel>,
 ) -> Result<BuiltScene> {
     let c = &desc.camera;
@@ -289,7 +293,7 @@ pub fn build_wrapped(
     })?;
 
     let t0 = Instant::now();
-    let (mut materials, material_index) = build_materials(desc, scene_path)?;
+    let (mut materials, material_index) = build_materials(desc, scene_path, prep)?;
     let material_time = t0.elapsed();
 
     let lights = desc
@@ -306,7 +310,8 @@ pub fn build_wrapped(
         &desc.materials,
         &material_index,
         &mut materials,
-        new_builder(scene_path)?.with_limits(*limits),
+        new_builder(scene_path)?.with_limits(*prep.limits()),
+        prep,
     )?;
     let geometry_time = t1.elapsed();
     let summary = format!(

@@ -1251,7 +1251,13 @@ mod tests {
     fn all_models() -> Vec<(String, Arc<dyn Bcsdf>, bool)> {
         HairModel::test_instances()
             .into_iter()
-            .map(|t| (t.name, t.params.build().unwrap(), t.white_furnace))
+            .map(|t| {
+                (
+                    t.name,
+                    t.params.build(crate::test_util::shared_prep()).unwrap(),
+                    t.white_furnace,
+                )
+            })
             .collect()
     }
 
@@ -1260,7 +1266,7 @@ mod tests {
             .into_iter()
             .find(|t| t.name == name)
             .unwrap_or_else(|| panic!("no test instance {name}"));
-        inst.params.build().unwrap()
+        inst.params.build(crate::test_util::shared_prep()).unwrap()
     }
 
     fn lambertian(albedo: (f32, f32, f32)) -> Arc<dyn Bcsdf> {

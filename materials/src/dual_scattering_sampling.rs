@@ -224,7 +224,7 @@ mod tests {
             .into_iter()
             .find(|t| t.name == name)
             .unwrap();
-        let b = inst.params.build().unwrap();
+        let b = inst.params.build(crate::test_util::shared_prep()).unwrap();
         let settings = DualScatteringSettings {
             theta_nodes: 32,
             ..Default::default()

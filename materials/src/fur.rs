@@ -43,11 +43,24 @@
 //! 32 of φ (equal solid angles) and ρ at 9 cortex absorptions 0, ⅛, …, 16 (ln ρ interpolated
 //! linearly in σ_c between them); `eval` interpolates the nodes bilinearly, and
 //! sampling draws a node by its weight, a cell by its probability and a point uniformly in the
-//! cell, so `pdf` is exactly the sampling density. The tables are built by [`Fur::new`] on
-//! every core with fixed seeds (bit-identical for any thread count), with a progress bar on a
-//! terminal. They are not cached: a library keeps no process-wide state and reads no
-//! environment (`clippy.toml`, `tests/tests/library_sources.rs`), and a cache passed in by the
-//! front ends needs `HairModel::build` to take one.
+//! cell, so `pdf` is exactly the sampling density. The tables are built on every core with
+//! fixed seeds (bit-identical for any thread count), with a progress bar on a terminal.
+//!
+//! # Where the tables are kept
+//! [`crate::HairModel::build`] hands the model the run's `tress_core::prepare::Preparation`
+//! ([`Fur::prepared`]), which keeps each table under its key — η, κ, σ_s, σ_a, g bit for bit,
+//! not the pigment, roughness or tilt — so the materials, pigment variants, objects and study
+//! jobs of one run that share a medulla share one build. When the front end gives the run a
+//! table folder (`tress … --table-cache DIR`, by default `$XDG_CACHE_HOME/tress` or
+//! `~/.cache/tress`; the Python functions' `table_cache`), the table is also stored there
+//! (`tress_core::stored_table`: `fur-medulla-v<VERSION>-<hash of the key>.table`, written
+//! atomically, its key echoed whole with the table's resolution, photon count, σ_c grid and
+//! seed, and a checksum) and later runs read it back bit for bit, noting `fur-medulla table
+//! read from …`; a file that is truncated, corrupt, of another version or of another key is
+//! ignored with a warning note and the table built again. [`Fur::new`] builds a model's table
+//! alone. Changing what the simulation computes or how a table is encoded means bumping the
+//! stored version (`Table::VERSION`); a test pins a table's bytes to catch a change that
+//! forgets to.
 //!
 //! # Simplifications (against the papers)
 //! - The cortex pigment changes how much scattered light leaves (ρ), not where it goes: D is
@@ -71,11 +84,14 @@
 use crate::pigment::Pigment;
 use crate::{check_range, parallel_map, ModelParams, ParamError, TestInstance};
 use serde::{Deserialize, Serialize};
+use std::convert::Infallible;
 use std::f64::consts::PI as PI64;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use tress_core::math::{luminance, Rgb, Vec3};
+use tress_core::prepare::Preparation;
 use tress_core::rng::Pcg32;
+use tress_core::stored_table::StoredTable;
 use tress_core::{Bcsdf, BcsdfSample};
 
 /// Smallest accepted β_m, β_n (as Chiang's).
@@ -187,8 +203,16 @@ struct Geometry {
 }
 
 impl Fur {
-    /// Validates `p`, then builds (or loads) the medulla's scattering profiles.
+    /// Validates `p`, then builds the medulla's scattering profiles, for this model alone
+    /// ([`Fur::prepared`] shares them through a run).
     pub fn new(p: &Params) -> Result<Self, ParamError> {
+        Self::prepared(p, &Preparation::new())
+    }
+
+    /// Validates `p`, then takes the medulla's scattering profiles from the run's `prep`: built
+    /// once per [`TableKey`] in a run, and read from (or stored in) its table folder if it has
+    /// one (module docs).
+    pub fn prepared(p: &Params, prep: &Preparation) -> Result<Self, ParamError> {
         check_range("beta_m", p.beta_m, BETA_MIN, 1.0)?;
         check_range("beta_n", p.beta_n, BETA_MIN, 1.0)?;
         check_range("alpha", p.alpha, -90.0, 90.0)?;
@@ -210,7 +234,12 @@ impl Fur {
         let tilt = [-2.0 * a, a, 4.0 * a, 0.0].map(|t: f64| (t.sin(), t.cos()));
 
         let key = TableKey::new(p);
-        let table = (key.kappa > 0.0 && key.sigma_s > 0.0).then(|| Arc::new(Table::build(&key)));
+        let table = if key.kappa > 0.0 && key.sigma_s > 0.0 {
+            let built = prep.get_or_build_stored(key, || Ok::<_, Infallible>(Table::build(&key)));
+            Some(built.unwrap_or_else(|never| match never {}))
+        } else {
+            None
+        };
         let sigma_c = [sigma_c.x, sigma_c.y, sigma_c.z].map(f64::from);
         let escape = table.as_ref().map_or(Vec::new(), |t| {
             t.nodes
@@ -562,9 +591,12 @@ const CELLS: usize = N_SIN * N_PHI;
 /// per model).
 const PHOTONS: u32 = 1 << 14;
 const CELL_AREA: f64 = (2.0 / N_SIN as f64) * (2.0 * PI64 / N_PHI as f64);
+/// The seed of every node's photon streams (each node its own stream).
+const SEED: u64 = 0xf0_2015;
 
-/// The parameters the table depends on (module docs).
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// The parameters the table depends on (module docs), compared bit for bit (−0 is made +0);
+/// the table's resolution and photon counts are constants of the build, in its stored key.
+#[derive(Clone, Copy, Debug)]
 struct TableKey {
     eta: f32,
     kappa: f32,
@@ -575,13 +607,32 @@ struct TableKey {
 
 impl TableKey {
     fn new(p: &Params) -> Self {
+        // + 0.0 turns −0 into +0, which build the same table.
         TableKey {
-            eta: p.eta,
-            kappa: p.medulla_ratio,
-            sigma_s: p.medulla_sigma_s,
-            sigma_a: p.medulla_sigma_a,
-            g: p.medulla_g,
+            eta: p.eta + 0.0,
+            kappa: p.medulla_ratio + 0.0,
+            sigma_s: p.medulla_sigma_s + 0.0,
+            sigma_a: p.medulla_sigma_a + 0.0,
+            g: p.medulla_g + 0.0,
         }
+    }
+
+    fn bits(&self) -> [u32; 5] {
+        [self.eta, self.kappa, self.sigma_s, self.sigma_a, self.g].map(f32::to_bits)
+    }
+}
+
+impl PartialEq for TableKey {
+    fn eq(&self, other: &Self) -> bool {
+        self.bits() == other.bits()
+    }
+}
+
+impl Eq for TableKey {}
+
+impl std::hash::Hash for TableKey {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        self.bits().hash(state);
     }
 }
 
@@ -606,6 +657,81 @@ const SIGMA_GRID: [f64; 9] = [0.0, 0.125, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0];
 #[derive(Debug)]
 struct Table {
     nodes: Vec<Node>,
+}
+
+/// The table's sizes, as stored: nodes in θ_o and u, cells in sin θ_i and φ, cortex
+/// absorptions.
+const STORED_SIZES: [u32; 5] = [
+    N_THETA as u32,
+    N_U as u32,
+    N_SIN as u32,
+    N_PHI as u32,
+    SIGMA_GRID.len() as u32,
+];
+
+/// Kept on disk as its key (η, κ, σ_s, σ_a, g, then the resolution, photon count and σ_c grid,
+/// and the simulation's seed) and, per node, the TTs and TRTs cell probabilities and the
+/// escaping fractions, all as f32 bits; the cumulative sums are recomputed (the same bits).
+impl StoredTable for Table {
+    type Key = TableKey;
+    const KIND: &'static str = "fur-medulla";
+    const VERSION: u32 = 1;
+
+    fn key_bytes(key: &TableKey) -> Vec<u8> {
+        let mut out = Vec::new();
+        key.bits().iter().for_each(|b| out.extend(b.to_le_bytes()));
+        STORED_SIZES
+            .iter()
+            .chain(&[PHOTONS])
+            .for_each(|v| out.extend(v.to_le_bytes()));
+        [THETA_STEP_DEG.to_bits(), SEED]
+            .iter()
+            .chain(&SIGMA_GRID.map(f64::to_bits))
+            .for_each(|v| out.extend(v.to_le_bytes()));
+        out
+    }
+
+    fn encode(&self, out: &mut Vec<u8>) {
+        STORED_SIZES
+            .iter()
+            .for_each(|v| out.extend(v.to_le_bytes()));
+        for n in &self.nodes {
+            n.prob
+                .iter()
+                .chain(&n.escape)
+                .for_each(|v| out.extend(v.to_bits().to_le_bytes()));
+        }
+    }
+
+    fn decode(bytes: &[u8]) -> Result<Self, String> {
+        let words: Vec<u32> = bytes
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        let per_node = 2 * CELLS + SIGMA_GRID.len();
+        let want = STORED_SIZES.len() + N_THETA * N_U * per_node;
+        if bytes.len() != 4 * want {
+            return Err(format!("{} bytes of table, not {}", bytes.len(), 4 * want));
+        }
+        let (sizes, values) = words.split_at(STORED_SIZES.len());
+        if sizes != STORED_SIZES {
+            return Err(format!("sizes {sizes:?}, not {STORED_SIZES:?}"));
+        }
+        let values: Vec<f32> = values.iter().map(|&b| f32::from_bits(b)).collect();
+        if let Some(v) = values.iter().find(|v| !(0.0..=1.0).contains(*v)) {
+            return Err(format!("a probability or fraction of {v}, outside [0, 1]"));
+        }
+        let nodes = values
+            .chunks_exact(per_node)
+            .map(|node| {
+                let (prob, escape) = node.split_at(2 * CELLS);
+                let mut e = [0.0; SIGMA_GRID.len()];
+                e.copy_from_slice(escape);
+                Node::new(prob.to_vec(), e)
+            })
+            .collect();
+        Ok(Table { nodes })
+    }
 }
 
 /// Up to four table nodes with their bilinear weights, and the mirror flags of the query.
@@ -941,7 +1067,7 @@ fn simulate_node(key: &TableKey, ti: usize, ui: usize) -> Node {
     // which interpolation toward them approaches; u = 1 just inside the tangent.
     let h = (u.min(1.0 - 1e-6) * kappa * eta_p).min(1.0 - 1e-6);
 
-    let mut rng = Pcg32::new(0xf0_2015, (ti * N_U + ui) as u64);
+    let mut rng = Pcg32::new(SEED, (ti * N_U + ui) as u64);
     let mut next = || rng.next_f32() as f64;
     let mut hist = vec![0.0f64; 2 * CELLS];
     let mut escaped = [0.0f64; SIGMA_GRID.len()];
@@ -1163,6 +1289,156 @@ mod tests {
         }
     }
 
+    /// Every number of a table, bit for bit.
+    fn table_bits(t: &Table) -> Vec<u32> {
+        t.nodes
+            .iter()
+            .flat_map(|n| n.prob.iter().chain(&n.cdf).chain(&n.escape))
+            .map(|v| v.to_bits())
+            .collect()
+    }
+
+    fn medulla(sigma_s: f32) -> Params {
+        Params {
+            medulla_ratio: 0.4,
+            medulla_sigma_s: sigma_s,
+            medulla_sigma_a: 0.25,
+            medulla_g: -0.2,
+            ..Params::default()
+        }
+    }
+
+    /// The table a model took from `prep`.
+    fn table_of(p: &Params, prep: &Preparation) -> Arc<Table> {
+        Fur::prepared(p, prep)
+            .unwrap()
+            .table
+            .expect("a scattering medulla")
+    }
+
+    #[test]
+    fn a_run_builds_each_table_once_whatever_the_pigment_roughness_and_tilt() {
+        let prep = Preparation::new();
+        let a = table_of(&medulla(3.0), &prep);
+        let other_cortex = Params {
+            beta_m: 0.2,
+            beta_n: 0.5,
+            alpha: -3.0,
+            pigment: Pigment::Melanin {
+                eumelanin: 0.3,
+                pheomelanin: 0.8,
+                tint: crate::pigment::NO_TINT,
+            },
+            ..medulla(3.0)
+        };
+        let b = table_of(&other_cortex, &prep);
+        assert!(Arc::ptr_eq(&a, &b));
+        assert_eq!(prep.count::<TableKey, Table>(), 1);
+        // −0 is +0; any parameter of the medulla is another table.
+        let negative_zero = Params {
+            medulla_sigma_a: -0.0,
+            ..medulla(3.0)
+        };
+        table_of(
+            &Params {
+                medulla_sigma_a: 0.0,
+                ..medulla(3.0)
+            },
+            &prep,
+        );
+        table_of(&negative_zero, &prep);
+        assert_eq!(prep.count::<TableKey, Table>(), 2);
+        for edit in [
+            |p: &mut Params| p.eta = 1.6,
+            |p: &mut Params| p.medulla_ratio = 0.5,
+            |p: &mut Params| p.medulla_sigma_s = 3.5,
+            |p: &mut Params| p.medulla_sigma_a = 0.5,
+            |p: &mut Params| p.medulla_g = 0.2,
+        ] {
+            let mut p = medulla(3.0);
+            edit(&mut p);
+            assert!(TableKey::new(&p) != TableKey::new(&medulla(3.0)));
+        }
+        // A model without a scattering medulla asks for no table.
+        Fur::prepared(
+            &Params {
+                medulla_ratio: 0.0,
+                ..medulla(3.0)
+            },
+            &prep,
+        )
+        .unwrap();
+        Fur::prepared(&medulla(0.0), &prep).unwrap();
+        assert_eq!(prep.count::<TableKey, Table>(), 2);
+    }
+
+    /// A table stored in the run's folder is read back by the next run bit for bit; a file that
+    /// is truncated, of another version or of another key is ignored with a warning and the
+    /// table built again, equal to a fresh build, and stored over it.
+    #[test]
+    fn stored_tables_read_back_bit_for_bit_and_bad_files_are_rebuilt() {
+        let dir = tempfile::tempdir().unwrap();
+        let run = || Preparation::new().with_table_dir(Some(dir.path().to_owned()));
+        let p = medulla(2.5);
+        let key = TableKey::new(&p);
+        let fresh = table_bits(&Table::build(&key));
+
+        let first = run();
+        assert_eq!(table_bits(&table_of(&p, &first)), fresh);
+        let notes = first.take_notes();
+        assert!(
+            notes[0].starts_with("fur-medulla table built in"),
+            "{notes:?}"
+        );
+        let path = tress_core::stored_table::path::<Table>(dir.path(), &Table::key_bytes(&key));
+        let stored = std::fs::read(&path).unwrap();
+
+        let second = run();
+        assert_eq!(table_bits(&table_of(&p, &second)), fresh);
+        let notes = second.take_notes();
+        assert_eq!(
+            notes,
+            [format!("fur-medulla table read from {}", path.display())]
+        );
+
+        // The checksum covers everything before it: an edited field gets a new one, so that
+        // the field itself is what the reader refuses.
+        let resum = |mut bytes: Vec<u8>| {
+            let body = bytes.len() - 8;
+            let sum = tress_core::stored_table::fnv1a64(&bytes[..body]);
+            bytes[body..].copy_from_slice(&sum.to_le_bytes());
+            bytes
+        };
+        let version_at = 8 + 4 + 4 + Table::KIND.len();
+        let key_at = version_at + 4 + 4;
+        let mut other_version = stored.clone();
+        other_version[version_at] += 1;
+        let mut other_key = stored.clone();
+        other_key[key_at] ^= 1; // η's lowest bit
+        for (bad, why) in [
+            (stored[..stored.len() / 2].to_vec(), "truncated"),
+            (
+                resum(other_version),
+                "version 2, this build reads version 1",
+            ),
+            (resum(other_key), "key differs"),
+        ] {
+            tress_core::output_file::write_bytes(&path, &Default::default(), &bad).unwrap();
+            let again = run();
+            assert_eq!(table_bits(&table_of(&p, &again)), fresh, "{why}");
+            let notes = again.take_notes();
+            assert!(
+                notes[0].starts_with("warning: ignoring") && notes[0].contains(why),
+                "{notes:?}"
+            );
+            assert!(
+                notes[1].starts_with("fur-medulla table built in"),
+                "{notes:?}"
+            );
+            assert_eq!(std::fs::read(&path).unwrap(), stored, "{why}: stored again");
+        }
+    }
+
     #[test]
     fn the_table_is_deterministic_and_its_escape_falls_with_absorption() {
         let key = TableKey::new(&Params {
@@ -1176,14 +1452,18 @@ mod tests {
         let a = Table::build(&key);
         println!("table built in {:.2} s", start.elapsed().as_secs_f64());
         let b = Table::build(&key);
-        let bits = |t: &Table| -> Vec<u32> {
-            t.nodes
-                .iter()
-                .flat_map(|n| n.prob.iter().chain(&n.escape))
-                .map(|v| v.to_bits())
-                .collect()
-        };
-        assert_eq!(bits(&a), bits(&b));
+        assert_eq!(table_bits(&a), table_bits(&b));
+        // The bytes this table is stored as, pinned: a change to the simulation or to the
+        // encoding changes them, and must bump `Table::VERSION`, so that no run reads a table
+        // an older build stored (then pin the new value here).
+        let mut bytes = Vec::new();
+        a.encode(&mut bytes);
+        let sum = tress_core::stored_table::fnv1a64(&bytes);
+        assert_eq!(
+            (Table::VERSION, sum),
+            (1, 0x70ca_9045_1ee4_2791),
+            "the stored table changed ({sum:#018x}): bump Table::VERSION"
+        );
         for n in &a.nodes {
             assert!(
                 n.escape[0] > 0.0 && n.escape[0] < 1.0,

@@ -3,7 +3,10 @@
 //! [`HairModel`] is THE registry of models. Adding a model is one new file (a `Params` struct
 //! with serde defaults implementing [`ModelParams`], a type implementing `Bcsdf` with
 //! `new(&Params) -> Result<_, ParamError>`, and `test_instances()`), its `pub mod` line and one
-//! line in the `hair_models!` invocation below; nothing else names the models one by one. The
+//! line in the `hair_models!` invocation below; nothing else names the models one by one. A
+//! model that precomputes tables marks its line `(prepared)` and has
+//! `prepared(&Params, &Preparation)` instead, which takes them from the run's
+//! [`Preparation`] ([`HairModel::build`]). The
 //! statistical test suite (`tests/bcsdf_statistics.rs`: white furnace, sampling, χ², …), the
 //! registry's own tests below and the dual-scattering tables' tests then cover the new model
 //! automatically.
@@ -13,6 +16,7 @@
 use pigment::Pigment;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
+use tress_core::prepare::Preparation;
 use tress_core::Bcsdf;
 
 pub mod chiang;
@@ -37,8 +41,19 @@ pub use model_params::ModelParams;
 pub(crate) use parallel::parallel_map;
 pub use params::{check_range, ParamError, TestInstance};
 
+/// One model of the registry built: `new(p)`, or `prepared(p, prep)` for a line marked
+/// `(prepared)`.
+macro_rules! build_model {
+    ($module:ident :: $ty:ident, $p:ident, $prep:ident) => {
+        $module::$ty::new($p)
+    };
+    ($module:ident :: $ty:ident, $p:ident, $prep:ident, prepared) => {
+        $module::$ty::prepared($p, $prep)
+    };
+}
+
 macro_rules! hair_models {
-    ($($variant:ident => $module:ident :: $ty:ident),* $(,)?) => {
+    ($($variant:ident => $module:ident :: $ty:ident $(($how:ident))?),* $(,)?) => {
         /// A hair scattering model and its parameters, as written in scene files.
         #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
         pub enum HairModel {
@@ -52,10 +67,15 @@ macro_rules! hair_models {
         }
 
         impl HairModel {
-            /// Validates the parameters and builds the BCSDF.
-            pub fn build(&self) -> Result<Arc<dyn Bcsdf>, ParamError> {
+            /// Validates the parameters and builds the BCSDF. What a model precomputes (the
+            /// fur's medulla tables) it takes from the run's `prep`: built once per key in the
+            /// run, and read from or stored in `prep`'s table folder if it has one
+            /// ([`Preparation::get_or_build_stored`]). Other models ignore `prep`.
+            pub fn build(&self, prep: &Preparation) -> Result<Arc<dyn Bcsdf>, ParamError> {
                 match self {
-                    $(HairModel::$variant(p) => Ok(Arc::new($module::$ty::new(p)?)),)*
+                    $(HairModel::$variant(p) => {
+                        Ok(Arc::new(build_model!($module::$ty, p, prep $(, $how)?)?))
+                    })*
                 }
             }
 
@@ -121,13 +141,13 @@ macro_rules! hair_models {
     };
 }
 
-// THE registry: one line per model.
+// THE registry: one line per model; `(prepared)`: built by `prepared(&Params, &Preparation)`.
 hair_models! {
     LambertianFiber => lambertian_fiber::LambertianFiber,
     Marschner => marschner::Marschner,
     DEon => deon::DEon,
     Chiang => chiang::Chiang,
-    Fur => fur::Fur,
+    Fur => fur::Fur (prepared),
     Huang => huang::Huang,
 }
 

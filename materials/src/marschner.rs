@@ -879,7 +879,9 @@ mod tests {
         };
         assert_eq!(model, HairModel::Marschner(want));
         assert!(opts.from_str::<HairModel>("Marschner(beta: 5.0)").is_err());
-        assert!(model.build().is_ok());
+        assert!(model
+            .build(&tress_core::prepare::Preparation::new())
+            .is_ok());
     }
 
     /// Costs (run with `--ignored --nocapture`).

@@ -20,16 +20,20 @@ pub(crate) fn assert_rejected<P: Default + Debug, M: Debug>(
     }
 }
 
-/// Dual-scattering tables through one preparation context shared by every test of the crate,
-/// so that the tests share each build.
+/// One preparation context shared by every test of the crate, so that the tests share each
+/// build of a table (dual scattering's, the fur's).
+pub(crate) fn shared_prep() -> &'static tress_core::prepare::Preparation {
+    static PREP: std::sync::OnceLock<tress_core::prepare::Preparation> = std::sync::OnceLock::new();
+    PREP.get_or_init(tress_core::prepare::Preparation::new)
+}
+
+/// Dual-scattering tables through [`shared_prep`].
 pub(crate) fn shared_tables(
     b: &dyn tress_core::Bcsdf,
     s: &crate::dual_scattering::DualScatteringSettings,
 ) -> std::sync::Arc<crate::dual_scattering::DualScatteringTables> {
     use crate::dual_scattering::{fingerprint, DualScatteringTables};
-    use tress_core::prepare::Preparation;
-    static PREP: std::sync::OnceLock<Preparation> = std::sync::OnceLock::new();
-    PREP.get_or_init(Preparation::new)
+    shared_prep()
         .get_or_build((fingerprint(b), s.clone()), || {
             DualScatteringTables::new(b, s, &tress_core::limits::Limits::default())
         })

@@ -20,6 +20,7 @@ use std::f32::consts::{FRAC_PI_2, TAU};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 use tress_core::math::{fiber_direction, safe_sqrt, Rgb, Vec3};
+use tress_core::prepare::Preparation;
 use tress_core::rng::hash_words;
 use tress_core::sampling::sample_uniform_sphere;
 use tress_core::stats::{sidak_alpha, Chi2Outcome, SphereChi2};
@@ -32,13 +33,19 @@ struct Instance {
     bcsdf: Arc<dyn Bcsdf>,
 }
 
+/// One preparation context for the file's tests: each fur table is built once.
+fn prep() -> &'static Preparation {
+    static PREP: std::sync::OnceLock<Preparation> = std::sync::OnceLock::new();
+    PREP.get_or_init(Preparation::new)
+}
+
 fn instances() -> Vec<Instance> {
     HairModel::test_instances()
         .into_iter()
         .map(|t| Instance {
             bcsdf: t
                 .params
-                .build()
+                .build(prep())
                 .unwrap_or_else(|e| panic!("test instance {} is invalid: {e}", t.name)),
             name: t.name,
             white_furnace: t.white_furnace,
@@ -865,7 +872,7 @@ fn eval_cost() {
 fn eval_pdf_is_eval_and_pdf() {
     let mut rng = tress_core::Sampler::from_seed(78);
     for inst in HairModel::test_instances() {
-        let b = inst.params.build().unwrap();
+        let b = inst.params.build(prep()).unwrap();
         for _ in 0..500 {
             let wo = tress_core::sampling::sample_uniform_sphere(rng.next_2d());
             let wi = tress_core::sampling::sample_uniform_sphere(rng.next_2d());
@@ -886,7 +893,7 @@ fn eval_pdf_is_eval_and_pdf() {
 fn lobes_sum_to_eval() {
     let mut rng = tress_core::Sampler::from_seed(77);
     for inst in HairModel::test_instances() {
-        let b = inst.params.build().unwrap();
+        let b = inst.params.build(prep()).unwrap();
         let lobes = b.lobe_names().len();
         for _ in 0..500 {
             let wo = tress_core::sampling::sample_uniform_sphere(rng.next_2d());

@@ -8,6 +8,7 @@
 
 use std::hint::black_box;
 use tress_core::math::{Vec2, Vec3};
+use tress_core::prepare::Preparation;
 use tress_core::rng::Pcg32;
 use tress_core::sampling::sample_uniform_sphere;
 use tress_core::Bcsdf;
@@ -53,7 +54,7 @@ fn huang_cost() {
         .iter()
         .map(|n| {
             let t = all.iter().find(|t| t.name == *n).unwrap();
-            t.params.build().unwrap()
+            t.params.build(&Preparation::new()).unwrap()
         })
         .collect();
     let metrics = ["eval", "pdf", "sample", "eval_pdf"];
@@ -119,7 +120,7 @@ fn huang_digest() {
     let mut r = || rng.next_f32();
     let all = HairModel::test_instances();
     for t in all.iter().filter(|t| t.name.starts_with("Huang/")) {
-        let b = t.params.build().unwrap();
+        let b = t.params.build(&Preparation::new()).unwrap();
         let mut hs = std::collections::hash_map::DefaultHasher::new();
         for _ in 0..20_000 {
             let wo = sample_uniform_sphere(Vec2::new(r(), r()));

@@ -231,9 +231,12 @@ fn number_array<'py>(py: Python<'py>, values: Vec<f32>, batched: bool) -> Bound<
 
 #[pymethods]
 impl HairModel {
-    /// Parses and validates a model written as in scene files.
+    /// Parses and validates a model written as in scene files. `table_cache`: a folder where
+    /// what the model precomputes (the fur's medulla tables) is read from and stored; by
+    /// default none.
     #[new]
-    fn new(model: &str) -> PyResult<Self> {
+    #[pyo3(signature = (model, table_cache=None))]
+    fn new(py: Python<'_>, model: &str, table_cache: Option<std::path::PathBuf>) -> PyResult<Self> {
         let parsed: tress_materials::HairModel =
             tress_loader::ron_options().from_str(model).map_err(|e| {
                 PyValueError::new_err(format!(
@@ -241,9 +244,12 @@ impl HairModel {
                     tress_materials::HairModel::names().join(", ")
                 ))
             })?;
-        let bcsdf = parsed
-            .build()
+        let prep = tress_core::prepare::Preparation::with_limits(crate::limits_from_env())
+            .with_table_dir(table_cache);
+        let bcsdf = py
+            .detach(|| parsed.build(&prep))
             .map_err(|e| PyValueError::new_err(format!("hair model '{model}': {e}")))?;
+        crate::warn_notes(py, &prep)?;
         Ok(HairModel {
             model: parsed,
             bcsdf,

@@ -101,3 +101,20 @@ fn limits_from_env() -> tress_core::limits::Limits {
         std::env::var_os(ALLOW_SLOW_TABLES_VAR).is_some(),
     )
 }
+
+/// The warnings among `prep`'s notes (a stored table refused, one that could not be stored) as
+/// Python `RuntimeWarning`s.
+fn warn_notes(py: Python<'_>, prep: &tress_core::prepare::Preparation) -> PyResult<()> {
+    for line in prep.take_notes() {
+        if let Some(text) = line.strip_prefix("warning: ") {
+            let message = std::ffi::CString::new(text.replace('\0', " ")).expect("NULs replaced");
+            PyErr::warn(
+                py,
+                &py.get_type::<pyo3::exceptions::PyRuntimeWarning>(),
+                &message,
+                1,
+            )?;
+        }
+    }
+    Ok(())
+}

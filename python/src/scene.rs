@@ -36,24 +36,33 @@ pub struct Scene {
 ///
 /// Relative paths in it resolve against the file's folder. Raises `ValueError` for a malformed
 /// or invalid scene (`file:line:column: message`), `OSError` (`FileNotFoundError`, …) for a
-/// file that cannot be read.
+/// file that cannot be read. `table_cache`: a folder where precomputed tables (the fur model's
+/// medulla tables) are read from and stored, so that later scenes and processes skip building
+/// them; by default none (images do not depend on it).
 #[pyfunction]
-pub fn load_scene(py: Python<'_>, path: PathBuf) -> PyResult<Scene> {
+#[pyo3(signature = (path, table_cache=None))]
+pub fn load_scene(py: Python<'_>, path: PathBuf, table_cache: Option<PathBuf>) -> PyResult<Scene> {
     let desc = scene_desc::load(&path).map_err(|e| to_py_err(&e))?;
-    Scene::build(py, desc, path)
+    Scene::build(py, desc, path, table_cache)
 }
 
 impl Scene {
-    fn build(py: Python<'_>, desc: SceneDesc, path: PathBuf) -> PyResult<Scene> {
-        let limits = crate::limits_from_env();
+    fn build(
+        py: Python<'_>,
+        desc: SceneDesc,
+        path: PathBuf,
+        table_cache: Option<PathBuf>,
+    ) -> PyResult<Scene> {
+        let prep = Preparation::with_limits(crate::limits_from_env()).with_table_dir(table_cache);
         let built = py
-            .detach(|| scene_desc::build(&desc, &path, &limits))
+            .detach(|| scene_desc::build(&desc, &path, &prep))
             .map_err(|e| to_py_err(&e))?;
+        crate::warn_notes(py, &prep)?;
         Ok(Scene {
             desc,
             path,
             built,
-            prep: Preparation::with_limits(limits),
+            prep,
         })
     }
 
@@ -82,11 +91,12 @@ impl Scene {
     /// default the current directory. A value that does not fit raises `ValueError` naming where
     /// it sits (`objects[0].Hair.source: unknown variant ...`).
     #[staticmethod]
-    #[pyo3(signature = (scene, base_dir=None))]
+    #[pyo3(signature = (scene, base_dir=None, table_cache=None))]
     fn from_dict(
         py: Python<'_>,
         scene: &Bound<'_, PyDict>,
         base_dir: Option<PathBuf>,
+        table_cache: Option<PathBuf>,
     ) -> PyResult<Scene> {
         let path = Self::virtual_path(base_dir, "<dict>");
         let value = to_json(scene.as_any(), "")?;
@@ -99,18 +109,24 @@ impl Scene {
             };
             PyValueError::new_err(format!("{}: {place}{}", path.display(), e.inner()))
         })?;
-        Self::build(py, desc, path)
+        Self::build(py, desc, path, table_cache)
     }
 
     /// A scene from the text of a scene file (RON). Relative paths resolve against `base_dir`,
     /// by default the current directory. Errors read `<ron>:line:column: message`.
+    /// `table_cache` as for `load_scene`.
     #[staticmethod]
-    #[pyo3(signature = (text, base_dir=None))]
-    fn from_ron(py: Python<'_>, text: &str, base_dir: Option<PathBuf>) -> PyResult<Scene> {
+    #[pyo3(signature = (text, base_dir=None, table_cache=None))]
+    fn from_ron(
+        py: Python<'_>,
+        text: &str,
+        base_dir: Option<PathBuf>,
+        table_cache: Option<PathBuf>,
+    ) -> PyResult<Scene> {
         let path = Self::virtual_path(base_dir, "<ron>");
         let desc = scene_desc::parse(text)
             .map_err(|e| PyValueError::new_err(format!("{}:{e}", path.display())))?;
-        Self::build(py, desc, path)
+        Self::build(py, desc, path, table_cache)
     }
 
     /// The scene description as RON, as a scene file would hold it.

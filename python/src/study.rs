@@ -10,8 +10,9 @@ use tress_study::{self as study, NotesOnStderr, StudySettings};
 /// Runs the study file `path` as `tress study` does, without drawing figures (the module links
 /// no plotting), and returns a dict: `folder`, `report`, `results_csv`, `summary_csv` (paths)
 /// and the counts `rendered` and `reused`. The `tress.study` wrapper adds the summary rows.
+/// `table_cache`: a folder where precomputed tables are read from and stored (default none).
 #[pyfunction]
-#[pyo3(signature = (path, quick=false, out=None, threads=None, verbose=false))]
+#[pyo3(signature = (path, quick=false, out=None, threads=None, verbose=false, table_cache=None))]
 pub fn run_study<'py>(
     py: Python<'py>,
     path: PathBuf,
@@ -19,6 +20,7 @@ pub fn run_study<'py>(
     out: Option<PathBuf>,
     threads: Option<usize>,
     verbose: bool,
+    table_cache: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let settings = StudySettings {
         study: path,
@@ -30,6 +32,7 @@ pub fn run_study<'py>(
             .map_err(PyValueError::new_err)?,
         verbose,
         limits: crate::limits_from_env(),
+        table_dir: table_cache,
     };
     let outputs = py
         .detach(|| study::run(&settings, &NotesOnStderr, None))

@@ -107,6 +107,28 @@ def test_from_ron_and_to_ron_round_trip(scene):
     assert (again.width, again.height, again.spp, again.seed) == (16, 16, 2, 1)
 
 
+def test_a_table_cache_keeps_the_fur_table_and_changes_no_pixel(tmp_path, scene_dict):
+    scene_dict["materials"]["blond"]["Hair"] = {
+        "Fur": {"medulla_ratio": 0.5, "medulla_sigma_s": 3.0, "pigment": {"Melanin": {"eumelanin": 0.3}}}
+    }
+    cache = tmp_path / "tables"
+    first = tress.Scene.from_dict(scene_dict, table_cache=cache)
+    (stored,) = cache.iterdir()
+    assert stored.name.startswith("fur-medulla-v")
+    second = tress.Scene.from_dict(scene_dict, table_cache=str(cache))
+    uncached = tress.Scene.from_dict(scene_dict)
+    np.testing.assert_array_equal(second.render(), first.render())
+    np.testing.assert_array_equal(uncached.render(), first.render())
+    model = tress.HairModel("Fur(medulla_ratio: 0.5, medulla_sigma_s: 3.0)", table_cache=cache)
+    assert len(model.lobes) == 6
+    # A damaged file is a RuntimeWarning, and the table is built again and stored.
+    stored.write_bytes(stored.read_bytes()[:100])
+    with pytest.warns(RuntimeWarning, match="truncated"):
+        again = tress.Scene.from_dict(scene_dict, table_cache=cache)
+    np.testing.assert_array_equal(again.render(), first.render())
+    assert stored.stat().st_size > 100
+
+
 def test_a_scene_file_renders_as_its_dict(tmp_path, scene):
     path = tmp_path / "ball.ron"
     path.write_text(scene.to_ron())

@@ -73,6 +73,7 @@ def study(
     out: Optional[Union[str, PathLike]] = None,
     threads: Optional[int] = None,
     verbose: bool = False,
+    table_cache: Optional[Union[str, PathLike]] = None,
 ) -> StudyResult:
     """Runs the study file ``path`` as ``tress study`` does, but draws no figures.
 
@@ -86,11 +87,15 @@ def study(
     ``quick`` is ``--quick`` (the study's scaled-down settings), ``out`` the output folder
     (default: the study's ``output``, else ``<study name>_study`` in the current folder),
     ``threads`` the worker threads (default: all cores); ``verbose`` prints the summary lines
-    the command prints and notes on renders redone (warnings are printed either way). Finished
+    the command prints and notes on renders redone (warnings are printed either way);
+    ``table_cache`` a folder where precomputed tables (the fur model's medulla tables) are read
+    from and stored, as ``tress study --table-cache`` (default: none). Finished
     renders in the output folder are reused, as on the command line. Raises ``ValueError`` for
     a malformed study and ``OSError`` for files that cannot be read or written.
     """
-    outputs = _run_study(path, quick=quick, out=out, threads=threads, verbose=verbose)
+    outputs = _run_study(
+        path, quick=quick, out=out, threads=threads, verbose=verbose, table_cache=table_cache
+    )
     with open(outputs["summary_csv"], newline="", encoding="utf-8") as f:
         rows = [{k: _cell(v) for k, v in row.items()} for row in csv.DictReader(f)]
     return StudyResult(

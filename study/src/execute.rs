@@ -62,7 +62,8 @@ pub(super) fn execute(
     };
     // One preparation context for the whole study: every scene and integrator that needs the
     // same tables shares them.
-    let prep = tress_core::prepare::Preparation::with_limits(settings.limits);
+    let prep = tress_core::prepare::Preparation::with_limits(settings.limits)
+        .with_table_dir(settings.table_dir.clone());
     for (si, scene) in plan.scenes.iter().enumerate() {
         let mut runner = SceneRunner {
             scene,

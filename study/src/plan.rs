@@ -29,6 +29,9 @@ pub struct StudySettings {
     pub verbose: bool,
     /// Memory and table-work limits of the run (the front ends read them from the environment).
     pub limits: tress_core::limits::Limits,
+    /// Where precomputed tables (the fur's medulla tables) are kept between runs; `None`:
+    /// nowhere ([`tress_core::prepare::Preparation::with_table_dir`]).
+    pub table_dir: Option<PathBuf>,
 }
 
 /// A scene of the study, with the study's film applied.

@@ -148,19 +148,20 @@ impl SceneRunner<'_> {
         let pool = self.pool;
         let built = match &mut self.built {
             Some(built) => built,
-            slot => slot.insert(
-                pool.install(|| scene_desc::build(&scene.desc, &scene.base, self.prep.limits()))?,
-            ),
+            slot => slot
+                .insert(pool.install(|| scene_desc::build(&scene.desc, &scene.base, self.prep))?),
         };
         let integrator = match self.integrators.entry(job.integrator.ron.clone()) {
             Entry::Occupied(e) => e.into_mut(),
             Entry::Vacant(e) => e.insert(
                 pool.install(|| job.integrator.desc.build(&built.scene, self.prep))
                     .inspect(|_| {
+                        // What the scene's models and this integrator built or read; warnings
+                        // (a stored table refused) are reported either way.
                         let built_now = self.prep.take_notes();
-                        if self.verbose {
-                            built_now.iter().for_each(|line| self.progress.note(line));
-                        }
+                        (built_now.iter())
+                            .filter(|line| self.verbose || line.starts_with("warning"))
+                            .for_each(|line| self.progress.note(line));
                     })
                     .map_err(|e| Error::Integrator {
                         scene: scene.source.clone(),

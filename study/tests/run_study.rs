@@ -35,6 +35,7 @@ fn run_study_says_where_the_study_wrote_and_what_it_rendered() {
         threads: Some(1),
         verbose: false,
         limits: Default::default(),
+        table_dir: None,
     };
     let first = study::run(&settings, &NotesOnStderr, None).unwrap();
     assert_eq!(first.folder, out);

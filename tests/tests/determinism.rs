@@ -23,7 +23,7 @@ fn scene() -> Scene {
         },
         ..Default::default()
     })
-    .build()
+    .build(&Default::default())
     .unwrap();
     let sky = EnvironmentMap::builtin_sky(30.0, 1e-36).unwrap();
     hair_ball_scene(Arc::clone(&model), 1500, vec![Light::Environment(sky)])

@@ -32,7 +32,9 @@ fn smooth_environment() -> Light {
 }
 
 fn ball_scene(strands: u32) -> Scene {
-    let model = HairModel::Chiang(Default::default()).build().unwrap();
+    let model = HairModel::Chiang(Default::default())
+        .build(&Default::default())
+        .unwrap();
     hair_ball_scene(Arc::clone(&model), strands, vec![smooth_environment()])
 }
 
@@ -57,7 +59,7 @@ fn sunlit_ball(eumelanin: f32, strands: u32) -> Scene {
         },
         ..Default::default()
     })
-    .build()
+    .build(&Default::default())
     .unwrap();
     let sun = Light::distant(
         glam::Vec3::new(-0.45, -0.55, -0.7),
@@ -171,7 +173,9 @@ fn with_no_fibers_to_cross_and_no_back_scattering_dual_scattering_is_single_scat
         transparency: None,
         orientations: None,
     };
-    let model = HairModel::Chiang(Default::default()).build().unwrap();
+    let model = HairModel::Chiang(Default::default())
+        .build(&Default::default())
+        .unwrap();
     let sky = EnvironmentMap::builtin_sky(0.0, 1.0).unwrap();
     let scene = hair_scene(
         &hair,

@@ -13,7 +13,11 @@ fn furnace_mean(model: &str) -> f64 {
         .with_default_extension(ron::extensions::Extensions::UNWRAP_VARIANT_NEWTYPES)
         .from_str(model)
         .unwrap();
-    let scene = hair_ball_scene(model.build().unwrap(), 3000, white_environment());
+    let scene = hair_ball_scene(
+        model.build(&Default::default()).unwrap(),
+        3000,
+        white_environment(),
+    );
     // Deep paths: the furnace only balances if the walk is not cut short (RR keeps it unbiased).
     let integrator: Box<dyn Integrator> = Box::new(PathTracer::new(PathSettings {
         max_depth: 10_000,
@@ -64,7 +68,13 @@ fn every_registered_integrator_in_a_white_furnace() {
         pigment: tress_materials::pigment::Pigment::SigmaA((0.0, 0.0, 0.0)),
         ..Default::default()
     });
-    let ball = || hair_ball_scene(model.build().unwrap(), 3000, white_environment());
+    let ball = || {
+        hair_ball_scene(
+            model.build(&Default::default()).unwrap(),
+            3000,
+            white_environment(),
+        )
+    };
     // One preparation for the run, as a study's: the two dual-scattering integrators share
     // their tables (same fiber, same settings) rather than each walking them again.
     let prep = Default::default();
@@ -117,7 +127,11 @@ fn dual_scattering_does_not_create_energy_in_a_white_furnace() {
                 "Chiang(beta_m: {beta}, beta_n: {beta}, pigment: SigmaA(0, 0, 0))"
             ))
             .unwrap();
-        let scene = hair_ball_scene(model.build().unwrap(), 3000, white_environment());
+        let scene = hair_ball_scene(
+            model.build(&Default::default()).unwrap(),
+            3000,
+            white_environment(),
+        );
         for (ms, bound) in [
             (MultipleScattering::Paper, 1.0),
             (MultipleScattering::FiberMedium, 1.0),
@@ -191,7 +205,7 @@ fn sky_left_to_scattering_and_sampled_sun_add_up() {
     let sun = || Light::distant(Vec3::new(-0.3, -1.0, -0.4), Rgb::splat(2.0), 3.0).unwrap();
     let integrator = PathTracer::new(PathSettings::default());
     let mean = |lights: Vec<Light>| {
-        let scene = hair_ball_scene(model.build().unwrap(), 3000, lights);
+        let scene = hair_ball_scene(model.build(&Default::default()).unwrap(), 3000, lights);
         let mut f = film(48, 48, spp(), 5);
         f.crop = Some([14, 14, 34, 34]);
         render(&scene, &integrator, &f, &|_| {}).image.mean()
@@ -231,7 +245,7 @@ fn interpenetrating_fibers_in_a_white_furnace_average_one_by_default() {
         let scene = hair_scene(
             &hair,
             &options,
-            lossless.build().unwrap(),
+            lossless.build(&Default::default()).unwrap(),
             white_environment(),
         );
         let integrator = PathTracer::new(PathSettings {

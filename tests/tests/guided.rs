@@ -23,7 +23,7 @@ fn blond_ball() -> Scene {
         },
         ..Default::default()
     })
-    .build()
+    .build(&Default::default())
     .unwrap();
     let sky = EnvironmentMap::builtin_sky(60.0, 1.0).unwrap();
     hair_ball_scene(Arc::clone(&bcsdf), 2000, vec![Light::Environment(sky)])

@@ -15,7 +15,9 @@ use tress_materials::HairModel;
 use tress_tests::{film, hair_ball_scene, learns_from_film, on_threads, shared_data};
 
 fn scene() -> Scene {
-    let model = HairModel::Chiang(Default::default()).build().unwrap();
+    let model = HairModel::Chiang(Default::default())
+        .build(&Default::default())
+        .unwrap();
     let sky = EnvironmentMap::builtin_sky(30.0, 1.0).unwrap();
     hair_ball_scene(Arc::clone(&model), 1500, vec![Light::Environment(sky)])
 }

@@ -23,7 +23,7 @@ fn chiang(eumelanin: f32, beta: f32) -> Arc<dyn tress_core::Bcsdf> {
         },
         ..Default::default()
     })
-    .build()
+    .build(&Default::default())
     .unwrap()
 }
 
@@ -80,7 +80,7 @@ fn white_furnace_stays_at_one_for_every_roughness() {
             pigment: Pigment::SigmaA((0.0, 0.0, 0.0)),
             ..Default::default()
         })
-        .build()
+        .build(&Default::default())
         .unwrap();
         let scene = hair_ball_scene(bcsdf, 3000, white_environment());
         let mut f = film(48, 48, 16, 11);

@@ -48,7 +48,9 @@ fn measure(hair: &HairGeometry, curve: CurveShape, bcsdf: &Arc<dyn Bcsdf>, spp: 
 }
 
 fn brown_chiang() -> Arc<dyn Bcsdf> {
-    HairModel::Chiang(Default::default()).build().unwrap()
+    HairModel::Chiang(Default::default())
+        .build(&Default::default())
+        .unwrap()
 }
 
 /// Hair made of `strands` (polylines), every point of radius `r`.

@@ -133,7 +133,7 @@ fn hair_file_colours_reach_the_shaded_material() {
             pigment: Pigment::Color((c[0], c[1], c[2])),
             ..Default::default()
         });
-        fingerprint(model.build().unwrap().as_ref())
+        fingerprint(model.build(&Default::default()).unwrap().as_ref())
     };
     for (s, &x) in [-0.6f32, 0.0, 0.6].iter().enumerate() {
         for j in 0..4 {
@@ -266,7 +266,8 @@ fn random_roughness_and_darker_roots_reach_each_segments_material() {
                 panic!("not hair")
             };
             assert!(
-                fingerprint(bcsdf.as_ref()) == fingerprint(want.build().unwrap().as_ref()),
+                fingerprint(bcsdf.as_ref())
+                    == fingerprint(want.build(&Default::default()).unwrap().as_ref()),
                 "strand {s}, segment {j}: material {} is not σ_a × {darkening}, roughness × {g}",
                 hit.material
             );

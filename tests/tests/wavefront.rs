@@ -24,7 +24,7 @@ fn scene(curve: CurveShape, light: Light) -> Scene {
         },
         ..Default::default()
     })
-    .build()
+    .build(&Default::default())
     .unwrap();
     let options = HairOptions {
         curve,

@@ -16,7 +16,7 @@ fuzz_target!(|data: &[u8]| {
             let _ = desc.film.validate();
             for material in desc.materials.values() {
                 if let MaterialDesc::Hair(model) = material {
-                    let _ = model.build();
+                    let _ = model.build(&Default::default());
                 }
             }
         }

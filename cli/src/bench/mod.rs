@@ -109,7 +109,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     }
     let material = HairModel::Chiang(Default::default());
     let bcsdf = material
-        .build()
+        .build(&Preparation::new())
         .map_err(|e| anyhow!("hair material: {e}"))?;
     eprintln!("bench: BCSDF costs and dual-scattering tables");
     bench_bcsdfs(&mut table, plan.bcsdf_calls)?;
@@ -290,9 +290,10 @@ fn bench_bcsdfs(table: &mut Table, calls: usize) -> Result<()> {
         else {
             continue;
         };
+        // Built alone (its tables, if any, built and not stored): the rows time calls.
         let bcsdf = instance
             .params
-            .build()
+            .build(&Preparation::new())
             .map_err(|e| anyhow!("{}: {e}", instance.name))?;
         let b: &dyn Bcsdf = bcsdf.as_ref();
         let time = |f: &dyn Fn(usize) -> f32| {

@@ -12,7 +12,6 @@ use rayon::ThreadPool;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-use tress_core::prepare::Preparation;
 use tress_loader::scene_desc;
 
 /// Benchmarks the scene at `path` (its integrator, film and lights; `spp` overrides its
@@ -24,7 +23,7 @@ pub(super) fn bench_scene(
     pools: &[(usize, ThreadPool)],
     table: &mut Table,
 ) -> Result<()> {
-    let limits = crate::limits_from_env();
+    let prep = crate::default_preparation();
     let mut desc = scene_desc::load(path)?;
     if let Some(spp) = spp {
         desc.film.spp = spp;
@@ -39,7 +38,7 @@ pub(super) fn bench_scene(
     let recording = Arc::new(AtomicBool::new(false));
     let mut tress_accel = None;
     let built = big_pool.install(|| {
-        scene_desc::build_wrapped(&desc, path, &limits, |accel| {
+        scene_desc::build_wrapped(&desc, path, &prep, |accel| {
             let accel = Arc::new(accel);
             tress_accel = Some(Arc::clone(&accel));
             Box::new(CountingAccel {
@@ -49,10 +48,10 @@ pub(super) fn bench_scene(
         })
     })?;
     let tress = tress_accel.expect("the scene's accelerator");
-    let plain = big_pool.install(|| scene_desc::build_plain_accel(&desc, path, &limits))?;
+    let plain = big_pool.install(|| scene_desc::build_plain_accel(&desc, path, &prep))?;
     let accels = Accels { tress, plain };
 
-    let prep = Preparation::with_limits(limits);
+    crate::print_warnings(&prep);
     let integrator = big_pool
         .install(|| desc.integrator.build(&built.scene, &prep))
         .with_context(|| path.display().to_string())?;

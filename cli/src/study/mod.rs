@@ -58,6 +58,7 @@ pub fn run(args: StudyArgs, log: &mut Log) -> Result<StudyOutputs> {
         threads: args.run.threads,
         verbose: !args.run.quiet,
         limits: crate::limits_from_env(),
+        table_dir: args.run.table_dir(),
     };
     let bar = Bar(progress_bar(0, settings.verbose, "study "));
     let outputs = study::run(&settings, &bar, Some(&plots::Plots))?;

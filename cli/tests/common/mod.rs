@@ -6,8 +6,14 @@ use std::process::{Command, Output};
 use tress_core::image_io::ImageError;
 use tress_core::output_file::{Inputs, Sink};
 
+/// Runs `tress` with `args` in `cwd`. Its default table cache is a folder of the build's
+/// (`XDG_CACHE_HOME` under `CARGO_TARGET_TMPDIR`), not the user's.
 pub fn tress(args: &[&str], cwd: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_tress"))
+        .env(
+            "XDG_CACHE_HOME",
+            Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli-tests-cache"),
+        )
         .args(args)
         .current_dir(cwd)
         .output()
