@@ -115,15 +115,6 @@ pub trait FiberDensity: Send + Sync {
     /// (the result is then at least `limit`): a caller for whom every count past `limit` means
     /// the same need not pay for the rest of the ray.
     fn fibers_crossed_up_to(&self, ray: &Ray, limit: f32) -> f32;
-    /// [`Self::fibers_crossed_up_to`] of each of `queries` (a ray and its limit) into `counts`
-    /// (as long), by default one after another. The answers must be those of
-    /// `fibers_crossed_up_to`, bit for bit: an implementation may only walk the rays together
-    /// (to fetch the data of many before reading any), never count differently.
-    fn fibers_crossed_many(&self, queries: &[(Ray, f32)], counts: &mut [f32]) {
-        for ((ray, limit), n) in queries.iter().zip(counts) {
-            *n = self.fibers_crossed_up_to(ray, *limit);
-        }
-    }
     /// One line for logs: resolution, memory, what it stores.
     fn describe(&self) -> String;
 }

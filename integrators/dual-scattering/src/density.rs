@@ -127,7 +127,6 @@ use std::sync::Arc;
 use tress_core::accel::{FiberDensity, HairCurves};
 use tress_core::limits::Limits;
 use tress_core::math::{Aabb, Ray, Vec3};
-use tress_core::sampling::prefetch;
 
 /// Target mean fiber length per occupied voxel, in voxel sides, of the automatic resolution.
 pub const AUTO_FIBERS_PER_VOXEL: f64 = 8.0;
@@ -319,42 +318,13 @@ impl Lattice {
         t1: f32,
         mut visit: impl FnMut([u32; 3], f32, f32) -> ControlFlow<()>,
     ) {
-        let Some(mut walk) = Dda::new(self, o, d, t0, t1) else {
+        let dims = self.dims.map(|n| n as i64);
+        let size = Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) * self.h;
+        let Some((t0, t1)) = clip_to_box(o, d.recip(), t0, t1, self.origin, self.origin + size)
+        else {
             return;
         };
-        while let Some((c, a, b)) = walk.step() {
-            if visit(c, a, b).is_break() {
-                return;
-            }
-        }
-    }
-}
-
-/// An Amanatides–Woo walk through a lattice's voxels along a line, one voxel per
-/// [`Dda::step`]: [`Lattice::traverse`] as a state that can be paused and resumed, so that
-/// many walks can advance together (`DensityGrid::fibers_crossed_many`).
-#[derive(Clone, Copy, Debug)]
-struct Dda {
-    cell: [i64; 3],
-    step: [i64; 3],
-    next: [f32; 3],
-    delta: [f32; 3],
-    dims: [i64; 3],
-    /// Where the part of the line in the current voxel starts.
-    t: f32,
-    t1: f32,
-    done: bool,
-}
-
-impl Dda {
-    /// The walk along `o + t·d` (unit `d`) over `t ∈ [t0, t1]` clipped to `lattice`; `None`
-    /// if the line misses it.
-    #[inline]
-    fn new(lattice: &Lattice, o: Vec3, d: Vec3, t0: f32, t1: f32) -> Option<Dda> {
-        let dims = lattice.dims.map(|n| n as i64);
-        let size = Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) * lattice.h;
-        let (t0, t1) = clip_to_box(o, d.recip(), t0, t1, lattice.origin, lattice.origin + size)?;
-        let start = lattice.cell_of(o + d * t0);
+        let start = self.cell_of(o + d * t0);
         let mut cell = [0i64; 3];
         let mut step = [0i64; 3];
         let mut next = [f32::INFINITY; 3];
@@ -364,32 +334,16 @@ impl Dda {
             cell[i] = c;
             if d[i] > 0.0 {
                 step[i] = 1;
-                next[i] = (lattice.origin[i] + (c + 1) as f32 * lattice.h - o[i]) / d[i];
-                delta[i] = lattice.h / d[i];
+                next[i] = (self.origin[i] + (c + 1) as f32 * self.h - o[i]) / d[i];
+                delta[i] = self.h / d[i];
             } else if d[i] < 0.0 {
                 step[i] = -1;
-                next[i] = (lattice.origin[i] + c as f32 * lattice.h - o[i]) / d[i];
-                delta[i] = -lattice.h / d[i];
+                next[i] = (self.origin[i] + c as f32 * self.h - o[i]) / d[i];
+                delta[i] = -self.h / d[i];
             }
         }
-        Some(Dda {
-            cell,
-            step,
-            next,
-            delta,
-            dims,
-            t: t0,
-            t1,
-            done: false,
-        })
-    }
-
-    /// The next voxel the line passes through, with the part `(t_in, t_out)` of the line in
-    /// it; `None` once the line has left the lattice or reached `t1`.
-    #[inline]
-    fn step(&mut self) -> Option<([u32; 3], f32, f32)> {
-        while !self.done {
-            let next = &self.next;
+        let mut t = t0;
+        loop {
             let axis = if next[0] <= next[1] && next[0] <= next[2] {
                 0
             } else if next[1] <= next[2] {
@@ -398,26 +352,22 @@ impl Dda {
                 2
             };
             let t_next = next[axis];
-            let t_end = t_next.min(self.t1);
-            let visit = (t_end > self.t).then(|| (self.cell.map(|c| c as u32), self.t, t_end));
-            if visit.is_some() {
-                self.t = t_end;
-            }
-            if t_next >= self.t1 {
-                self.done = true;
-            } else {
-                self.cell[axis] += self.step[axis];
-                if self.cell[axis] < 0 || self.cell[axis] >= self.dims[axis] {
-                    self.done = true;
-                } else {
-                    self.next[axis] += self.delta[axis];
+            let t_end = t_next.min(t1);
+            if t_end > t {
+                if visit(cell.map(|c| c as u32), t, t_end).is_break() {
+                    return;
                 }
+                t = t_end;
             }
-            if visit.is_some() {
-                return visit;
+            if t_next >= t1 {
+                return;
             }
+            cell[axis] += step[axis];
+            if cell[axis] < 0 || cell[axis] >= dims[axis] {
+                return;
+            }
+            next[axis] += delta[axis];
         }
-        None
     }
 }
 
@@ -780,13 +730,17 @@ impl FiberDensity for DensityGrid {
     }
 
     fn fibers_crossed_up_to(&self, ray: &Ray, limit: f32) -> f32 {
-        let Some(q) = self.query(ray) else {
+        let len = ray.dir.length();
+        if self.records.is_empty() || len.is_nan() || len <= 0.0 {
             return 0.0;
-        };
-        let own = self.own_strand(ray, q.d, q.t_max);
+        }
+        let (d, t_max) = (ray.dir / len, ray.t_max * len);
+        let own = self.own_strand(ray, d, t_max);
+        // The ray in voxel sides from the lattice's corner, for the profiles.
+        let (o_cells, d_cells) = (self.lattice.in_cells(ray.origin), d / self.lattice.h);
         let mut n = 0.0;
         self.lattice
-            .traverse_until(ray.origin, q.d, 0.0, q.t_max, |c, t0, t1| {
+            .traverse_until(ray.origin, d, 0.0, t_max, |c, t0, t1| {
                 let Some(at) = self.record_at(c) else {
                     return ControlFlow::Continue(());
                 };
@@ -794,7 +748,15 @@ impl FiberDensity for DensityGrid {
                 if record.sigma_kappa == 0.0 {
                     return ControlFlow::Continue(());
                 }
-                n += q.in_voxel(record, c, t0, t1, &own, &self.lattice);
+                let mut per_length = record.crossings(d);
+                if own.len > 0 && t0 < own.reach {
+                    per_length -= own.at(self.lattice.linear(c));
+                }
+                // The own strand's share takes the voxel's profile too: a voxel that holds only
+                // the own strand then counts nothing anywhere.
+                let middle = o_cells + d_cells * (0.5 * (t0 + t1));
+                let profile = record.profile(Lattice::from_centre(middle, c));
+                n += per_length.max(0.0) * profile * (t1 - t0);
                 if n >= limit {
                     ControlFlow::Break(())
                 } else {
@@ -803,150 +765,6 @@ impl FiberDensity for DensityGrid {
             });
         n
     }
-
-    /// The walks of all `queries` advance together, [`WALK_ROUND`] voxels of occupied bricks
-    /// at a time: each round finds the records of every walk's next voxels (a DDA's voxels
-    /// depend on the ray alone) and asks for them to be fetched, then counts them walk by walk,
-    /// so the records' cache misses overlap. Each walk adds the same terms in the same order
-    /// and stops where [`FiberDensity::fibers_crossed_up_to`] stops: the counts are its own.
-    fn fibers_crossed_many(&self, queries: &[(Ray, f32)], counts: &mut [f32]) {
-        let mut walks = Vec::with_capacity(queries.len());
-        for (i, ((ray, limit), n)) in queries.iter().zip(counts.iter_mut()).enumerate() {
-            *n = 0.0;
-            let Some(q) = self.query(ray) else {
-                continue;
-            };
-            let Some(dda) = Dda::new(&self.lattice, ray.origin, q.d, 0.0, q.t_max) else {
-                continue;
-            };
-            walks.push(Walk {
-                dda,
-                own: self.own_strand(ray, q.d, q.t_max),
-                q,
-                index: i,
-                limit: *limit,
-                n: 0.0,
-                stopped: false,
-            });
-        }
-        let mut voxels: Vec<(u32, [u32; 3], f32, f32)> = Vec::new();
-        let mut ends: Vec<usize> = Vec::with_capacity(walks.len());
-        while !walks.is_empty() {
-            voxels.clear();
-            ends.clear();
-            for w in &mut walks {
-                let mut taken = 0;
-                while taken < WALK_ROUND {
-                    let Some((c, t0, t1)) = w.dda.step() else {
-                        break;
-                    };
-                    if let Some(at) = self.record_at(c) {
-                        // A record may straddle two cache lines: ask for both ends.
-                        let record = &self.records[at];
-                        prefetch(&record.sigma_kappa);
-                        prefetch(&record.slope);
-                        voxels.push((at as u32, c, t0, t1));
-                        taken += 1;
-                    }
-                }
-                ends.push(voxels.len());
-            }
-            let mut start = 0;
-            for (w, &end) in walks.iter_mut().zip(&ends) {
-                for &(at, c, t0, t1) in &voxels[start..end] {
-                    let record = &self.records[at as usize];
-                    if record.sigma_kappa == 0.0 {
-                        continue;
-                    }
-                    w.n += w.q.in_voxel(record, c, t0, t1, &w.own, &self.lattice);
-                    if w.n >= w.limit {
-                        w.stopped = true;
-                        break;
-                    }
-                }
-                start = end;
-            }
-            walks.retain(|w| {
-                let going = !w.stopped && !w.dda.done;
-                if !going {
-                    counts[w.index] = w.n;
-                }
-                going
-            });
-        }
-    }
-}
-
-/// Voxels of occupied bricks a walk of [`DensityGrid::fibers_crossed_many`] takes per round.
-const WALK_ROUND: usize = 16;
-
-/// A ray as the grid's counts see it.
-#[derive(Clone, Copy, Debug)]
-struct Query {
-    /// Unit direction.
-    d: Vec3,
-    /// The ray's end along `d`.
-    t_max: f32,
-    /// The ray in voxel sides from the lattice's corner, for the profiles.
-    o_cells: Vec3,
-    d_cells: Vec3,
-}
-
-impl DensityGrid {
-    /// `ray` as the counts walk it; `None` where every count is 0 (an empty grid, a ray
-    /// without a direction).
-    #[inline]
-    fn query(&self, ray: &Ray) -> Option<Query> {
-        let len = ray.dir.length();
-        if self.records.is_empty() || len.is_nan() || len <= 0.0 {
-            return None;
-        }
-        let d = ray.dir / len;
-        Some(Query {
-            d,
-            t_max: ray.t_max * len,
-            o_cells: self.lattice.in_cells(ray.origin),
-            d_cells: d / self.lattice.h,
-        })
-    }
-}
-
-impl Query {
-    /// The fibers crossed in voxel `c` (with `record`, not empty) over `(t0, t1)`, less the
-    /// own strand's share.
-    #[inline]
-    fn in_voxel(
-        &self,
-        record: &VoxelRecord,
-        c: [u32; 3],
-        t0: f32,
-        t1: f32,
-        own: &OwnStrand,
-        lattice: &Lattice,
-    ) -> f32 {
-        let mut per_length = record.crossings(self.d);
-        if own.len > 0 && t0 < own.reach {
-            per_length -= own.at(lattice.linear(c));
-        }
-        // The own strand's share takes the voxel's profile too: a voxel that holds only
-        // the own strand then counts nothing anywhere.
-        let middle = self.o_cells + self.d_cells * (0.5 * (t0 + t1));
-        let profile = record.profile(Lattice::from_centre(middle, c));
-        per_length.max(0.0) * profile * (t1 - t0)
-    }
-}
-
-/// A count of [`DensityGrid::fibers_crossed_many`] in progress.
-struct Walk {
-    dda: Dda,
-    q: Query,
-    own: OwnStrand,
-    /// The query's index.
-    index: usize,
-    limit: f32,
-    n: f32,
-    /// Whether `n` reached `limit`.
-    stopped: bool,
 }
 
 /// Per voxel (linear index), what the grid counts per unit length for the own strand.

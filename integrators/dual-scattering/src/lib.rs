@@ -23,6 +23,10 @@
 //! infinity (environment, constant, distant with a disc), sampled by the direction strategy,
 //! and delta lights (point, distant without a disc), evaluated directly.
 //!
+//! The render loop's waves of camera samples are shaded in a wave form (`li_wave`): groups of
+//! samples advance together, their camera rays and shadow rays traced in batches, each
+//! sample's radiance that of `li` bit for bit.
+//!
 //! Settings ([`DualSettings`]), in RON: `DualUniform(d_f: None, d_b: None, grid_resolution:
 //! None, tables: (multiple_scattering: FiberMedium), path_bounces: 0)` — `d_f`/`d_b` default
 //! to the tables' model (1 for `FiberMedium`, the paper's 0.7 for `Paper`).
@@ -195,8 +199,8 @@ pub trait DirectionSampling: Send + Sync + std::fmt::Debug {
     /// For the wave form ([`Integrator::li_wave`]): the directions [`Self::estimate`] takes at
     /// `point`, each with its weight, drawing from `sampler` what `estimate` draws, such that
     /// `estimate` is `Rgb::ZERO` plus `point.radiance_from(scene, wi) * w` of each in order.
-    /// The wave form then traces the shadow rays and counts the fibers of many points
-    /// together. `None` (the default, which draws nothing): the wave form calls `estimate`.
+    /// The wave form then traces the shadow rays of many points as one batch. `None` (the
+    /// default, which draws nothing): the wave form calls `estimate`.
     fn weighed_directions(
         &self,
         point: &HairPoint,
@@ -437,7 +441,9 @@ impl<D: DirectionSampling> Integrator for DualScattering<D> {
         self.li_from(camera_ray, scene.intersect(camera_ray), scene, sampler)
     }
 
-    /// The wave form: see [`wave`].
+    /// The wave form: the samples of `wave` advanced together in groups, each step for the
+    /// whole group (the camera rays and the shadow rays traced in batches), each sample's
+    /// radiance `li`'s bit for bit (see the `wave` module).
     fn li_wave(&self, scene: &Scene, wave: &mut [tress_core::integrator::WaveSample]) {
         let mut b = wave::Buffers::default();
         for group in wave.chunks_mut(wave::GROUP) {

@@ -1,18 +1,22 @@
 //! The wave form of the dual-scattering estimator ([`Integrator::li_wave`]): the camera
 //! samples of a wave are cut into groups of [`GROUP`], and each step of the estimator runs
 //! for the whole group before the next starts — the camera rays traced as one batch
-//! ([`Scene::intersect_many`]), the counts of fibers behind the hair points as one
-//! ([`FiberDensity::fibers_crossed_many`], which fetches the voxel records of all its walks
-//! ahead of reading them), the points' light directions drawn, their shadow rays traced as one
-//! batch ([`Scene::occluded_many`]), the counts toward the blocked directions as one, and then
-//! F evaluated. Samples whose camera ray does not end in a dual-scattering gather (a surface, a
+//! ([`Scene::intersect_many`]), the gathers sorted by the fiber segment they hit, the fibers
+//! behind each counted, the light table entries that every gather's first draws pick asked
+//! for before any is read, the directions drawn, their shadow rays traced as one batch
+//! ([`Scene::occluded_many`]), the fibers toward the blocked directions counted, and then F
+//! evaluated. Samples whose camera ray does not end in a dual-scattering gather (a surface, a
 //! miss, `path_bounces` > 0) take the single-sample path from their traced first hit. Every
 //! sample draws its numbers and adds its terms as [`Integrator::li`] does: the images are
 //! `li`'s, bit for bit.
 //!
+//! The counts walk the grid one ray at a time. Walking a group's rays together, with each
+//! round's voxel records prefetched for all walks before any is read, or with a first pass
+//! over each walk's first voxels that only prefetches, made a count slower (1.09–1.32× on
+//! straight.hair; the book's performance notes, "Where a dual-mis sample goes").
+//!
 //! [`Integrator::li_wave`]: tress_core::Integrator::li_wave
 //! [`Integrator::li`]: tress_core::Integrator::li
-//! [`FiberDensity::fibers_crossed_many`]: tress_core::FiberDensity::fibers_crossed_many
 
 use crate::{DirectionSampling, DualScattering, HairPoint};
 use tress_core::integrator::WaveSample;
@@ -29,10 +33,6 @@ pub(crate) struct Buffers {
     hits: Vec<Option<Hit>>,
     /// Per gather: its sample in the group, its material.
     gathers: Vec<(u32, u32)>,
-    /// The counts behind the gathers that take one: per gather the index of its query.
-    behind_of: Vec<Option<u32>>,
-    queries: Vec<(Ray, f32)>,
-    counts: Vec<f32>,
     /// Per gather: its estimate, where its direction sampling has no wave form.
     estimated: Vec<Option<Rgb>>,
     /// The directions of all gathers, in the order each gather weighs them.
@@ -41,8 +41,6 @@ pub(crate) struct Buffers {
     /// Per shadow ray: its direction.
     shadow_of: Vec<u32>,
     blocked: Vec<bool>,
-    /// Per count toward a light: its direction.
-    count_of: Vec<u32>,
 }
 
 /// A direction of a gather, on its way to a term.
@@ -93,34 +91,24 @@ impl<D: DirectionSampling> DualScattering<D> {
             w.radiance = self.li_from(&w.ray, *hit, scene, &mut w.sampler);
         }
 
-        // The fibers behind every gather, counted together.
-        let shading_point = |&(i, _): &(u32, u32)| {
+        // Gathers at the same fiber segment one after another: the own strand that each
+        // count behind takes out is read once for all of them.
+        b.gathers.sort_unstable_by_key(|&(i, _)| {
+            let prim = b.hits[i as usize]
+                .as_ref()
+                .expect("a gather has a hit")
+                .prim;
+            (prim.geom, prim.prim, i)
+        });
+
+        // Every gather's point, with the fibers behind it counted.
+        let mut points: Vec<Option<HairPoint>> = Vec::with_capacity(b.gathers.len());
+        for &(i, material) in &b.gathers {
             let i = i as usize;
             let hit = b.hits[i].as_ref().expect("a gather has a hit");
-            ShadingPoint::new(hit, &group[i].ray, &scene.materials)
-        };
-        b.behind_of.clear();
-        b.queries.clear();
-        for g in &b.gathers {
-            let sp = shading_point(g);
-            let query = self
-                .hair_shading(&sp, g.1)
-                .and_then(|(shading, ..)| Self::behind_query(shading, &sp));
-            b.behind_of.push(query.map(|q| {
-                b.queries.push(q);
-                (b.queries.len() - 1) as u32
-            }));
-        }
-        b.counts.clear();
-        b.counts.resize(b.queries.len(), 0.0);
-        if let Some(density) = self.density.as_deref() {
-            density.fibers_crossed_many(&b.queries, &mut b.counts);
-        }
-        let mut points: Vec<Option<HairPoint>> = Vec::with_capacity(b.gathers.len());
-        for (g, behind_of) in b.gathers.iter().zip(&b.behind_of) {
-            let sp = shading_point(g);
+            let sp = ShadingPoint::new(hit, &group[i].ray, &scene.materials);
             points.push(
-                self.hair_shading(&sp, g.1)
+                self.hair_shading(&sp, material)
                     .map(|(shading, density, frame, h)| HairPoint {
                         wo_local: frame.to_local(sp.wo),
                         sp,
@@ -128,17 +116,31 @@ impl<D: DirectionSampling> DualScattering<D> {
                         density,
                         h,
                         frame,
-                        behind: behind_of.map_or(f32::INFINITY, |q| b.counts[q as usize]),
+                        behind: Self::behind_query(shading, &sp)
+                            .map_or(f32::INFINITY, |(ray, limit)| {
+                                density.fibers_crossed_up_to(&ray, limit)
+                            }),
                     }),
             );
         }
 
-        // Every gather's directions, drawn in its sample's order; the shadow rays of those
-        // the lights at infinity shine along.
+        // The light's table entries that every gather's first draws pick (if it draws them),
+        // asked for before any is read.
+        if scene.lights.sampling_reads_tables() {
+            for (point, &(i, _)) in points.iter().zip(&b.gathers) {
+                if point.is_some() {
+                    let mut ahead = group[i as usize].sampler.clone();
+                    let (u_select, u_light) = (ahead.next_1d(), ahead.next_2d());
+                    if let Some((light, _)) = scene.lights.choose_non_delta(u_select) {
+                        light.prefetch_sample(u_light);
+                    }
+                }
+            }
+        }
+        // Every gather's directions, drawn in its sample's order, with the lights' radiance
+        // along each asked for.
         b.estimated.clear();
         b.directions.clear();
-        b.shadow_rays.clear();
-        b.shadow_of.clear();
         for (k, (point, &(i, _))) in points.iter().zip(&b.gathers).enumerate() {
             let Some(point) = point else {
                 b.estimated.push(None);
@@ -152,51 +154,48 @@ impl<D: DirectionSampling> DualScattering<D> {
             };
             b.estimated.push(None);
             for (wi, w) in directions.into_iter().flatten() {
-                let le = scene.escaped_radiance(wi);
-                if le != Rgb::ZERO {
-                    b.shadow_rays
-                        .push(point.sp.spawn(wi).with_t_max(f32::INFINITY));
-                    b.shadow_of.push(b.directions.len() as u32);
-                }
+                scene.lights.infinite().for_each(|l| l.prefetch_le(wi));
                 b.directions.push(Direction {
                     gather: k as u32,
                     wi,
                     w,
-                    le,
+                    le: Rgb::ZERO,
                     seen: Seen::Unknown,
                 });
             }
         }
+        // The shadow rays of the directions the lights shine along.
+        b.shadow_rays.clear();
+        b.shadow_of.clear();
+        for (d, direction) in b.directions.iter_mut().enumerate() {
+            direction.le = scene.escaped_radiance(direction.wi);
+            if direction.le != Rgb::ZERO {
+                let point = points[direction.gather as usize]
+                    .as_ref()
+                    .expect("a direction's gather has a point");
+                b.shadow_rays
+                    .push(point.sp.spawn(direction.wi).with_t_max(f32::INFINITY));
+                b.shadow_of.push(d as u32);
+            }
+        }
 
-        // The shadow rays together; then, for those hair blocks, the fibers crossed together.
+        // The shadow rays together; then, for those hair blocks, the fibers crossed.
         b.blocked.clear();
         b.blocked.resize(b.shadow_rays.len(), true);
         scene.occluded_many(&b.shadow_rays, &mut b.blocked);
-        b.queries.clear();
-        b.count_of.clear();
         for ((ray, &blocked), &d) in b.shadow_rays.iter().zip(&b.blocked).zip(&b.shadow_of) {
             let direction = &mut b.directions[d as usize];
+            let point = points[direction.gather as usize]
+                .as_ref()
+                .expect("a direction's gather has a point");
             direction.seen = if !blocked {
                 Seen::Open
             } else if scene.occluded_by_surfaces(ray) {
                 Seen::Surface
             } else {
-                let point = points[direction.gather as usize]
-                    .as_ref()
-                    .expect("a direction's gather has a point");
                 let limit = point.shading.tables().settled_counts().toward_light;
-                b.queries.push((*ray, limit));
-                b.count_of.push(d);
-                Seen::Unknown
+                Seen::Fibers(point.density.fibers_crossed_up_to(ray, limit))
             };
-        }
-        b.counts.clear();
-        b.counts.resize(b.queries.len(), 0.0);
-        if let Some(density) = self.density.as_deref() {
-            density.fibers_crossed_many(&b.queries, &mut b.counts);
-        }
-        for (&n, &d) in b.counts.iter().zip(&b.count_of) {
-            b.directions[d as usize].seen = Seen::Fibers(n);
         }
 
         // F of every direction, added to its gather's estimate in order (as `weigh` adds them),
