@@ -7,7 +7,6 @@
 
 mod determinism;
 mod docs_links;
-mod dual_mis_wave;
 mod dual_scattering;
 mod furnace;
 mod groom_inputs;

@@ -10,9 +10,7 @@
 
 use tress_core::sampling::power_heuristic;
 use tress_core::{Rgb, Sampler, Scene};
-use tress_dual_scattering::{
-    weigh, DirectionSampling, DualScattering, HairPoint, WeighedDirections,
-};
+use tress_dual_scattering::{DirectionSampling, DualScattering, HairPoint};
 
 pub use tress_dual_scattering::{DualError, DualSettings};
 
@@ -27,23 +25,9 @@ tress_dual_scattering::dual_scattering_integrator!(MisDirections, "dual-mis");
 
 impl DirectionSampling for MisDirections {
     fn estimate(&self, point: &HairPoint, scene: &Scene, sampler: &mut Sampler) -> Rgb {
-        match self.weighed_directions(point, scene, sampler) {
-            Some(directions) => weigh(point, scene, directions),
-            None => Rgb::ZERO,
-        }
-    }
-
-    /// The light's sample and F's, each with its power-heuristic weight over its density.
-    fn weighed_directions(
-        &self,
-        point: &HairPoint,
-        scene: &Scene,
-        sampler: &mut Sampler,
-    ) -> Option<WeighedDirections> {
         let lights = &scene.lights;
-        let none = [None, None];
         if lights.non_delta().len() == 0 {
-            return Some(none);
+            return Rgb::ZERO;
         }
         let select_pdf = lights.non_delta_select_pdf();
         // Light strategy density of a direction: the mixture over the light choice, matching
@@ -54,26 +38,27 @@ impl DirectionSampling for MisDirections {
                 .map(|l| select_pdf * l.pdf_li(wi))
                 .sum::<f32>()
         };
-        let mut directions = none;
+        let mut radiance = Rgb::ZERO;
 
         let (u_select, u_light, u_f) = (sampler.next_1d(), sampler.next_2d(), sampler.next_4d());
         // One mixture for the light sample's pdf and the F sample.
         let f_sampler = point.shading.direction_sampler(point.wo_local);
         let Some((light, _)) = lights.choose_non_delta(u_select) else {
-            return Some(none);
+            return Rgb::ZERO;
         };
         if let Some(ls) = light.sample_li(point.sp.p, u_light) {
             let p_light = light_pdf(ls.wi);
             if p_light > 0.0 {
                 let p_f = f_sampler.pdf(point.to_local(ls.wi), point.h);
-                directions[0] = Some((ls.wi, power_heuristic(p_light, p_f) / p_light));
+                radiance +=
+                    point.radiance_from(scene, ls.wi) * (power_heuristic(p_light, p_f) / p_light);
             }
         }
         if let Some((wi_local, p_f)) = f_sampler.sample(point.h, u_f) {
             let wi = point.to_world(wi_local);
             let w = power_heuristic(p_f, light_pdf(wi));
-            directions[1] = Some((wi, w / p_f));
+            radiance += point.radiance_from(scene, wi) * (w / p_f);
         }
-        Some(directions)
+        radiance
     }
 }

@@ -23,10 +23,6 @@
 //! infinity (environment, constant, distant with a disc), sampled by the direction strategy,
 //! and delta lights (point, distant without a disc), evaluated directly.
 //!
-//! The render loop's waves of camera samples are shaded in a wave form (`li_wave`): groups of
-//! samples advance together, their camera rays and shadow rays traced in batches, each
-//! sample's radiance that of `li` bit for bit.
-//!
 //! Settings ([`DualSettings`]), in RON: `DualUniform(d_f: None, d_b: None, grid_resolution:
 //! None, tables: (multiple_scattering: FiberMedium), path_bounces: 0)` — `d_f`/`d_b` default
 //! to the tables' model (1 for `FiberMedium`, the paper's 0.7 for `Paper`).
@@ -34,7 +30,6 @@
 #![warn(missing_docs)]
 
 pub mod density;
-mod wave;
 
 use density::{DensityGrid, DensitySettings};
 use serde::{Deserialize, Serialize};
@@ -42,9 +37,7 @@ use std::sync::Arc;
 use tress_core::integrator::{direct_light, escaped_light, scatter};
 use tress_core::prepare::Preparation;
 use tress_core::shading::Scattering;
-use tress_core::{
-    FiberDensity, FiberFrame, Integrator, Material, Ray, Rgb, Sampler, Scene, ShadingPoint,
-};
+use tress_core::{FiberDensity, Integrator, Material, Ray, Rgb, Sampler, Scene, ShadingPoint};
 use tress_materials::dual_scattering::{
     fingerprint, DensityFactors, DualScatteringError, DualScatteringSettings,
     DualScatteringShading, DualScatteringTables,
@@ -195,34 +188,6 @@ impl HairPoint<'_> {
 pub trait DirectionSampling: Send + Sync + std::fmt::Debug {
     /// One-sample estimate of `∫ L(ω) F(ω) dω` over the lights at infinity.
     fn estimate(&self, point: &HairPoint, scene: &Scene, sampler: &mut Sampler) -> Rgb;
-
-    /// For the wave form ([`Integrator::li_wave`]): the directions [`Self::estimate`] takes at
-    /// `point`, each with its weight, drawing from `sampler` what `estimate` draws, such that
-    /// `estimate` is `Rgb::ZERO` plus `point.radiance_from(scene, wi) * w` of each in order.
-    /// The wave form then traces the shadow rays of many points as one batch. `None` (the
-    /// default, which draws nothing): the wave form calls `estimate`.
-    fn weighed_directions(
-        &self,
-        point: &HairPoint,
-        scene: &Scene,
-        sampler: &mut Sampler,
-    ) -> Option<WeighedDirections> {
-        let _ = (point, scene, sampler);
-        None
-    }
-}
-
-/// Up to two world directions with their weights ([`DirectionSampling::weighed_directions`]).
-pub type WeighedDirections = [Option<(tress_core::math::Vec3, f32)>; 2];
-
-/// `Rgb::ZERO` plus `point.radiance_from(scene, wi) * w` of each of `directions`, in order:
-/// the estimate a [`DirectionSampling::weighed_directions`] stands for.
-pub fn weigh(point: &HairPoint, scene: &Scene, directions: WeighedDirections) -> Rgb {
-    let mut radiance = Rgb::ZERO;
-    for (wi, w) in directions.into_iter().flatten() {
-        radiance += point.radiance_from(scene, wi) * w;
-    }
-    radiance
 }
 
 /// The dual-scattering estimator, parameterised by its direction sampling.
@@ -305,35 +270,6 @@ impl<D: DirectionSampling> DualScattering<D> {
         })
     }
 
-    /// The shading function and fiber frame of a hair point, if dual scattering shades it
-    /// (else it returns nothing).
-    fn hair_shading<'s>(
-        &'s self,
-        sp: &ShadingPoint,
-        material: u32,
-    ) -> Option<(
-        &'s DualScatteringShading,
-        &'s dyn FiberDensity,
-        FiberFrame,
-        f32,
-    )> {
-        let (Scattering::Fiber { frame, h, .. }, Some(Some(shading))) =
-            (sp.scattering, self.shading.get(material as usize))
-        else {
-            return None;
-        };
-        let density = self.density.as_deref()?;
-        Some((shading, density, frame, h))
-    }
-
-    /// The count of fibers behind a hair point, if its shading uses one: the ray and limit.
-    fn behind_query(shading: &DualScatteringShading, sp: &ShadingPoint) -> Option<(Ray, f32)> {
-        shading.uses_depth_behind().then(|| {
-            let limit = shading.tables().settled_counts().behind;
-            (sp.spawn(-sp.wo), limit)
-        })
-    }
-
     fn hair_radiance(
         &self,
         sp: ShadingPoint,
@@ -341,12 +277,19 @@ impl<D: DirectionSampling> DualScattering<D> {
         scene: &Scene,
         sampler: &mut Sampler,
     ) -> Rgb {
-        let Some((shading, density, frame, h)) = self.hair_shading(&sp, material) else {
+        let (Scattering::Fiber { frame, h, .. }, Some(Some(shading))) =
+            (sp.scattering, self.shading.get(material as usize))
+        else {
             return Rgb::ZERO;
         };
-        let behind = match Self::behind_query(shading, &sp) {
-            Some((ray, limit)) => density.fibers_crossed_up_to(&ray, limit),
-            None => f32::INFINITY,
+        let Some(density) = self.density.as_deref() else {
+            return Rgb::ZERO;
+        };
+        let behind = if shading.uses_depth_behind() {
+            let limit = shading.tables().settled_counts().behind;
+            density.fibers_crossed_up_to(&sp.spawn(-sp.wo), limit)
+        } else {
+            f32::INFINITY
         };
         let point = HairPoint {
             wo_local: frame.to_local(sp.wo),
@@ -357,12 +300,7 @@ impl<D: DirectionSampling> DualScattering<D> {
             frame,
             behind,
         };
-        let radiance = self.directions.estimate(&point, scene, sampler);
-        Self::add_delta_lights(&point, scene, radiance)
-    }
-
-    /// `radiance` plus the delta lights' terms at `point`.
-    fn add_delta_lights(point: &HairPoint, scene: &Scene, mut radiance: Rgb) -> Rgb {
+        let mut radiance = self.directions.estimate(&point, scene, sampler);
         // Delta lights have one direction each: evaluate them all.
         for light in scene.lights.delta() {
             if let Some(ls) = light.sample_li(point.sp.p, tress_core::math::Vec2::ZERO) {
@@ -438,42 +376,14 @@ impl DualSettings {
 
 impl<D: DirectionSampling> Integrator for DualScattering<D> {
     fn li(&self, camera_ray: &Ray, scene: &Scene, sampler: &mut Sampler) -> Rgb {
-        self.li_from(camera_ray, scene.intersect(camera_ray), scene, sampler)
-    }
-
-    /// The wave form: the samples of `wave` advanced together in groups, each step for the
-    /// whole group (the camera rays and the shadow rays traced in batches), each sample's
-    /// radiance `li`'s bit for bit (see the `wave` module).
-    fn li_wave(&self, scene: &Scene, wave: &mut [tress_core::integrator::WaveSample]) {
-        let mut b = wave::Buffers::default();
-        for group in wave.chunks_mut(wave::GROUP) {
-            self.advance(scene, group, &mut b);
-        }
-    }
-}
-
-impl<D: DirectionSampling> DualScattering<D> {
-    /// [`Integrator::li`] of `camera_ray`, whose first hit, `first`, is already traced.
-    fn li_from(
-        &self,
-        camera_ray: &Ray,
-        first: Option<tress_core::Hit>,
-        scene: &Scene,
-        sampler: &mut Sampler,
-    ) -> Rgb {
         let select_pdf = scene.lights.non_delta_select_pdf();
         let mut radiance = Rgb::ZERO;
         let mut throughput = Rgb::ONE;
         let mut ray = *camera_ray;
         let mut scatter_pdf: Option<f32> = None;
         let mut hair_hits_traced = 0;
-        let mut first = Some(first);
         for depth in 0..=self.settings.max_depth {
-            let hit = match first.take() {
-                Some(hit) => hit,
-                None => scene.intersect(&ray),
-            };
-            let Some(hit) = hit else {
+            let Some(hit) = scene.intersect(&ray) else {
                 for light in scene.lights.non_delta() {
                     radiance += escaped_light(light, ray.dir, scatter_pdf, select_pdf, throughput);
                 }
