@@ -42,14 +42,26 @@
 //!
 //! # Far field (`far_field: true`)
 //! The paper's far-field fiber — its R lobe and TT/TRT integrated over the width — is the near
-//! field averaged over h uniform in [−1, 1] (uniform in the projected width), here by an 8-point
-//! Gauss–Legendre rule in h; `eval`, `pdf` and `sample` are then the rule's mixtures, so `pdf`
-//! stays the exact density of `sample`. `h` is ignored. The eight near-field lobes merge into one
-//! only for rough fibers (roughness ≳ 0.2). The near field is discontinuous in h (where R's `wi`
-//! passes below the surface, where paths start or stop leaving), so the rule is only as accurate
-//! as eight points on such a function: against 64 points, about 2 % of f energy-weighted at
-//! roughness 0.5 to 1 and up to tens of percent at single directions (the ignored test
-//! `far_field_rule_error` prints it; docs/src/research/performance.md).
+//! field averaged over h uniform in [−1, 1] (uniform in the projected width). `h` is ignored.
+//! - **R** is integrated over its own rule for each (`wo`, `wi`): R is on where `wo·m_e >
+//!   COS_MIN`, `wi·m_e > 0` and `wi·n_e > 0`, and each condition's ends are the roots of a
+//!   quadratic in tan β over the circle the ellipse maps onto (h = sin β), so R's interval in h
+//!   is found exactly (one interval in every case measured); it is split at the offset whose
+//!   mesonormal faces the half vector (D's peak), and each part gets 4 Gauss–Legendre points.
+//! - **TT, TRT, the residual** and the sampling mixture use a fixed 8-point Gauss–Legendre rule
+//!   in h; `pdf` and `sample` are that rule's mixtures, so `pdf` stays the exact density of
+//!   `sample` (R's rule need not match the sampler's offsets: the mixture's defensive uniform
+//!   share keeps the density positive wherever f is, so `f / pdf` stays unbiased and bounded).
+//!
+//! The near field is discontinuous in h (where R's `wi` passes below the surface, where paths
+//! start or stop leaving), so a fixed rule converges slowly. Against 512 points (eumelanin 0.8,
+//! round and elliptical 0.75, 1764 directions; the ignored test `far_field_accuracy`), f is off
+//! by 11–12 % energy-weighted at roughness 0.1, 4.5–5.6 % at 0.2, 1.8–1.9 % at 0.3 and 1.1–2.7 % at
+//! 0.5–1 (the same 8-point rule for R too: 50–54 %, 11–13 %, 3.2–3.7 %, 1.7–3.2 %); R alone is
+//! now within 0.06 % at roughness ≥ 0.5, so what is left is TT's and TRT's, whose ends depend on
+//! each path's refraction and are not found here. The eight near-field lobes merge into one
+//! only for rough fibers (roughness ≳ 0.2). A test bounds the error
+//! (`the_far_field_is_within_its_measured_accuracy`; docs/src/research/performance.md).
 //!
 //! # Sampling
 //! A mixture with exactly computable density: R by GGX visible-normal sampling at `m_e` (exact);
@@ -68,9 +80,11 @@
 //! taken where the CPU has them. The far field computes its eight offsets side by side too: the
 //! offsets in the lanes, one quadrature node at a time, all eight in one 256-bit vector where the
 //! CPU has AVX2 (two groups of four elsewhere; the same bits either way), with the entry points,
-//! frames and R's Fresnel computed once per call. Near field about 2.4× Chiang per `eval`, 2.2×
-//! per `pdf` and 2.7× per `sample`; far field about 8× (about 16× on a CPU with AVX but not
-//! AVX2; docs/src/research/performance.md, "Huang's cost").
+//! frames and R's Fresnel computed once per call; R's own rule adds its interval's roots
+//! (scalar) and its eight offsets' entry normals in one vector. Near field about 2.4× Chiang per
+//! `eval`, 2.2× per `pdf` and 2.7× per `sample`; far field about 9.4× per `eval`, 7.7× per
+//! `pdf`, 9.2× per `sample` (more on a CPU with AVX but not AVX2, which runs the offsets in two
+//! groups of four: about 16× before R's rule; docs/src/research/performance.md, "Huang's cost").
 //!
 //! # Orientation
 //! The model reports [`Bcsdf::uses_orientation`]: the shading point hands it directions in the
@@ -1766,13 +1780,18 @@ impl Huang {
             let len = (c(pp) + c(2.0 * pq) * t + c(pr) * t * t)
                 .max(f32x4::ZERO)
                 .sqrt();
-            let g = |(a, u, v): (f32, f32, f32)| (c(a) * len + c(u) + c(v) * t).simd_gt(f32x4::ZERO);
+            let g =
+                |(a, u, v): (f32, f32, f32)| (c(a) * len + c(u) + c(v) * t).simd_gt(f32x4::ZERO);
             (g(conds[0]) & g(conds[1]) & g(conds[2])).to_bitmask()
         };
         let mask = on(f32x4::from(&inside[..4])) | on(f32x4::from(&inside[4..])) << 4;
         let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
         for i in 0..=n {
-            let a = if i == 0 { f32::NEG_INFINITY } else { cuts[i - 1] };
+            let a = if i == 0 {
+                f32::NEG_INFINITY
+            } else {
+                cuts[i - 1]
+            };
             let b = if i == n { f32::INFINITY } else { cuts[i] };
             if b > a && mask & (1 << i) != 0 {
                 lo = lo.min(a);

@@ -70,7 +70,9 @@ fn huang_matches_the_scalar_implementation() {
     assert_eq!(rows, 400 * models.len(), "the reference rows");
     eprintln!("{rows} rows; worst error of f {worst_f:.2e}, of pdf {worst_pdf:.2e}");
     let far_l1 = far_err / far_sum;
-    eprintln!("far field against the width average: energy-weighted {far_l1:.2e}, worst {far_worst:.3}");
+    eprintln!(
+        "far field against the width average: energy-weighted {far_l1:.2e}, worst {far_worst:.3}"
+    );
     assert!(
         far_l1 <= FAR_L1 && far_worst <= FAR_WORST,
         "far field against the width average: {far_l1:.2e}, worst {far_worst:.3}"
