@@ -83,7 +83,7 @@
 //! frames and R's Fresnel computed once per call; R's own rule adds its interval's roots
 //! (scalar) and its eight offsets' entry normals in one vector. Near field about 2.4× Chiang per
 //! `eval`, 2.2× per `pdf` and 2.7× per `sample`; far field about 9.4× per `eval`, 7.7× per
-//! `pdf`, 9.2× per `sample` (more on a CPU with AVX but not AVX2, which runs the offsets in two
+//! `pdf`, 9.1× per `sample` (more on a CPU with AVX but not AVX2, which runs the offsets in two
 //! groups of four: about 16× before R's rule; docs/src/research/performance.md, "Huang's cost").
 //!
 //! # Orientation
