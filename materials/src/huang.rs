@@ -1712,10 +1712,11 @@ impl Huang {
     /// `wi·n_e > 0` (as in [`Self::eval_r`]): over the visible half of the circle each is
     /// `A |N| + u cos β + v sin β > 0` at the circle point `q cos β + e sin β` (h = sin β,
     /// `N` the ellipse's unnormalised normal there), whose roots in tan β are those of a
-    /// quadratic (squared, so some roots are spurious, which only adds a cut). Between the sorted
-    /// roots every condition keeps its sign, so each piece is tested at one point inside; R is on over the pieces from the first to the last that pass
-    /// (one interval in every case measured). That interval is split at the offset whose
-    /// mesonormal faces the half vector (D's peak), and each part gets 4 Gauss–Legendre points.
+    /// quadratic (squared, so some roots are spurious, which only adds a cut). Between the
+    /// sorted roots every condition keeps its sign, so each piece is tested at one point inside;
+    /// R is on over the pieces from the first to the last that pass (one interval in every case
+    /// measured). That interval is split at the offset whose mesonormal faces the half vector
+    /// (D's peak), and each part gets 4 Gauss–Legendre points.
     // Not inlined: in the lanes' AVX builds it made `sample` and `eval_pdf` 1.3× slower.
     #[inline(never)]
     fn far_r_rule(&self, wo: Vec3, q: Vec2, wi: Vec3) -> Option<([f32; 8], [f32; 8])> {
