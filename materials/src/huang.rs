@@ -42,14 +42,26 @@
 //!
 //! # Far field (`far_field: true`)
 //! The paper's far-field fiber — its R lobe and TT/TRT integrated over the width — is the near
-//! field averaged over h uniform in [−1, 1] (uniform in the projected width), here by an 8-point
-//! Gauss–Legendre rule in h; `eval`, `pdf` and `sample` are then the rule's mixtures, so `pdf`
-//! stays the exact density of `sample`. `h` is ignored. The eight near-field lobes merge into one
-//! only for rough fibers (roughness ≳ 0.2). The near field is discontinuous in h (where R's `wi`
-//! passes below the surface, where paths start or stop leaving), so the rule is only as accurate
-//! as eight points on such a function: against 64 points, about 2 % of f energy-weighted at
-//! roughness 0.5 to 1 and up to tens of percent at single directions (the ignored test
-//! `far_field_rule_error` prints it; docs/src/research/performance.md).
+//! field averaged over h uniform in [−1, 1] (uniform in the projected width). `h` is ignored.
+//! - **R** is integrated over its own rule for each (`wo`, `wi`): R is on where `wo·m_e >
+//!   COS_MIN`, `wi·m_e > 0` and `wi·n_e > 0`, and each condition's ends are the roots of a
+//!   quadratic in tan β over the circle the ellipse maps onto (h = sin β), so R's interval in h
+//!   is found exactly (one interval in every case measured); it is split at the offset whose
+//!   mesonormal faces the half vector (D's peak), and each part gets 4 Gauss–Legendre points.
+//! - **TT, TRT, the residual** and the sampling mixture use a fixed 8-point Gauss–Legendre rule
+//!   in h; `pdf` and `sample` are that rule's mixtures, so `pdf` stays the exact density of
+//!   `sample` (R's rule need not match the sampler's offsets: the mixture's defensive uniform
+//!   share keeps the density positive wherever f is, so `f / pdf` stays unbiased and bounded).
+//!
+//! The near field is discontinuous in h (where R's `wi` passes below the surface, where paths
+//! start or stop leaving), so a fixed rule converges slowly. Against 512 points (eumelanin 0.8,
+//! round and elliptical 0.75, 1764 directions; the ignored test `far_field_accuracy`), f is off
+//! by 11–12 % energy-weighted at roughness 0.1, 4.5–5.6 % at 0.2, 1.8–1.9 % at 0.3 and 1.1–2.7 % at
+//! 0.5–1 (the same 8-point rule for R too: 50–54 %, 11–13 %, 3.2–3.7 %, 1.7–3.2 %); R alone is
+//! now within 0.06 % at roughness ≥ 0.5, so what is left is TT's and TRT's, whose ends depend on
+//! each path's refraction and are not found here. The eight near-field lobes merge into one
+//! only for rough fibers (roughness ≳ 0.2). A test bounds the error
+//! (`the_far_field_is_within_its_measured_accuracy`; docs/src/research/performance.md).
 //!
 //! # Sampling
 //! A mixture with exactly computable density: R by GGX visible-normal sampling at `m_e` (exact);
@@ -68,9 +80,11 @@
 //! taken where the CPU has them. The far field computes its eight offsets side by side too: the
 //! offsets in the lanes, one quadrature node at a time, all eight in one 256-bit vector where the
 //! CPU has AVX2 (two groups of four elsewhere; the same bits either way), with the entry points,
-//! frames and R's Fresnel computed once per call. Near field about 2.4× Chiang per `eval`, 2.2×
-//! per `pdf` and 2.7× per `sample`; far field about 8× (about 16× on a CPU with AVX but not
-//! AVX2; docs/src/research/performance.md, "Huang's cost").
+//! frames and R's Fresnel computed once per call; R's own rule adds its interval's roots
+//! (scalar) and its eight offsets' entry normals in one vector. Near field about 2.4× Chiang per
+//! `eval`, 2.2× per `pdf` and 2.7× per `sample`; far field about 9.4× per `eval`, 7.7× per
+//! `pdf`, 9.1× per `sample` (more on a CPU with AVX but not AVX2, which runs the offsets in two
+//! groups of four: about 16× before R's rule; docs/src/research/performance.md, "Huang's cost").
 //!
 //! # Orientation
 //! The model reports [`Bcsdf::uses_orientation`]: the shading point hands it directions in the
@@ -458,6 +472,10 @@ const GL_W: [f32; 8] = [
     0.101_228_54,
 ];
 
+/// 4-point Gauss–Legendre nodes and weights on [−1, 1] (the far field's R, per piece).
+const GL4_X: [f32; 4] = [-0.861_136_3, -0.339_981_04, 0.339_981_04, 0.861_136_3];
+const GL4_W: [f32; 4] = [0.347_854_85, 0.652_145_15, 0.652_145_15, 0.347_854_85];
+
 /// Parameters of [`Huang`] (module docs).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
@@ -761,9 +779,8 @@ struct Geometry {
 /// The far field's geometry for `L::N` of the rule's offsets, one per lane.
 #[derive(Clone, Debug)]
 struct FarGroup<L = f32x4> {
-    /// Entry mesonormals and macro normals, `wo · m_e` and Smith's Λ(wo) there.
+    /// Entry mesonormals, `wo · m_e` and Smith's Λ(wo) there.
     m_e: V4<L>,
-    n_e: V4<L>,
     cos_o: L,
     lambda_o: L,
     /// Per quadrature node, its paths at the four offsets, their throughput weighted by the
@@ -783,6 +800,8 @@ struct FarGroup<L = f32x4> {
 #[derive(Clone, Debug)]
 struct FarGeometry<L = f32x4, const G: usize = 2> {
     wo: Vec3,
+    /// The view's direction in the circle ([`Huang::view_in_circle`]).
+    q: Vec2,
     groups: [FarGroup<L>; G],
     /// The residual's energy over the width.
     residual: Rgb,
@@ -1385,6 +1404,7 @@ impl Huang {
         let residual = |c: usize| (groups[0].residual[c] + groups[1].residual[c]).reduce_add();
         FarGeometry {
             wo,
+            q,
             residual: Rgb::new(residual(0), residual(1), residual(2)),
             groups,
         }
@@ -1414,6 +1434,7 @@ impl Huang {
         let residual = |c: usize| group.residual[c].fold4().reduce_add();
         FarGeometry {
             wo,
+            q,
             residual: Rgb::new(residual(0), residual(1), residual(2)),
             groups: [group],
         }
@@ -1560,11 +1581,6 @@ impl Huang {
         }
         FarGroup {
             m_e,
-            n_e: V4 {
-                x: zero,
-                y: ny,
-                z: nz,
-            },
             cos_o,
             lambda_o,
             tt,
@@ -1634,26 +1650,32 @@ impl Huang {
             (0.0, 1.0)
         };
         let h2 = 2.0 * k;
-        let w = V4::splat(wi);
-        // Per group: R, TT's and TRT's three channels.
-        let mut sums = [[f32x4::ZERO; 7]; G];
-        for (grp, out) in g.groups.iter().zip(sums.iter_mut()) {
-            let mut r = zero;
-            if r_on {
-                let cos_i = w.dot(grp.m_e);
-                let mh = grp.cos_o + cos_i;
-                let ok = grp.cos_o.simd_gt(c(COS_MIN))
-                    & cos_i.simd_gt(zero)
-                    & w.dot(grp.n_e).simd_gt(zero)
-                    & mh.simd_gt(zero);
-                let x = mh * mh * c(self.alpha2 - 1.0) + c(h2);
-                let v = c(f_num * self.alpha2 * h2 * h2 / PI) * grp.weight
-                    / (x * x
-                        * c(f_den * 4.0)
-                        * (L::ONE + grp.lambda_o + self.lambda4(cos_i))
-                        * grp.cos_o);
-                r = ok.select(v, zero);
+        // R over its own rule in h (between the offsets where it switches on and off).
+        let rule = if r_on {
+            self.far_r_rule(g.wo, g.q, wi)
+        } else {
+            None
+        };
+        let mut r_sum = f32x4::ZERO;
+        if let Some((hs, ws)) = rule {
+            for i in 0..G {
+                let at = i * L::N;
+                let r = self.far_r_lanes::<L>(
+                    g.wo,
+                    g.q,
+                    wi,
+                    L::load(&hs[at..]),
+                    L::load(&ws[at..]),
+                    c(f_num * self.alpha2 * h2 * h2 / PI),
+                    c(f_den * 4.0),
+                    c(h2),
+                );
+                r_sum += r.fold4();
             }
+        }
+        // Per group: TT's and TRT's three channels.
+        let mut sums = [[f32x4::ZERO; 6]; G];
+        for (grp, out) in g.groups.iter().zip(sums.iter_mut()) {
             let (mut tt, mut trt) = ([zero; 3], [zero; 3]);
             for k in 0..K {
                 let a = self.exits_lanes(&grp.tt[k], wi);
@@ -1661,7 +1683,7 @@ impl Huang {
                 tt = [tt[0] + a[0], tt[1] + a[1], tt[2] + a[2]];
                 trt = [trt[0] + b[0], trt[1] + b[1], trt[2] + b[2]];
             }
-            *out = [r, tt[0], tt[1], tt[2], trt[0], trt[1], trt[2]].map(|v| v.fold4());
+            *out = [tt[0], tt[1], tt[2], trt[0], trt[1], trt[2]].map(|v| v.fold4());
         }
         let mut s = sums[0];
         for more in &sums[1..] {
@@ -1677,11 +1699,189 @@ impl Huang {
             )
         };
         [
-            Rgb::splat(s[0].reduce_add()),
-            rgb(1),
-            rgb(4),
+            Rgb::splat(r_sum.reduce_add()),
+            rgb(0),
+            rgb(3),
             g.residual * INV_4PI,
         ]
+    }
+
+    /// The far field's rule for R at `wi`, seen from `wo` (whose direction in the circle is
+    /// `q`): the offsets h and their weights (halved, for h uniform on [−1, 1]), or `None`
+    /// where R vanishes at every offset. R is on where `wo·m_e > COS_MIN`, `wi·m_e > 0` and
+    /// `wi·n_e > 0` (as in [`Self::eval_r`]): over the visible half of the circle each is
+    /// `A |N| + u cos β + v sin β > 0` at the circle point `q cos β + e sin β` (h = sin β,
+    /// `N` the ellipse's unnormalised normal there), whose roots in tan β are those of a
+    /// quadratic (squared, so some roots are spurious, which only adds a cut). Between the
+    /// sorted roots every condition keeps its sign, so each piece is tested at one point inside;
+    /// R is on over the pieces from the first to the last that pass (one interval in every case
+    /// measured). That interval is split at the offset whose mesonormal faces the half vector
+    /// (D's peak), and each part gets 4 Gauss–Legendre points.
+    // Not inlined: in the lanes' AVX builds it made `sample` and `eval_pdf` 1.3× slower.
+    #[inline(never)]
+    fn far_r_rule(&self, wo: Vec3, q: Vec2, wi: Vec3) -> Option<([f32; 8], [f32; 8])> {
+        let e = Vec2::new(q.y, -q.x);
+        let inv_b = self.inv_b;
+        // |N|² = P c² + 2 Q c s + R s² in c = cos β, s = sin β.
+        let (sq, se) = (Vec2::new(q.x * inv_b, q.y), Vec2::new(e.x * inv_b, e.y));
+        let (pp, pq, pr) = (sq.dot(sq), sq.dot(se), se.dot(se));
+        // Per condition, (A, u, v): A |N| + u c + v s > 0 (A = 0 for wi·n_e; wo·m_e > COS_MIN
+        // is (A − COS_MIN) |N| + … > 0).
+        let cond = |w: Vec3, a: f32, b: f32, min: f32| {
+            let bw = Vec2::new(w.y * inv_b, w.z) * b;
+            (a * w.x - min, bw.dot(q), bw.dot(e))
+        };
+        let conds = [
+            cond(wo, self.sin_tilt, self.cos_tilt, COS_MIN),
+            cond(wi, self.sin_tilt, self.cos_tilt, 0.0),
+            cond(wi, 0.0, 1.0, 0.0),
+        ];
+        // The roots in t = tan β (β in (−π/2, π/2), t over the whole line): every condition is
+        // homogeneous in (cos β, sin β), so it is tested at (1, t) without converting to h.
+        let mut cuts = [0.0f32; 6];
+        let mut n = 0;
+        for &(a, u, v) in &conds {
+            // (A² R − v²) t² + 2 (A² Q − u v) t + (A² P − u²) = 0.
+            let a2 = a * a;
+            let (k2, k1, k0) = (a2 * pr - v * v, 2.0 * (a2 * pq - u * v), a2 * pp - u * u);
+            let mut root = |t: f32| {
+                if t.is_finite() {
+                    cuts[n] = t.clamp(-1e15, 1e15);
+                    n += 1;
+                }
+            };
+            if a == 0.0 {
+                // u + v t = 0: the quadratic's double root, which rounding may lose.
+                root(-u / v);
+            } else if k2.abs() <= 1e-12 * (k1.abs() + k0.abs()) {
+                root(-k0 / k1);
+            } else {
+                let disc = k1 * k1 - 4.0 * k2 * k0;
+                if disc >= 0.0 {
+                    let sd = disc.sqrt();
+                    root((-k1 + sd) / (2.0 * k2));
+                    root((-k1 - sd) / (2.0 * k2));
+                }
+            }
+        }
+        let cuts = &mut cuts[..n];
+        cuts.sort_unstable_by(f32::total_cmp);
+        // One point inside each piece, the pieces tested four at a time.
+        let mut inside = [0.0f32; 8];
+        for (i, x) in inside.iter_mut().enumerate().take(n + 1) {
+            *x = match (i == 0, i == n) {
+                (true, true) => 0.0,
+                (true, false) => cuts[i] - 1.0 - cuts[i].abs(),
+                (false, true) => cuts[i - 1] + 1.0 + cuts[i - 1].abs(),
+                (false, false) => 0.5 * (cuts[i - 1] + cuts[i]),
+            };
+        }
+        let on = |t: f32x4| {
+            let c = f32x4::splat;
+            let len = (c(pp) + c(2.0 * pq) * t + c(pr) * t * t)
+                .max(f32x4::ZERO)
+                .sqrt();
+            let g =
+                |(a, u, v): (f32, f32, f32)| (c(a) * len + c(u) + c(v) * t).simd_gt(f32x4::ZERO);
+            (g(conds[0]) & g(conds[1]) & g(conds[2])).to_bitmask()
+        };
+        let mask = on(f32x4::from(&inside[..4])) | on(f32x4::from(&inside[4..])) << 4;
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for i in 0..=n {
+            let a = if i == 0 {
+                f32::NEG_INFINITY
+            } else {
+                cuts[i - 1]
+            };
+            let b = if i == n { f32::INFINITY } else { cuts[i] };
+            if b > a && mask & (1 << i) != 0 {
+                lo = lo.min(a);
+                hi = hi.max(b);
+            }
+        }
+        if lo >= hi {
+            return None;
+        }
+        // Back to h = sin β = t / √(1 + t²).
+        let to_h = |t: f32| {
+            if t.abs() >= 1e15 {
+                t.signum()
+            } else {
+                t / (1.0 + t * t).sqrt()
+            }
+        };
+        let (lo, hi) = (to_h(lo), to_h(hi));
+        // D's peak: the mesonormal's cross-section part along the half vector's, N ∥ (H_y, H_z),
+        // i.e. the circle point along (b H_y, H_z); beyond the silhouette, its nearer end.
+        let hv = wo + wi;
+        let p = Vec2::new(self.b * hv.y, hv.z).normalize_or_zero();
+        let peak = if p == Vec2::ZERO {
+            0.5 * (lo + hi)
+        } else if p.dot(q) < 0.0 {
+            if p.dot(e) < 0.0 {
+                -1.0
+            } else {
+                1.0
+            }
+        } else {
+            p.dot(e)
+        }
+        .clamp(lo, hi);
+        let mut hs = [0.0f32; 8];
+        let mut ws = [0.0f32; 8];
+        for (j, (a, b)) in [(lo, peak), (peak, hi)].into_iter().enumerate() {
+            let half = 0.5 * (b - a);
+            for i in 0..4 {
+                hs[4 * j + i] = a + half * (GL4_X[i] + 1.0);
+                ws[4 * j + i] = 0.5 * half * GL4_W[i];
+            }
+        }
+        Some((hs, ws))
+    }
+
+    /// R ([`Self::eval_r`]) at the offsets `h` seen from `wo` (`q` in the circle), weighted by
+    /// `weight`, with R's Fresnel and D's constants folded into `num` (`F α² |H|⁴ / π`'s
+    /// numerator) and `den` (Fresnel's denominator times 4), and `h2` = |H|².
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn far_r_lanes<L: Lanes>(
+        &self,
+        wo: Vec3,
+        q: Vec2,
+        wi: Vec3,
+        h: L,
+        weight: L,
+        num: L,
+        den: L,
+        h2: L,
+    ) -> L {
+        let c = L::splat;
+        let (zero, one) = (L::ZERO, L::ONE);
+        // The entry points' normals, as in [`Self::far_group`].
+        let sq = (one - h * h).max(zero).sqrt();
+        let (cy, cz) = (c(q.y) * h + c(q.x) * sq, c(-q.x) * h + c(q.y) * sq);
+        let (ny, nz) = (cy * c(self.inv_b), cz);
+        let inv = one / (ny * ny + nz * nz).sqrt();
+        let unit = inv.is_finite() & inv.simd_gt(zero);
+        let (ny, nz) = (unit.select(ny * inv, zero), unit.select(nz * inv, one));
+        let m_e = V4 {
+            x: c(self.sin_tilt),
+            y: c(self.cos_tilt) * ny,
+            z: c(self.cos_tilt) * nz,
+        };
+        let cos_o = V4::splat(wo).dot(m_e);
+        let w = V4::splat(wi);
+        let cos_i = w.dot(m_e);
+        let mh = cos_o + cos_i;
+        let ok = cos_o.simd_gt(c(COS_MIN))
+            & cos_i.simd_gt(zero)
+            & (c(wi.y) * ny + c(wi.z) * nz).simd_gt(zero)
+            & mh.simd_gt(zero)
+            & weight.simd_gt(zero);
+        let x = mh * mh * c(self.alpha2 - 1.0) + h2;
+        let v = num * weight
+            / (x * x * den * (one + self.lambda4(cos_o) + self.lambda4(cos_i)) * cos_o);
+        ok.select(v, zero)
     }
 
     /// The far field's sampling density at `wi`: the offsets' mixtures weighted by the rule.
@@ -2387,9 +2587,10 @@ mod tests {
         }
     }
 
-    /// The far field (its eight offsets side by side in lanes) is the rule's weighted sum of the
-    /// near field at its offsets, to rounding: 3000 random (wo, wi) per parameter set, relative
-    /// to the largest channel of f and to the pdf (measured worst 4·10⁻⁷ and 1.4·10⁻⁶).
+    /// The far field (its eight offsets side by side in lanes) is its rules' weighted sums of
+    /// the near field, to rounding: TT, TRT, the residual and the pdf over the 8-point rule, R
+    /// over its own rule for `wi` ([`Huang::far_r_rule`]); 3000 random (wo, wi) per parameter
+    /// set, relative to the largest channel of f and to the pdf.
     #[test]
     fn the_far_field_is_the_rule_over_the_near_field() {
         let mut rng = Sampler::from_seed(17);
@@ -2418,9 +2619,16 @@ mod tests {
                 let (f, pdf) = far.eval_pdf(wo, wi, 0.3);
                 let (mut f_sum, mut pdf_sum) = (Rgb::ZERO, 0.0f32);
                 for (&x, &w) in GL_X.iter().zip(&GL_W) {
-                    let (fx, px) = near.eval_pdf(wo, wi, x);
-                    f_sum += fx * (0.5 * w);
-                    pdf_sum += px * (0.5 * w);
+                    let g = near.geometry(wo, x, BOTH);
+                    let l = near.lobes(&g, wi);
+                    f_sum += (l[1] + l[2] + l[3]) * (0.5 * w);
+                    pdf_sum += near.pdf_at(&g, wi) * (0.5 * w);
+                }
+                let rule = (1.0 + wo.dot(wi) > 0.0)
+                    .then(|| far.far_r_rule(wo, far.view_in_circle(wo), wi))
+                    .flatten();
+                for (x, w) in rule.map_or(Vec::new(), |(x, w)| x.into_iter().zip(w).collect()) {
+                    f_sum += Rgb::splat(near.eval_r(&near.geometry(wo, x, EVAL), wi) * w);
                 }
                 let err_f = (f - f_sum).abs().max_element() / f_sum.max_element().max(1e-12);
                 let err_pdf = ((pdf - pdf_sum) / pdf_sum).abs();
@@ -2507,6 +2715,242 @@ mod tests {
                 println!("{line}");
             }
         }
+    }
+
+    /// Directions of the far field's accuracy grid: θ_o, θ_i in 7 steps over (−81°, 81°), φ_o
+    /// at three azimuths and φ_i − φ_o at 12 (1764 pairs).
+    fn accuracy_grid() -> Vec<(Vec3, Vec3)> {
+        let mut v = Vec::new();
+        for a in 0..7 {
+            let to = (-81.0f32 + 27.0 * a as f32).to_radians();
+            for po in [0.3f32, 1.2, 2.3] {
+                let wo = fiber_direction(to.sin(), to.cos(), po);
+                for b in 0..7 {
+                    let ti = (-81.0f32 + 27.0 * b as f32 + 4.0).to_radians();
+                    for c in 0..12 {
+                        let pi = po + (c as f32 + 0.5) * TAU / 12.0;
+                        v.push((wo, fiber_direction(ti.sin(), ti.cos(), pi)));
+                    }
+                }
+            }
+        }
+        v
+    }
+
+    /// The far field's error against a dense rule (`dense` Gauss–Legendre points in h over the
+    /// near field's lobes) over `grid`, for the far field of `p` and for the former rule (8
+    /// Gauss–Legendre points in h for every lobe): per rule the energy-weighted
+    /// Σ|Δf| / Σ max f, the 99th percentile and the worst of |Δf| over the largest channel of
+    /// the reference, and the energy-weighted error of R alone.
+    fn far_field_error(p: &Params, grid: &[(Vec3, Vec3)], dense: usize) -> [[f64; 4]; 2] {
+        let near = huang(Params {
+            far_field: false,
+            ..p.clone()
+        });
+        let far = huang(Params {
+            far_field: true,
+            ..p.clone()
+        });
+        let lobes = |rule: &[(f64, f64)], wo: Vec3, wi: Vec3| {
+            let mut out = [Rgb::ZERO; 4];
+            for &(x, w) in rule {
+                let l = near.lobes(&near.geometry(wo, x as f32, EVAL), wi);
+                for (o, l) in out.iter_mut().zip(l) {
+                    *o += l * (0.5 * w) as f32;
+                }
+            }
+            out
+        };
+        let dense = crate::dual_scattering::gauss_legendre(dense);
+        let old = crate::dual_scattering::gauss_legendre(8);
+        let mut errs = [Vec::new(), Vec::new()];
+        let mut l1 = [[0.0f64; 2]; 2];
+        let mut total = 0.0f64;
+        for &(wo, wi) in grid {
+            let r = lobes(&dense, wo, wi);
+            let fr = r[0] + r[1] + r[2] + r[3];
+            let scale = fr.max_element().max(1e-12) as f64;
+            total += scale;
+            let got = [
+                lobes(&old, wo, wi),
+                far.far_lobes(&far.far_geometry(wo, EVAL), wi),
+            ];
+            for (j, l) in got.iter().enumerate() {
+                let f = l[0] + l[1] + l[2] + l[3];
+                let d = (f - fr).abs().max_element() as f64;
+                errs[j].push(d / scale);
+                l1[j][0] += d;
+                l1[j][1] += (l[0] - r[0]).abs().max_element() as f64;
+            }
+        }
+        std::array::from_fn(|j| {
+            let e = &mut errs[j];
+            e.sort_by(f64::total_cmp);
+            [
+                l1[j][0] / total,
+                e[e.len() * 99 / 100],
+                e[e.len() - 1],
+                l1[j][1] / total,
+            ]
+        })
+    }
+
+    /// The far field stays within its measured accuracy against the width average (256
+    /// Gauss–Legendre points in h over the near field) on [`accuracy_grid`], eumelanin 0.8,
+    /// round and elliptical (0.75), roughness 0.2, 0.5 and 1: energy-weighted error of f
+    /// (Σ|Δf| / Σ max f), its 99th percentile, and the energy-weighted error of R alone. The
+    /// bounds are this test's measured values (it prints them) with about 30 % margin (R alone
+    /// at 0.5 and 1, measured 0.04–0.06 %: 10⁻³); the former rule (8 points in h for every
+    /// lobe) fails the R bound at every roughness here and the total at 0.2 (measured against
+    /// 512 points, `far_field_accuracy`: 11.3 % and 12.6 %, R alone 0.7–9.6 %).
+    #[test]
+    fn the_far_field_is_within_its_measured_accuracy() {
+        let grid = accuracy_grid();
+        // (roughness, aspect ratio, bounds: energy-weighted, 99th percentile, R alone).
+        let cases = [
+            (0.2f32, 1.0f32, [0.073, 0.23, 0.017]),
+            (0.2, 0.75, [0.059, 0.24, 0.014]),
+            (0.5, 1.0, [0.015, 0.10, 0.001]),
+            (0.5, 0.75, [0.026, 0.21, 0.001]),
+            (1.0, 1.0, [0.023, 0.18, 0.001]),
+            (1.0, 0.75, [0.036, 0.29, 0.001]),
+        ];
+        for (roughness, aspect_ratio, bound) in cases {
+            let p = Params {
+                roughness,
+                aspect_ratio,
+                pigment: Pigment::Melanin {
+                    eumelanin: 0.8,
+                    pheomelanin: 0.0,
+                    tint: crate::pigment::NO_TINT,
+                },
+                ..Params::default()
+            };
+            let e = far_field_error(&p, &grid, 256)[1];
+            println!("roughness {roughness} aspect {aspect_ratio}: {e:?}");
+            assert!(
+                e[0] <= bound[0] && e[1] <= bound[1] && e[3] <= bound[2],
+                "roughness {roughness}, aspect {aspect_ratio}: energy-weighted {:.4}, p99 {:.3}, R {:.5} against {bound:?}",
+                e[0],
+                e[1],
+                e[3]
+            );
+        }
+    }
+
+    /// Not an assertion: [`far_field_error`] against 512 points on [`accuracy_grid`] for
+    /// roughness 0.1 to 1, round and elliptical (0.75), eumelanin 0.8 and clear:
+    /// `cargo test --release -p tress-materials --lib -- --ignored --nocapture far_field_accuracy`.
+    #[test]
+    #[ignore]
+    fn far_field_accuracy() {
+        let grid = accuracy_grid();
+        for (name, pigment) in [
+            (
+                "eu0.8",
+                Pigment::Melanin {
+                    eumelanin: 0.8,
+                    pheomelanin: 0.0,
+                    tint: crate::pigment::NO_TINT,
+                },
+            ),
+            ("clear", Pigment::SigmaA((0.0, 0.0, 0.0))),
+        ] {
+            for aspect_ratio in [1.0f32, 0.75] {
+                for roughness in [0.1f32, 0.2, 0.3, 0.5, 0.7, 1.0] {
+                    let p = Params {
+                        roughness,
+                        aspect_ratio,
+                        pigment: pigment.clone(),
+                        ..Params::default()
+                    };
+                    let e = far_field_error(&p, &grid, 512);
+                    let f = |e: [f64; 4]| {
+                        format!(
+                            "L1 {:.2}% p99 {:.1}% max {:.0}% (R {:.2}%)",
+                            100.0 * e[0],
+                            100.0 * e[1],
+                            100.0 * e[2],
+                            100.0 * e[3]
+                        )
+                    };
+                    println!(
+                        "{name} b{aspect_ratio} r{roughness}: old {} | new {}",
+                        f(e[0]),
+                        f(e[1])
+                    );
+                }
+            }
+        }
+    }
+
+    /// Writes `tests/data/huang_reference.csv` with the far-field rows' f replaced by the dense
+    /// reference (512 Gauss–Legendre points in h over the near field, in f64 sums), their pdf
+    /// kept, to stdout; prints the old and new far fields' errors against it to stderr.
+    #[test]
+    #[ignore]
+    fn far_field_reference_rows() {
+        let data = include_str!("../tests/data/huang_reference.csv");
+        let dense = crate::dual_scattering::gauss_legendre(512);
+        let inst = test_instances()
+            .into_iter()
+            .find(|t| t.name == "rough_far_field")
+            .unwrap();
+        let far = huang(inst.params.clone());
+        let near = huang(Params {
+            far_field: false,
+            ..inst.params
+        });
+        let old = crate::dual_scattering::gauss_legendre(8);
+        let (mut worst_new, mut worst_old) = (0.0f64, 0.0f64);
+        let (mut l1_new, mut l1_old, mut total) = (0.0f64, 0.0f64, 0.0f64);
+        let mut out = String::new();
+        for (i, line) in data.lines().enumerate() {
+            let (name, numbers) = line.split_once(',').unwrap();
+            if i == 0 || name != "rough_far_field" {
+                out += line;
+                out += "\n";
+                continue;
+            }
+            let v: Vec<f32> = numbers.split(',').map(|x| x.parse().unwrap()).collect();
+            let (wo, wi) = (Vec3::new(v[0], v[1], v[2]), Vec3::new(v[3], v[4], v[5]));
+            let avg = |rule: &[(f64, f64)]| {
+                let mut s = [0.0f64; 3];
+                for &(x, w) in rule {
+                    let f = near.eval(wo, wi, x as f32);
+                    for c in 0..3 {
+                        s[c] += 0.5 * w * f[c] as f64;
+                    }
+                }
+                s
+            };
+            let d = avg(&dense);
+            let o = avg(&old);
+            let n = far.eval(wo, wi, v[6]);
+            let scale = d.iter().fold(1e-12f64, |a, &b| a.max(b.abs()));
+            let err = |f: [f64; 3]| (0..3).map(|c| (f[c] - d[c]).abs()).fold(0.0, f64::max) / scale;
+            let (e_new, e_old) = (err([n.x as f64, n.y as f64, n.z as f64]), err(o));
+            worst_new = worst_new.max(e_new);
+            worst_old = worst_old.max(e_old);
+            l1_new += e_new * scale;
+            l1_old += e_old * scale;
+            total += scale;
+            let nums: Vec<String> = v.iter().map(|x| format!("{x:e}")).collect();
+            out += &format!(
+                "{name},{},{:e},{:e},{:e},{}\n",
+                nums[..7].join(","),
+                d[0] as f32,
+                d[1] as f32,
+                d[2] as f32,
+                nums[10]
+            );
+        }
+        print!("{out}");
+        eprintln!(
+            "far-field rows against the dense rule: energy-weighted old {:.3e}, new {:.3e}; worst old {worst_old:.3e}, new {worst_new:.3e}",
+            l1_old / total,
+            l1_new / total
+        );
     }
 
     /// Turning an elliptical fiber about its axis changes what it scatters; a round one does not.
