@@ -6,8 +6,9 @@ benchmark scene it renders, in alternating rounds, tress (tubes and ribbons) and
 (`linearcurve`, and the frame-correct `bsplinecurve` setup where affordable) at equal spp, and
 prints render-only and whole-process time, the noise of each image against the renderer's own
 converged image, and the time each needs to reach the same error. A second table compares the
-converged images of the two renderers (mean radiance over the hair), also with tress's
-`overlaps: PassThrough` (Mitsuba's convention where fibers interpenetrate). See README.md.
+converged images of the two renderers (mean radiance over the hair), with tress's default
+`overlaps: PassThrough` (Mitsuba's convention where fibers interpenetrate) and `Scatter`. All
+of it under a white constant sky and under the Venice map (`--light`). See README.md.
 """
 
 import argparse
@@ -36,6 +37,41 @@ TRESS_MAX_DEPTH = 64
 RR_DEPTH = 5
 # relMSE = mean((x − ref)² / (ref² + EPS)) over pixels and channels.
 REL_EPS = 1e-2
+# The Venice map (shared data) and its rotation about +y for tress: with −60° its sun, 3° above
+# the horizon, lies 96° to the right of straight.hair's view direction (−z), so the hair is lit
+# from one side and a mirrored or turned map shows. Mitsuba's `envmap` is the same map with
+# `to_world` = rotate_y(rotation + 180°) (Mitsuba puts u = 0 at local −z, tress u = 0.5 at −z
+# turned by its rotation), no mirror: `envmap_check` prints the agreement.
+VENICE_FILE = Path("envmaps") / "venice_sunset_1k.hdr"
+VENICE_ROTATION = -60.0
+
+
+class Light:
+    """The light of a run, written for both renderers."""
+
+    def __init__(self, name, data):
+        self.name = name
+        if name == "sky":
+            self.label = "white constant sky"
+            self.map = None
+        else:
+            self.label = f"Venice map ({VENICE_FILE.name}, rotation {VENICE_ROTATION:g}°)"
+            self.map = (data / VENICE_FILE).resolve()
+            if not self.map.exists():
+                sys.exit(f"{self.map} is missing: pass --data DIR (the shared data set)")
+
+    def tress_ron(self):
+        if self.map is None:
+            return "Constant(radiance: (1.0, 1.0, 1.0))"
+        return f'Environment(file: "{self.map}", rotation: {VENICE_ROTATION}, scale: 1.0)'
+
+    def mitsuba_desc(self):
+        if self.map is None:
+            return {"type": "constant"}
+        return {"type": "envmap", "file": str(self.map), "rotation": VENICE_ROTATION}
+
+    def key(self):
+        return [self.name, str(self.map), VENICE_ROTATION if self.map else None]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -166,7 +202,7 @@ class Scene:
         # tress scales the file's radii; Mitsuba's curve files are written scaled.
         self.radius_scale = radius_scale
 
-    def tress_ron(self, curve, overlaps, res):
+    def tress_ron(self, curve, overlaps, res, light):
         (f, a, fov) = self.camera
         vec = lambda v: "({:.6g}, {:.6g}, {:.6g})".format(*v)
         return f"""(
@@ -182,16 +218,16 @@ class Scene:
              material: "hair",
              options: (curve: {curve}, overlaps: {overlaps}, radius_scale: {self.radius_scale})),
     ],
-    lights: [Constant(radiance: (1.0, 1.0, 1.0))],
+    lights: [{light.tress_ron()}],
 )
 """
 
-    def mitsuba_desc(self, kind, res):
+    def mitsuba_desc(self, kind, res, light):
         (f, a, fov) = self.camera
         return {
             "curves": str(self.curves[kind]), "kind": f"{kind}curve",
             "look_from": list(f), "look_at": list(a),
-            "fov": fov, "res": res,
+            "fov": fov, "res": res, "light": light.mitsuba_desc(),
         }
 
 
@@ -250,6 +286,15 @@ def build_scenes(work, data, quick):
 # Rendering
 
 
+def mitsuba_light(mi, light):
+    """Mitsuba's emitter for a `Light.mitsuba_desc()`."""
+    if light["type"] == "constant":
+        return {"type": "constant", "radiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}
+    return {"type": "envmap", "filename": light["file"],
+            "to_world": mi.ScalarTransform4f().rotate(axis=[0, 1, 0],
+                                                      angle=light["rotation"] + 180.0)}
+
+
 def mitsuba_render_main(argv):
     """Child process: one Mitsuba render. Prints a JSON line with the render-only time."""
     import mitsuba as mi
@@ -265,6 +310,7 @@ def mitsuba_render_main(argv):
                                               up=[0, 1, 0])
     scene = mi.load_dict({
         "type": "scene",
+        "sky": mitsuba_light(mi, desc["light"]),
         "integrator": {"type": "path", "max_depth": TRESS_MAX_DEPTH + 1, "rr_depth": RR_DEPTH},
         "sensor": {
             "type": "perspective", "fov": desc["fov"], "fov_axis": "y", "to_world": to_world,
@@ -272,7 +318,6 @@ def mitsuba_render_main(argv):
                      "pixel_format": "rgb"},
             "sampler": {"type": "independent", "sample_count": spp},
         },
-        "sky": {"type": "constant", "radiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}},
         "hair": {
             "type": desc["kind"], "filename": desc["curves"],
             "bsdf": {"type": "hair", "sigma_a": {"type": "rgb", "value": list(SIGMA_A)},
@@ -304,15 +349,15 @@ class Renderers:
         (work / "scenes").mkdir(exist_ok=True)
         (work / "images").mkdir(exist_ok=True)
 
-    def tress_scene_file(self, scene, curve, overlaps, res):
+    def tress_scene_file(self, scene, light, curve, overlaps, res):
         """The tress scene file of `scene` with these options, named by its contents."""
-        ron = scene.tress_ron(curve, overlaps, res)
+        ron = scene.tress_ron(curve, overlaps, res, light)
         path = self.work / "scenes" / (hashlib.sha1(ron.encode()).hexdigest()[:12] + ".ron")
         path.write_text(ron)
         return path
 
-    def tress_render(self, scene, curve, overlaps, res, spp, seed, out):
-        path = self.tress_scene_file(scene, curve, overlaps, res)
+    def tress_render(self, scene, light, curve, overlaps, res, spp, seed, out):
+        path = self.tress_scene_file(scene, light, curve, overlaps, res)
         cmd = [str(self.tress), "render", str(path), "--spp", str(spp), "--seed", str(seed),
                "--threads", str(self.threads), "--out", str(out), "--no-preview", "--alpha",
                "--log-format", "json"]
@@ -324,8 +369,8 @@ class Renderers:
         summary = json.loads(run.stdout.strip().splitlines()[-1])
         return {"render_s": summary["time_s"], "whole_s": whole}
 
-    def mitsuba_render(self, scene, kind, res, spp, seed, out):
-        desc = json.dumps(scene.mitsuba_desc(kind, res))
+    def mitsuba_render(self, scene, light, kind, res, spp, seed, out):
+        desc = json.dumps(scene.mitsuba_desc(kind, res, light))
         cmd = [sys.executable, __file__, "mitsuba-child", desc, str(spp), str(seed),
                str(self.threads), str(out)]
         t0 = time.perf_counter()
@@ -338,18 +383,21 @@ class Renderers:
                 "compile_s": summary["compile_s"]}
 
     def render(self, variant, res, spp, seed, out):
-        scene, who, shape, extra = variant
+        scene, light, who, shape, extra = variant
         if who == "tress":
-            return self.tress_render(scene, shape, extra, res, spp, seed, out)
-        return self.mitsuba_render(scene, shape, res, spp, seed, out)
+            return self.tress_render(scene, light, shape, extra, res, spp, seed, out)
+        return self.mitsuba_render(scene, light, shape, res, spp, seed, out)
 
     def reference(self, variant, res, spp):
         """The variant's converged image, rendered once and kept (keyed by everything that
         shapes it, the tress binary's modification time included)."""
-        scene, who, shape, extra = variant
+        scene, light, who, shape, extra = variant
         stamp = os.stat(self.tress).st_mtime_ns if who == "tress" else MITSUBA_VERSION
-        key = json.dumps([scene.name, str(scene.hair_file), scene.radius_scale, who, shape,
-                          extra, res, spp, str(stamp), scene.camera])
+        key = [scene.name, str(scene.hair_file), scene.radius_scale, who, shape, extra, res,
+               spp, str(stamp), scene.camera]
+        if light.name != "sky":  # the sky's references keep the keys they had
+            key.append(light.key())
+        key = json.dumps(key)
         out = self.work / "images" / f"ref-{hashlib.sha1(key.encode()).hexdigest()[:16]}.exr"
         if not out.exists():
             print(f"  reference: {label(variant)}, {spp} spp …", flush=True)
@@ -360,11 +408,11 @@ class Renderers:
 
 
 def label(variant):
-    scene, who, shape, extra = variant
+    scene, light, who, shape, extra = variant
     if who == "tress":
         name = {"Round": "tubes", "Flat": "ribbons"}[shape]
-        if extra == "PassThrough":
-            name += ", PassThrough"
+        if extra != "PassThrough":  # tress's default, Mitsuba's convention
+            name += f", {extra}"
     else:
         name = {"linear": "linearcurve", "bspline": "bsplinecurve ×3"}[shape]
     return f"{who} {name}"
@@ -386,7 +434,7 @@ def rel_mse(img, ref):
 # The two tables
 
 
-def timing_table(r, scenes, cfg, log):
+def timing_table(r, scenes, light, cfg, log):
     """Alternating rounds at equal spp; relMSE against each variant's own reference. Returns
     the table and, per (scene key, tress variant, Mitsuba variant), the render-only time to
     equal error, tress ÷ Mitsuba."""
@@ -394,14 +442,16 @@ def timing_table(r, scenes, cfg, log):
     equal_error = {}
     for key in ["straight", "groom"]:
         scene = scenes[key]
-        variants = [(scene, "tress", "Round", "Scatter"), (scene, "tress", "Flat", "Scatter"),
-                    (scene, "mitsuba", "linear", None)]
+        variants = [(scene, light, "tress", "Round", cfg.overlaps),
+                    (scene, light, "tress", "Flat", cfg.overlaps),
+                    (scene, light, "mitsuba", "linear", None)]
         if "bspline" in scene.curves:
-            variants.append((scene, "mitsuba", "bspline", None))
+            variants.append((scene, light, "mitsuba", "bspline", None))
         refs = {label(v): r.reference(v, cfg.res, cfg.ref_spp) for v in variants}
+        side_by_side(r.work / "images" / f"{light.name}-{key}-timed.png", list(refs.values()))
         stats = {label(v): {"render": [], "whole": [], "rel": []} for v in variants}
-        print(f"  {scene.label}: {cfg.rounds} alternating rounds of {len(variants)} renders",
-              flush=True)
+        print(f"  {scene.label}, {light.label}: {cfg.rounds} alternating rounds of "
+              f"{len(variants)} renders", flush=True)
         for k in range(cfg.rounds):
             order = variants if k % 2 == 0 else variants[::-1]
             for v in order:
@@ -444,7 +494,7 @@ def timing_table(r, scenes, cfg, log):
                     f"{ratio['render'] * noise:.2f}",
                     f"{ratio['whole'] * noise:.2f}",
                 ])
-        log(f"\nPer-round figures, {scene.label} (render s, whole s, relMSE):")
+        log(f"\nPer-round figures, {scene.label}, {light.label} (render s, whole s, relMSE):")
         for name, s in stats.items():
             log(f"- {name}: render {fmt_list(s['render'])}; whole {fmt_list(s['whole'])}; "
                 f"relMSE {fmt_list(s['rel'], '.2e')}")
@@ -454,7 +504,7 @@ def timing_table(r, scenes, cfg, log):
     return header, rows, equal_error
 
 
-def embree_bound_table(r, scenes, cfg, equal_error):
+def embree_bound_table(r, scenes, light, cfg, equal_error):
     """How far Embree alone is from Mitsuba: `tress bench --scene` renders each tress variant
     and traces the same rays again with Embree alone, each ray leaving a fiber started where it
     leaves it; the ratio of the two rates (per CPU-second) times tress's time to equal error
@@ -463,8 +513,8 @@ def embree_bound_table(r, scenes, cfg, equal_error):
     for key in ["straight", "groom"]:
         scene = scenes[key]
         for curve in ["Round", "Flat"]:
-            v = (scene, "tress", curve, "Scatter")
-            path = r.tress_scene_file(scene, curve, "Scatter", cfg.res)
+            v = (scene, light, "tress", curve, cfg.overlaps)
+            path = r.tress_scene_file(scene, light, curve, cfg.overlaps, cfg.res)
             csv_path = r.work / "bench-scene.csv"
             cmd = [str(r.tress), "bench", "--scene", str(path), "--spp", str(cfg.spp),
                    "--threads", str(r.threads), "--csv", str(csv_path)]
@@ -496,30 +546,40 @@ def hair_mean(img, mask):
     return img[..., :3][mask].mean(axis=0)
 
 
-def image_table(r, scenes, cfg):
+def image_table(r, scenes, light, cfg):
     """Converged images: tress (both overlap conventions) against Mitsuba's frame-correct
     setup, mean RGB over the pixels the hair covers fully."""
     rows = []
     for key in ["slab", "straight", "straight_half"]:
         scene = scenes[key]
-        mitsuba = r.reference((scene, "mitsuba", "bspline", None), cfg.res, cfg.ref_spp)
+        mitsuba = r.reference((scene, light, "mitsuba", "bspline", None), cfg.res, cfg.ref_spp)
         tress = {}
         for curve in ["Round", "Flat"]:
-            for overlaps in ["Scatter", "PassThrough"]:
-                v = (scene, "tress", curve, overlaps)
+            for overlaps in ["PassThrough", "Scatter"]:
+                v = (scene, light, "tress", curve, overlaps)
                 tress[label(v)] = r.reference(v, cfg.res, cfg.ref_spp)
         mask = next(iter(tress.values()))[..., 3] > 0.999
         base = hair_mean(mitsuba, mask)
         if key == "straight":
-            lin = r.reference((scene, "mitsuba", "linear", None), cfg.res, cfg.ref_spp)
+            lin = r.reference((scene, light, "mitsuba", "linear", None), cfg.res, cfg.ref_spp)
             rows.append([scene.label, "Mitsuba linearcurve (wrong frame)",
                          *pct(hair_mean(lin, mask), base)])
+            side_by_side(r.work / "images" / f"{light.name}-{key}.png",
+                         [tress["tress tubes"], tress["tress ribbons"], mitsuba, lin])
         for lab, img in tress.items():
             rows.append([scene.label, lab, *pct(hair_mean(img, mask), base)])
         rows.append([scene.label, "(Mitsuba bsplinecurve ×3: mean RGB)",
                      *(f"{c:.4f}" for c in base)])
     header = ["scene", "image", "R vs Mitsuba", "G", "B"]
     return header, rows
+
+
+def side_by_side(path, images):
+    """A PNG of converged images side by side (sRGB, clipped), to look at."""
+    import mitsuba as mi
+
+    row = np.concatenate([img[..., :3] for img in images], axis=1).astype(np.float32)
+    mi.Bitmap(row).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, True).write(str(path))
 
 
 def pct(a, b):
@@ -547,6 +607,51 @@ def frame_check(work, log):
             log(f"| {kind}curve | {y} | {fmt_vec(n)} | {fmt_vec(axis)} | {angle:.0f}° |")
 
 
+def envmap_check(log):
+    """Where Mitsuba's `envmap`, turned by rotate_y(R + 180°), reads a map at the centre of
+    each texel as tress maps it (`EnvironmentMap::direction_at`: u = 0.5 at −z turned by R,
+    v = 0 at +y): a 1024 × 512 map whose red is its column and green its row, so Mitsuba's
+    bilinear lookup returns the position it reads, in texels."""
+    import mitsuba as mi
+
+    w, h = 1024, 512
+    img = np.zeros((h, w, 3), np.float32)
+    img[..., 0] = np.arange(w)[None, :]
+    img[..., 1] = np.arange(h)[:, None]
+    img[..., 2] = 1.0
+    cols = np.arange(8, w - 8, 7)  # away from the seam, where red wraps from 1023 to 0
+    rows = np.arange(0, h, 5)
+    i, j = [a.ravel() for a in np.meshgrid(cols, rows)]
+    u, v = (i + 0.5) / w, (j + 0.5) / h
+    log("\n## The Venice map's mapping: Mitsuba `envmap` at tress's texel centres\n")
+    log(f"A {w} × {h} map whose red is the column and green the row; Mitsuba's lookup at the "
+        f"direction of each of {len(i)} texel centres of tress's mapping (rotation R, Mitsuba "
+        "`to_world` = rotate_y(R + 180°), no mirror). Mitsuba interpolates bilinearly between "
+        "texels it places at u = (column + ½)/width like tress, but at v = row/(height − 1) "
+        "(rows on the poles), against tress's (row + ½)/height: up to half a texel at the "
+        "poles, none at the horizon.\n")
+    log("| tress rotation R | column read − column (max abs) | row read − row: at the horizon "
+        "| at the poles (max abs) |")
+    log("|---|---|---|---|")
+    for rot in [0.0, VENICE_ROTATION, 37.5]:
+        em = mi.load_dict({"type": "envmap", "bitmap": mi.Bitmap(img),
+                           "to_world": mi.ScalarTransform4f().rotate(axis=[0, 1, 0],
+                                                                     angle=rot + 180.0)})
+        elev = 0.5 * np.pi - v * np.pi
+        phi = (u - 0.5) * 2 * np.pi - np.radians(rot)
+        d = np.stack([np.cos(elev) * np.sin(phi), np.sin(elev), -np.cos(elev) * np.cos(phi)], 1)
+        si = mi.SurfaceInteraction3f()
+        got = []
+        for k in range(len(d)):
+            si.wi = mi.Vector3f(*(-d[k]))
+            got.append(np.array(em.eval(si)))
+        got = np.array(got)
+        dcol = np.abs(got[:, 0] - i).max()
+        drow = got[:, 1] - j
+        horizon = np.abs(drow[np.abs(j - h / 2 + 0.5) < 3]).max()
+        log(f"| {rot:g}° | {dcol:.3f} | {horizon:.3f} | {np.abs(drow).max():.3f} |")
+
+
 def fmt_vec(v):
     return "(" + ", ".join(f"{x:+.2f}" for x in v) + ")"
 
@@ -571,6 +676,11 @@ def main():
     ap.add_argument("--timing-only", action="store_true",
                     help="skip the converged-image table (its references stay cached)")
     ap.add_argument("--log", type=Path, help="also write the report here (markdown)")
+    ap.add_argument("--light", choices=["sky", "venice", "both"], default="both",
+                    help="white constant sky, the Venice map, or both in turn (default)")
+    ap.add_argument("--overlaps", choices=["PassThrough", "Scatter"], default="PassThrough",
+                    help="tress's convention in the time, noise and Embree tables (default "
+                         "PassThrough: tress's default and Mitsuba's)")
     args = ap.parse_args()
 
     import mitsuba as mi
@@ -580,7 +690,10 @@ def main():
         sys.exit(f"Mitsuba {mi.__version__} found, {MITSUBA_VERSION} wanted")
     cfg = argparse.Namespace(
         res=48 if args.quick else 128, spp=16 if args.quick else 64,
-        ref_spp=args.ref_spp or (128 if args.quick else 256), rounds=args.rounds or (2 if args.quick else 7))
+        ref_spp=args.ref_spp or (128 if args.quick else 256),
+        rounds=args.rounds or (2 if args.quick else 7), overlaps=args.overlaps)
+    lights = [Light(name, args.data) for name in
+              (["sky", "venice"] if args.light == "both" else [args.light])]
     args.work.mkdir(parents=True, exist_ok=True)
     lines = []
 
@@ -593,22 +706,37 @@ def main():
 
     log(f"# tress against Mitsuba {MITSUBA_VERSION} (llvm_ad_rgb)\n")
     log(f"{cfg.res}², {cfg.spp} spp, {args.threads} threads, path tracing (64 scattering "
-        f"events, roulette from {RR_DEPTH}), white constant sky, Chiang σ_a = {SIGMA_A}, "
-        f"β_m = β_n = {BETA_M}, α = {ALPHA_DEG}°, η = {ETA}; references {cfg.ref_spp} spp; "
+        f"events, roulette from {RR_DEPTH}), "
+        f"{' and '.join(light.label for light in lights)}, Chiang σ_a = {SIGMA_A}, "
+        f"β_m = β_n = {BETA_M}, α = {ALPHA_DEG}°, η = {ETA}; tress `overlaps: {cfg.overlaps}` "
+        f"in the time tables; references {cfg.ref_spp} spp; "
         f"{cfg.rounds} alternating rounds{' (quick)' if args.quick else ''}.")
     start = time.perf_counter()
     scenes = build_scenes(args.work, args.data, args.quick)
     frame_check(args.work, log)
+    if any(light.map for light in lights):
+        envmap_check(log)
     r = Renderers(args, args.work)
+    for light in lights:
+        log(f"\n# Under the {light.label}")
+        light_tables(r, scenes, light, cfg, args, log)
+    log(f"\n(whole run {time.perf_counter() - start:.0f} s)")
+    if args.log:
+        print(f"wrote {args.log}")
+
+
+def light_tables(r, scenes, light, cfg, args, log):
+    """The three tables under one light."""
     if not args.timing_only:
-        print("converged images:", flush=True)
-        header, rows = image_table(r, scenes, cfg)
+        print(f"converged images, {light.label}:", flush=True)
+        header, rows = image_table(r, scenes, light, cfg)
         log("\n## Converged images: mean over the hair against Mitsuba's frame-correct setup\n")
         log("Pixels the hair covers fully (tress's alpha); Mitsuba `bsplinecurve ×3` draws the "
-            "same polylines as `linearcurve` with a correct fiber frame (README.md).\n")
+            "same polylines as `linearcurve` with a correct fiber frame (README.md). tress "
+            "with `overlaps: PassThrough` (its default, Mitsuba's convention) and `Scatter`.\n")
         log(markdown(header, rows))
-    print("timing and noise:", flush=True)
-    header, rows, equal_error = timing_table(r, scenes, cfg, log)
+    print(f"timing and noise, {light.label}:", flush=True)
+    header, rows, equal_error = timing_table(r, scenes, light, cfg, log)
     log("\n## Time and noise at equal spp\n")
     log("Ratios are tress ÷ Mitsuba, each the median over the rounds of the ratio within a "
         "round; render-only time: tress's own render time, Mitsuba's `mi.render` and "
@@ -616,8 +744,8 @@ def main():
         "mean over rounds against the renderer's own reference (corrected for the reference's "
         "noise); time to equal error = time ratio × relMSE ratio.\n")
     log(markdown(header, rows))
-    print("Embree alone on tress's rays:", flush=True)
-    header, rows = embree_bound_table(r, scenes, cfg, equal_error)
+    print(f"Embree alone on tress's rays, {light.label}:", flush=True)
+    header, rows = embree_bound_table(r, scenes, light, cfg, equal_error)
     log("\n## Embree alone on tress's rays\n")
     log("`tress bench --scene` on each tress scene above (same film and spp): the path "
         "tracer's rate over Embree alone tracing exactly its rays again (per CPU-second; each "
@@ -626,9 +754,6 @@ def main():
         "The last column is the time to equal error a renderer whose only cost were Embree's "
         "would reach against Mitsuba `linearcurve`: below it, no shading speed-up helps.\n")
     log(markdown(header, rows))
-    log(f"\n(whole run {time.perf_counter() - start:.0f} s)")
-    if args.log:
-        print(f"wrote {args.log}")
 
 
 if __name__ == "__main__":
