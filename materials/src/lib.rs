@@ -20,6 +20,7 @@ use tress_core::prepare::Preparation;
 use tress_core::Bcsdf;
 
 pub mod chiang;
+mod cost_inputs;
 pub mod deon;
 pub mod dual_scattering;
 pub mod dual_scattering_sampling;
@@ -37,6 +38,7 @@ pub mod strand_variation;
 #[cfg(test)]
 mod test_util;
 
+pub use cost_inputs::CostInputs;
 pub use model_params::ModelParams;
 pub(crate) use parallel::parallel_map;
 pub use params::{check_range, ParamError, TestInstance};

@@ -1,18 +1,17 @@
 //! Huang's cost per call against Chiang's (not an assertion), as docs/src/research/performance.md
-//! ("Huang's cost") measures it: `tress bench`'s inputs (4096 uniform (ω_o, ω_i, h) from
-//! `Pcg32::new(11, 0)` and `(12, 0)`), each model timed over passes of 40,000 calls in the
+//! ("Huang's cost") measures it: `tress bench`'s inputs ([`CostInputs`]), each model timed over passes of 40,000 calls in the
 //! thread's CPU time, the models alternating pass by pass, `HUANG_COST_ROUNDS` rounds (default
 //! 11) in one process; prints the median ns per call and the median of the rounds' ratios to
 //! Chiang. Run:
 //! `cargo test --release -p tress-materials --test integration -- --ignored --nocapture huang_cost`.
 
 use std::hint::black_box;
-use tress_core::math::{Vec2, Vec3};
+use tress_core::math::Vec2;
 use tress_core::prepare::Preparation;
 use tress_core::rng::Pcg32;
 use tress_core::sampling::sample_uniform_sphere;
 use tress_core::Bcsdf;
-use tress_materials::HairModel;
+use tress_materials::{CostInputs, HairModel};
 
 /// CPU time of the calling thread, in ns (other processes on the machine do not count).
 fn thread_ns() -> f64 {
@@ -34,20 +33,12 @@ fn median(mut v: Vec<f64>) -> f64 {
 #[test]
 #[ignore]
 fn huang_cost() {
-    const INPUTS: usize = 4096;
     const CALLS: usize = 40_000;
     let rounds: usize = std::env::var("HUANG_COST_ROUNDS")
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(11);
-    let mut rng = Pcg32::new(11, 0);
-    let mut dir = || sample_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
-    let dirs: Vec<(Vec3, Vec3)> = (0..INPUTS).map(|_| (dir(), dir())).collect();
-    let mut rng = Pcg32::new(12, 0);
-    let hs: Vec<f32> = (0..INPUTS).map(|_| 2.0 * rng.next_f32() - 1.0).collect();
-    let us: Vec<[f32; 4]> = (0..INPUTS)
-        .map(|_| std::array::from_fn(|_| rng.next_f32()))
-        .collect();
+    let CostInputs { dirs, hs, us } = CostInputs::new();
     let names = ["Chiang/brown", "Huang/brown", "Huang/rough_far_field"];
     let all = HairModel::test_instances();
     let models: Vec<std::sync::Arc<dyn Bcsdf>> = names
@@ -78,7 +69,7 @@ fn huang_cost() {
                 let start = thread_ns();
                 let mut acc = 0.0f32;
                 for i in 0..CALLS {
-                    acc += call(b.as_ref(), m, black_box(i % INPUTS));
+                    acc += call(b.as_ref(), m, black_box(i % CostInputs::LEN));
                 }
                 black_box(acc);
                 times.push((thread_ns() - start) / CALLS as f64);

@@ -40,18 +40,16 @@ use std::time::{Duration, Instant};
 use tress_accel::{CurveShape, EmbreeAccel, HairOptions, SceneBuilder};
 use tress_core::film::FilmSettings;
 use tress_core::light::{EnvironmentMap, Light};
-use tress_core::math::{Aabb, Vec2, Vec3};
+use tress_core::math::{Aabb, Vec3};
 use tress_core::output_file::{self, Inputs};
 use tress_core::prepare::Preparation;
-use tress_core::rng::Pcg32;
-use tress_core::sampling::sample_uniform_sphere;
 use tress_core::{Bcsdf, Camera, Integrator, Material, Scene};
 use tress_dual_scattering::density::{DensityGrid, DensitySettings};
 use tress_groom::{HairFile, HairGeometry, HairStyle, ProceduralHair};
 use tress_loader::integrators::IntegratorDesc;
 use tress_loader::scene_desc;
 use tress_materials::dual_scattering::{fingerprint, DualScatteringTables};
-use tress_materials::HairModel;
+use tress_materials::{CostInputs, HairModel};
 
 mod plan;
 mod raw;
@@ -267,15 +265,7 @@ fn models(args: &BenchArgs, plan: &Plan, table: &mut Table) -> Vec<ModelSpec> {
 /// eval, sample and pdf cost of one instance of every registered hair model (the first
 /// pigmented test instance, so absorption is exercised).
 fn bench_bcsdfs(table: &mut Table, calls: usize) -> Result<()> {
-    const INPUTS: usize = 4096;
-    let mut rng = Pcg32::new(11, 0);
-    let mut dir = || sample_uniform_sphere(Vec2::new(rng.next_f32(), rng.next_f32()));
-    let dirs: Vec<(Vec3, Vec3)> = (0..INPUTS).map(|_| (dir(), dir())).collect();
-    let mut rng = Pcg32::new(12, 0);
-    let hs: Vec<f32> = (0..INPUTS).map(|_| 2.0 * rng.next_f32() - 1.0).collect();
-    let us: Vec<[f32; 4]> = (0..INPUTS)
-        .map(|_| std::array::from_fn(|_| rng.next_f32()))
-        .collect();
+    let CostInputs { dirs, hs, us } = CostInputs::new();
     let instances = HairModel::test_instances();
     for name in HairModel::names() {
         let prefix = format!("{name}/");
@@ -300,7 +290,7 @@ fn bench_bcsdfs(table: &mut Table, calls: usize) -> Result<()> {
             let start = Instant::now();
             let mut acc = 0.0f32;
             for i in 0..calls {
-                acc += f(i % INPUTS);
+                acc += f(i % CostInputs::LEN);
             }
             black_box(acc);
             start.elapsed().as_secs_f64() * 1e9 / calls as f64
