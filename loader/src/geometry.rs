@@ -229,6 +229,9 @@ struct SharedReads {
     uses_left: HashMap<String, usize>,
     /// Per key: the file read, while objects still to come name it.
     kept: HashMap<String, Arc<HairGeometry>>,
+    /// Bytes of the files in `kept`, kept as a running total: summing them for every object
+    /// would be quadratic in a scene of many files each named twice.
+    kept_total: usize,
     /// Objects that took a file read for an earlier object.
     read_once: usize,
 }
@@ -258,6 +261,7 @@ impl SharedReads {
             keys,
             uses_left,
             kept: HashMap::new(),
+            kept_total: 0,
             read_once: 0,
         }
     }
@@ -268,7 +272,9 @@ impl SharedReads {
         let left = self.uses_left.get_mut(key)?;
         *left -= 1;
         let hair = if *left == 0 {
-            self.kept.remove(key)
+            let last = self.kept.remove(key);
+            self.kept_total -= last.as_ref().map_or(0, |h| h.heap_bytes());
+            last
         } else {
             self.kept.get(key).cloned()
         };
@@ -281,6 +287,7 @@ impl SharedReads {
         let hair = Arc::new(hair);
         if let Some(key) = &self.keys[i] {
             if self.uses_left[key] > 0 {
+                self.kept_total += hair.heap_bytes();
                 self.kept.insert(key.clone(), Arc::clone(&hair));
             }
         }
@@ -289,7 +296,7 @@ impl SharedReads {
 
     /// Bytes of the files kept.
     fn kept_bytes(&self) -> f64 {
-        self.kept.values().map(|h| h.heap_bytes() as f64).sum()
+        self.kept_total as f64
     }
 }
 
